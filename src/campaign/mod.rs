@@ -1,0 +1,512 @@
+//! Campaign files: the YAML a user writes, its defaults and its validation.
+//!
+//! The keys are a contract (../shared/spec/campaign.md). Every struct denies unknown keys, and
+//! every number is checked after parsing, with errors that point at the file, line and key.
+//! Units are those the key names say; conversion to SI happens once, in `sensor`.
+
+pub mod yaml;
+
+use crate::error::{Error, Result};
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+pub use yaml::Doc;
+
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Campaign {
+    pub name: String,
+    /// Scene file, relative to the campaign file.
+    pub scene: String,
+    #[serde(default = "default_seed")]
+    pub seed: u64,
+    pub wavelength_nm: f64,
+    pub instrument: Instrument,
+    pub platform: Platform,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sun: Option<Sun>,
+    #[serde(default)]
+    pub simulation: Simulation,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub products: Option<Products>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sweep: Option<BTreeMap<String, Vec<serde_yaml::Value>>>,
+}
+
+fn default_seed() -> u64 {
+    1
+}
+
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum InstrumentKind {
+    #[default]
+    Waveform,
+    DiscreteReturn,
+    PhotonCounting,
+}
+
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Instrument {
+    #[serde(default)]
+    pub kind: InstrumentKind,
+    pub pulse_energy_j: f64,
+    pub pulse_fwhm_ns: f64,
+    pub footprint_half_angle_mrad: f64,
+    /// η: energy at the footprint edge relative to the centre.
+    #[serde(default = "default_eta")]
+    pub edge_energy_fraction: f64,
+    pub fov_half_angle_mrad: f64,
+    pub receiver_area_m2: f64,
+    #[serde(default = "default_bin_ns")]
+    pub bin_ns: f64,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub bandwidth_nm: Option<f64>,
+    #[serde(default = "default_max_returns")]
+    pub max_returns: u32,
+    #[serde(default = "default_threshold")]
+    pub detection_threshold_photons: f64,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub quantum_efficiency: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub dead_time_ns: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub dark_count_hz: Option<f64>,
+    /// Optional fixed range gate; by default each pulse's gate covers the scene's bounding box.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub range_gate: Option<RangeGate>,
+}
+
+fn default_eta() -> f64 {
+    (-2.0f64).exp()
+}
+fn default_bin_ns() -> f64 {
+    1.0
+}
+fn default_max_returns() -> u32 {
+    4
+}
+fn default_threshold() -> f64 {
+    5.0
+}
+
+/// A fixed range gate: bin 0 starts `start_ns` after emission, `bins` bins long.
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct RangeGate {
+    pub start_ns: f64,
+    pub bins: u32,
+}
+
+/// All platform kinds share one struct so that every key keeps its own line in errors;
+/// which keys a kind needs is checked in [`Campaign::validate`].
+#[derive(Clone, Debug, Deserialize, Serialize, Default)]
+#[serde(deny_unknown_fields)]
+pub struct Platform {
+    pub kind: PlatformKind,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pulses: Option<Vec<PulseSpec>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub altitude_m: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub speed_m_s: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ground_speed_m_s: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub prf_hz: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub lines: Option<Vec<Segment>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub scanner: Option<Scanner>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub track: Option<Segment>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub beams: Option<Vec<Beam>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub off_nadir_deg: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub along_track_step_m: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub position: Option<[f64; 3]>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub azimuth_deg: Option<[f64; 2]>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub azimuth_step_deg: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub zenith_deg: Option<[f64; 2]>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub zenith_step_deg: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub gps_start_s: Option<f64>,
+}
+
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum PlatformKind {
+    #[default]
+    Static,
+    Als,
+    Spaceborne,
+    Track,
+    Tls,
+}
+
+/// One explicit pulse: a position and a beam direction, given as a vector or as the beam's
+/// zenith (from +z, so 180° is nadir) and azimuth (from +x towards +y) in degrees.
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct PulseSpec {
+    pub position: [f64; 3],
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub direction: Option<[f64; 3]>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub zenith_deg: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub azimuth_deg: Option<f64>,
+}
+
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Segment {
+    pub start: [f64; 2],
+    pub end: [f64; 2],
+}
+
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Beam {
+    #[serde(default)]
+    pub cross_track_m: f64,
+}
+
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Scanner {
+    pub pattern: String,
+    pub scan_angle_deg: [f64; 2],
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub scan_frequency_hz: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub look_angle_step_deg: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub along_track_step_m: Option<f64>,
+}
+
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Sun {
+    pub zenith_deg: f64,
+    pub azimuth_deg: f64,
+    pub irradiance_w_m2_um: f64,
+}
+
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum Method {
+    /// Light paths from the laser, each vertex connected to the receiver.
+    #[default]
+    Forward,
+    /// Receiver paths from the aperture, each vertex connected to the laser.
+    Backward,
+    Bdpt,
+}
+
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Simulation {
+    #[serde(default)]
+    pub method: Method,
+    #[serde(default = "default_rays")]
+    pub rays_per_pulse: u64,
+    #[serde(default = "default_max_order")]
+    pub max_order: u32,
+}
+
+impl Default for Simulation {
+    fn default() -> Self {
+        Simulation {
+            method: Method::default(),
+            rays_per_pulse: default_rays(),
+            max_order: default_max_order(),
+        }
+    }
+}
+
+fn default_rays() -> u64 {
+    10_000
+}
+fn default_max_order() -> u32 {
+    100
+}
+
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Products {
+    #[serde(default = "yes")]
+    pub waveforms: bool,
+    #[serde(default)]
+    pub points: bool,
+    #[serde(default)]
+    pub photons: bool,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub dsm: Option<Dsm>,
+}
+
+fn yes() -> bool {
+    true
+}
+
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Dsm {
+    #[serde(default = "default_dsm_resolution")]
+    pub resolution_m: f64,
+}
+
+fn default_dsm_resolution() -> f64 {
+    2.0
+}
+
+/// A campaign with the file it came from, validated.
+#[derive(Clone, Debug)]
+pub struct Loaded {
+    pub campaign: Campaign,
+    pub doc: Doc,
+    pub scene_path: PathBuf,
+}
+
+impl Loaded {
+    /// Reads, parses and validates a campaign file.
+    pub fn read(path: &Path) -> Result<Loaded> {
+        let doc = Doc::read(path)?;
+        let campaign: Campaign = doc.parse()?;
+        campaign.validate(&doc)?;
+        let scene_path = doc.resolve(&campaign.scene);
+        if !scene_path.is_file() {
+            return Err(doc.error(
+                "scene",
+                format!("scene file {} does not exist", scene_path.display()),
+            ));
+        }
+        Ok(Loaded {
+            campaign,
+            doc,
+            scene_path,
+        })
+    }
+
+    /// The campaign with every default filled in, as YAML.
+    pub fn resolved_yaml(&self) -> String {
+        let mut c = self.campaign.clone();
+        c.scene = self.scene_path.display().to_string();
+        serde_yaml::to_string(&c).expect("a campaign always serialises")
+    }
+}
+
+/// Checks that a number is finite and within a range, with a located error otherwise.
+struct Check<'a> {
+    doc: &'a Doc,
+}
+
+impl Check<'_> {
+    fn finite(&self, key: &str, v: f64) -> Result<()> {
+        if v.is_finite() {
+            Ok(())
+        } else {
+            Err(self
+                .doc
+                .error(key, format!("must be a finite number, found {v}")))
+        }
+    }
+    fn positive(&self, key: &str, v: f64) -> Result<()> {
+        self.finite(key, v)?;
+        if v > 0.0 {
+            Ok(())
+        } else {
+            Err(self.doc.error(key, format!("must be positive, found {v}")))
+        }
+    }
+    fn non_negative(&self, key: &str, v: f64) -> Result<()> {
+        self.finite(key, v)?;
+        if v >= 0.0 {
+            Ok(())
+        } else {
+            Err(self
+                .doc
+                .error(key, format!("must not be negative, found {v}")))
+        }
+    }
+    fn within(&self, key: &str, v: f64, lo: f64, hi: f64, what: &str) -> Result<()> {
+        self.finite(key, v)?;
+        if v >= lo && v <= hi {
+            Ok(())
+        } else {
+            Err(self.doc.error(key, format!("must be {what}, found {v}")))
+        }
+    }
+    fn opt_positive(&self, key: &str, v: Option<f64>) -> Result<()> {
+        v.map_or(Ok(()), |v| self.positive(key, v))
+    }
+    fn opt_non_negative(&self, key: &str, v: Option<f64>) -> Result<()> {
+        v.map_or(Ok(()), |v| self.non_negative(key, v))
+    }
+    fn vec_finite(&self, key: &str, v: &[f64]) -> Result<()> {
+        v.iter().try_for_each(|x| self.finite(key, *x))
+    }
+}
+
+impl Campaign {
+    pub fn validate(&self, doc: &Doc) -> Result<()> {
+        let c = Check { doc };
+        if self.name.trim().is_empty() || self.name.contains(['/', '\\']) {
+            return Err(doc.error(
+                "name",
+                "must be a non-empty name without slashes (it names the run folder)",
+            ));
+        }
+        c.within(
+            "wavelength_nm",
+            self.wavelength_nm,
+            100.0,
+            20_000.0,
+            "a wavelength in nm between 100 and 20000",
+        )?;
+        let i = &self.instrument;
+        c.positive("instrument.pulse_energy_j", i.pulse_energy_j)?;
+        c.non_negative("instrument.pulse_fwhm_ns", i.pulse_fwhm_ns)?;
+        c.within(
+            "instrument.footprint_half_angle_mrad",
+            i.footprint_half_angle_mrad,
+            1e-9,
+            1500.0,
+            "an angle in mrad above 0 and below 1500 (86°)",
+        )?;
+        c.within(
+            "instrument.fov_half_angle_mrad",
+            i.fov_half_angle_mrad,
+            1e-9,
+            1500.0,
+            "an angle in mrad above 0 and below 1500 (86°)",
+        )?;
+        if !(i.edge_energy_fraction > 0.0 && i.edge_energy_fraction < 1.0) {
+            return Err(doc.error(
+                "instrument.edge_energy_fraction",
+                format!(
+                    "must lie strictly between 0 and 1 (default e^-2 = 0.1353), found {}",
+                    i.edge_energy_fraction
+                ),
+            ));
+        }
+        c.positive("instrument.receiver_area_m2", i.receiver_area_m2)?;
+        c.positive("instrument.bin_ns", i.bin_ns)?;
+        c.opt_positive("instrument.bandwidth_nm", i.bandwidth_nm)?;
+        c.non_negative(
+            "instrument.detection_threshold_photons",
+            i.detection_threshold_photons,
+        )?;
+        if let Some(q) = i.quantum_efficiency {
+            c.within(
+                "instrument.quantum_efficiency",
+                q,
+                0.0,
+                1.0,
+                "between 0 and 1",
+            )?;
+        }
+        c.opt_non_negative("instrument.dead_time_ns", i.dead_time_ns)?;
+        c.opt_non_negative("instrument.dark_count_hz", i.dark_count_hz)?;
+        if let Some(g) = &i.range_gate {
+            c.finite("instrument.range_gate.start_ns", g.start_ns)?;
+            if g.bins == 0 || g.bins > 10_000_000 {
+                return Err(doc.error(
+                    "instrument.range_gate.bins",
+                    "must be between 1 and 10000000",
+                ));
+            }
+        }
+        if let Some(s) = &self.sun {
+            c.within(
+                "sun.zenith_deg",
+                s.zenith_deg,
+                -90.0,
+                90.0,
+                "between -90 and 90",
+            )?;
+            c.finite("sun.azimuth_deg", s.azimuth_deg)?;
+            c.non_negative("sun.irradiance_w_m2_um", s.irradiance_w_m2_um)?;
+        }
+        let s = &self.simulation;
+        if s.method == Method::Bdpt {
+            return Err(doc.error(
+                "simulation.method",
+                "`bdpt` is not available yet in this version; use `forward` or `backward`",
+            ));
+        }
+        if s.rays_per_pulse == 0 {
+            return Err(doc.error("simulation.rays_per_pulse", "must be at least 1"));
+        }
+        if s.max_order == 0 || s.max_order > 100_000 {
+            return Err(doc.error("simulation.max_order", "must be between 1 and 100000"));
+        }
+        if let Some(p) = &self.products {
+            if let Some(d) = &p.dsm {
+                c.positive("products.dsm.resolution_m", d.resolution_m)?;
+            }
+        }
+        self.validate_platform(doc, &c)
+    }
+
+    fn validate_platform(&self, doc: &Doc, c: &Check) -> Result<()> {
+        let p = &self.platform;
+        match p.kind {
+            PlatformKind::Static => {
+                let pulses = p.pulses.as_ref().ok_or_else(|| {
+                    doc.error("platform", "a static platform needs `pulses:`, a list of { position, direction }")
+                })?;
+                if pulses.is_empty() {
+                    return Err(doc.error("platform.pulses", "the list of pulses is empty"));
+                }
+                for (k, pulse) in pulses.iter().enumerate() {
+                    c.vec_finite(&format!("platform.pulses[{k}].position"), &pulse.position)?;
+                    match (&pulse.direction, pulse.zenith_deg, pulse.azimuth_deg) {
+                        (Some(d), None, None) => {
+                            let key = format!("platform.pulses[{k}].direction");
+                            c.vec_finite(&key, d)?;
+                            if (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt() < 1e-12 {
+                                return Err(doc.error(&key, "must not be the zero vector"));
+                            }
+                        }
+                        (None, z, a) => {
+                            if let Some(z) = z {
+                                c.finite(&format!("platform.pulses[{k}].zenith_deg"), z)?;
+                            }
+                            if let Some(a) = a {
+                                c.finite(&format!("platform.pulses[{k}].azimuth_deg"), a)?;
+                            }
+                        }
+                        (Some(_), _, _) => {
+                            return Err(doc.error(
+                                &format!("platform.pulses[{k}].direction"),
+                                "give either `direction` or `zenith_deg`/`azimuth_deg`, not both",
+                            ))
+                        }
+                    }
+                }
+                Ok(())
+            }
+            other => Err(doc.error(
+                "platform.kind",
+                format!(
+                    "platform kind `{}` is not available yet in this version; use `static` with explicit pulses",
+                    serde_yaml::to_string(&other).unwrap_or_default().trim()
+                ),
+            )),
+        }
+    }
+}
+
+/// Error for a bad campaign path given on the command line.
+pub fn missing_campaign(path: &Path) -> Error {
+    Error::file(path, "campaign file does not exist")
+}

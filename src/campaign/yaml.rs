@@ -1,0 +1,287 @@
+//! YAML reading with errors that point at the file, line, column and key path.
+//!
+//! Two tools: [`parse`] turns a YAML text into a typed config (unknown keys and wrong types
+//! come back as `file:line:col: key.path: message`), and [`Doc::error`] does the same for
+//! problems found after parsing (a negative energy, a wavelength missing from a table), by
+//! walking the document again to find where the offending key sits.
+
+use crate::error::{Error, Result};
+use serde::de::{
+    self, DeserializeOwned, DeserializeSeed, IgnoredAny, MapAccess, SeqAccess, Visitor,
+};
+use std::fmt;
+use std::path::{Path, PathBuf};
+
+/// A YAML file read from disk, kept so that later checks can point into it.
+#[derive(Clone, Debug)]
+pub struct Doc {
+    pub path: PathBuf,
+    pub text: String,
+}
+
+impl Doc {
+    pub fn read(path: &Path) -> Result<Doc> {
+        let text = crate::error::read_text(path)?;
+        if text.trim().is_empty() {
+            return Err(Error::file(path, "the file is empty"));
+        }
+        Ok(Doc {
+            path: path.to_path_buf(),
+            text,
+        })
+    }
+
+    pub fn parse<T: DeserializeOwned>(&self) -> Result<T> {
+        parse(&self.path, &self.text)
+    }
+
+    /// An error at the key path `key` (dotted, `[i]` for list items), located in the text.
+    pub fn error(&self, key: &str, text: impl fmt::Display) -> Error {
+        Error::at(&self.path, locate(&self.text, key), key, text)
+    }
+
+    /// Resolves a path named in this file against the file's own folder.
+    pub fn resolve(&self, relative: &str) -> PathBuf {
+        let p = Path::new(relative);
+        if p.is_absolute() {
+            p.to_path_buf()
+        } else {
+            self.path.parent().unwrap_or(Path::new(".")).join(p)
+        }
+    }
+}
+
+/// Parses `text` (read from `path`) into `T`, with a located message on failure.
+pub fn parse<T: DeserializeOwned>(path: &Path, text: &str) -> Result<T> {
+    let de = serde_yaml::Deserializer::from_str(text);
+    match serde_path_to_error::deserialize::<_, T>(de) {
+        Ok(v) => Ok(v),
+        Err(e) => {
+            let key = e.path().to_string();
+            let key = if key == "." { String::new() } else { key };
+            let inner = e.into_inner();
+            let location = inner.location().map(|l| (l.line(), l.column()));
+            let message = bare_message(&inner.to_string());
+            // serde reports an unknown key against its parent: name the key itself.
+            let key = match unknown_field_name(&message) {
+                Some(field) if key.is_empty() => field,
+                Some(field) => format!("{key}.{field}"),
+                None => key,
+            };
+            Err(Error::at(path, location, &key, message))
+        }
+    }
+}
+
+/// serde_yaml's display adds its own path prefix and an " at line L column C" suffix: the
+/// error we build carries both in a fixed form, so strip them.
+fn bare_message(display: &str) -> String {
+    let mut s = display.to_string();
+    if let Some(i) = s.rfind(" at line ") {
+        if s[i + 9..]
+            .chars()
+            .all(|c| c.is_ascii_digit() || c == ' ' || c.is_ascii_alphabetic())
+        {
+            s.truncate(i);
+        }
+    }
+    if let Some(i) = s.find(": ") {
+        let head = &s[..i];
+        if !head.is_empty() && !head.contains(' ') && !head.contains('`') {
+            s = s[i + 2..].to_string();
+        }
+    }
+    s
+}
+
+fn unknown_field_name(message: &str) -> Option<String> {
+    let rest = message.strip_prefix("unknown field `")?;
+    let end = rest.find('`')?;
+    Some(rest[..end].to_string())
+}
+
+#[derive(Debug, Clone, PartialEq)]
+enum Seg {
+    Key(String),
+    Index(usize),
+}
+
+fn split_path(key: &str) -> Vec<Seg> {
+    let mut out = Vec::new();
+    for part in key.split('.') {
+        let mut rest = part;
+        if let Some(i) = rest.find('[') {
+            if i > 0 {
+                out.push(Seg::Key(rest[..i].to_string()));
+            }
+            rest = &rest[i..];
+            while let Some(stripped) = rest.strip_prefix('[') {
+                let end = stripped.find(']').unwrap_or(stripped.len());
+                if let Ok(n) = stripped[..end].parse() {
+                    out.push(Seg::Index(n));
+                }
+                rest = stripped.get(end + 1..).unwrap_or("");
+            }
+        } else if !rest.is_empty() {
+            out.push(Seg::Key(rest.to_string()));
+        }
+    }
+    out
+}
+
+const FOUND: &str = "\u{1}found";
+
+/// Line and column (1-based) of the value at `key` in a YAML text, found by walking the
+/// document with serde_yaml itself, so flow style (`{ a: 1 }`) works as well as block style.
+/// When the key is absent, the nearest existing parent is returned.
+pub fn locate(text: &str, key: &str) -> Option<(usize, usize)> {
+    let segs = split_path(key);
+    for n in (0..=segs.len()).rev() {
+        let de = serde_yaml::Deserializer::from_str(text);
+        if let Err(e) = Seek(&segs[..n]).deserialize(de) {
+            if e.to_string().starts_with(FOUND) || e.to_string().contains(FOUND) {
+                return e.location().map(|l| (l.line(), l.column()));
+            }
+        }
+    }
+    None
+}
+
+struct Seek<'a>(&'a [Seg]);
+
+impl<'de> DeserializeSeed<'de> for Seek<'_> {
+    type Value = ();
+    fn deserialize<D: de::Deserializer<'de>>(self, d: D) -> std::result::Result<(), D::Error> {
+        d.deserialize_any(SeekVisitor(self.0))
+    }
+}
+
+struct SeekVisitor<'a>(&'a [Seg]);
+
+impl SeekVisitor<'_> {
+    fn leaf<E: de::Error>(&self) -> std::result::Result<(), E> {
+        if self.0.is_empty() {
+            Err(E::custom(FOUND))
+        } else {
+            Ok(())
+        }
+    }
+}
+
+/// A map key of any scalar type, as text (reflectance tables use numbers as keys).
+struct AnyKey(String);
+
+impl<'de> de::Deserialize<'de> for AnyKey {
+    fn deserialize<D: de::Deserializer<'de>>(d: D) -> std::result::Result<Self, D::Error> {
+        struct V;
+        impl Visitor<'_> for V {
+            type Value = AnyKey;
+            fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
+                f.write_str("a scalar key")
+            }
+            fn visit_str<E>(self, v: &str) -> std::result::Result<AnyKey, E> {
+                Ok(AnyKey(v.to_string()))
+            }
+            fn visit_i64<E>(self, v: i64) -> std::result::Result<AnyKey, E> {
+                Ok(AnyKey(v.to_string()))
+            }
+            fn visit_u64<E>(self, v: u64) -> std::result::Result<AnyKey, E> {
+                Ok(AnyKey(v.to_string()))
+            }
+            fn visit_f64<E>(self, v: f64) -> std::result::Result<AnyKey, E> {
+                Ok(AnyKey(v.to_string()))
+            }
+            fn visit_bool<E>(self, v: bool) -> std::result::Result<AnyKey, E> {
+                Ok(AnyKey(v.to_string()))
+            }
+        }
+        d.deserialize_any(V)
+    }
+}
+
+impl<'de> Visitor<'de> for SeekVisitor<'_> {
+    type Value = ();
+    fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
+        f.write_str("any value")
+    }
+    fn visit_bool<E: de::Error>(self, _: bool) -> std::result::Result<(), E> {
+        self.leaf()
+    }
+    fn visit_i64<E: de::Error>(self, _: i64) -> std::result::Result<(), E> {
+        self.leaf()
+    }
+    fn visit_u64<E: de::Error>(self, _: u64) -> std::result::Result<(), E> {
+        self.leaf()
+    }
+    fn visit_f64<E: de::Error>(self, _: f64) -> std::result::Result<(), E> {
+        self.leaf()
+    }
+    fn visit_str<E: de::Error>(self, _: &str) -> std::result::Result<(), E> {
+        self.leaf()
+    }
+    fn visit_unit<E: de::Error>(self) -> std::result::Result<(), E> {
+        self.leaf()
+    }
+    fn visit_none<E: de::Error>(self) -> std::result::Result<(), E> {
+        self.leaf()
+    }
+    fn visit_some<D: de::Deserializer<'de>>(self, d: D) -> std::result::Result<(), D::Error> {
+        d.deserialize_any(self)
+    }
+    fn visit_map<A: MapAccess<'de>>(self, mut map: A) -> std::result::Result<(), A::Error> {
+        if self.0.is_empty() {
+            return Err(de::Error::custom(FOUND));
+        }
+        while let Some(AnyKey(k)) = map.next_key::<AnyKey>()? {
+            if self.0[0] == Seg::Key(k) {
+                map.next_value_seed(Seek(&self.0[1..]))?;
+            } else {
+                map.next_value::<IgnoredAny>()?;
+            }
+        }
+        Ok(())
+    }
+    fn visit_seq<A: SeqAccess<'de>>(self, mut seq: A) -> std::result::Result<(), A::Error> {
+        if self.0.is_empty() {
+            return Err(de::Error::custom(FOUND));
+        }
+        let mut i = 0;
+        loop {
+            let found = if self.0[0] == Seg::Index(i) {
+                seq.next_element_seed(Seek(&self.0[1..]))?
+            } else {
+                seq.next_element::<IgnoredAny>()?.map(|_| ())
+            };
+            if found.is_none() {
+                return Ok(());
+            }
+            i += 1;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const TEXT: &str = "name: a\ninstrument:\n  pulse_energy_j: -1\n  bin_ns: 1\nplatform: { kind: static, pulses: [ { position: [0, 0, 5] }, { position: [1, 2, 3] } ] }\nmaterials:\n  soil: { reflectance: { 532: 0.1 } }\n";
+
+    #[test]
+    fn locates_block_and_flow_keys() {
+        assert_eq!(locate(TEXT, "instrument.pulse_energy_j"), Some((3, 19)));
+        assert_eq!(locate(TEXT, "instrument.bin_ns"), Some((4, 11)));
+        assert_eq!(
+            locate(TEXT, "platform.pulses[1].position").map(|l| l.0),
+            Some(5)
+        );
+        assert_eq!(
+            locate(TEXT, "materials.soil.reflectance.532").map(|l| l.0),
+            Some(7)
+        );
+        // a missing key falls back to its nearest parent
+        assert_eq!(
+            locate(TEXT, "instrument.nothing"),
+            locate(TEXT, "instrument")
+        );
+    }
+}

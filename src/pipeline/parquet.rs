@@ -1,0 +1,235 @@
+//! Parquet files of the run folder (outputs.md): pulses and waveforms.
+
+use crate::error::{Error, Result};
+use crate::fsutil::write_atomic;
+use crate::plan::Pulse;
+use crate::waveform::Waveform;
+use arrow_array::builder::{Float32Builder, Float64Builder, ListBuilder};
+use arrow_array::{ArrayRef, Float32Array, Float64Array, RecordBatch, UInt32Array, UInt64Array};
+use arrow_schema::{DataType, Field, Schema};
+use parquet::arrow::ArrowWriter;
+use parquet::basic::{Compression, ZstdLevel};
+use parquet::file::properties::WriterProperties;
+use std::path::Path;
+use std::sync::Arc;
+
+fn props() -> WriterProperties {
+    WriterProperties::builder()
+        .set_compression(Compression::ZSTD(ZstdLevel::default()))
+        .set_created_by(format!("lidarsim {}", env!("CARGO_PKG_VERSION")))
+        .build()
+}
+
+fn write_batch(path: &Path, batch: RecordBatch) -> Result<()> {
+    write_atomic(path, |file| {
+        let err = |e: parquet::errors::ParquetError| {
+            Error::file(path, format!("cannot write Parquet: {e}"))
+        };
+        let mut w = ArrowWriter::try_new(file, batch.schema(), Some(props())).map_err(err)?;
+        w.write(&batch).map_err(err)?;
+        w.close().map_err(err)?;
+        Ok(())
+    })
+}
+
+fn list_f32(rows: impl Iterator<Item = Vec<f32>>) -> ArrayRef {
+    let mut b = ListBuilder::new(Float32Builder::new()).with_field(Field::new(
+        "item",
+        DataType::Float32,
+        false,
+    ));
+    for r in rows {
+        b.values().append_slice(&r);
+        b.append(true);
+    }
+    Arc::new(b.finish())
+}
+
+fn list_f64(rows: impl Iterator<Item = Vec<f64>>) -> ArrayRef {
+    let mut b = ListBuilder::new(Float64Builder::new()).with_field(Field::new(
+        "item",
+        DataType::Float64,
+        false,
+    ));
+    for r in rows {
+        b.values().append_slice(&r);
+        b.append(true);
+    }
+    Arc::new(b.finish())
+}
+
+fn batch(columns: Vec<(&str, ArrayRef)>) -> RecordBatch {
+    let fields: Vec<Field> = columns
+        .iter()
+        .map(|(n, a)| Field::new(*n, a.data_type().clone(), a.null_count() > 0))
+        .collect();
+    RecordBatch::try_new(
+        Arc::new(Schema::new(fields)),
+        columns.into_iter().map(|(_, a)| a).collect(),
+    )
+    .expect("columns of one batch have equal lengths")
+}
+
+pub fn write_pulses(path: &Path, pulses: &[Pulse]) -> Result<()> {
+    let f64col = |f: fn(&Pulse) -> f64| -> ArrayRef {
+        Arc::new(Float64Array::from_iter_values(pulses.iter().map(f)))
+    };
+    let b = batch(vec![
+        (
+            "pulse_id",
+            Arc::new(UInt64Array::from_iter_values(pulses.iter().map(|p| p.id))),
+        ),
+        ("gps_time_s", f64col(|p| p.gps_time_s)),
+        ("origin_x", f64col(|p| p.origin.x)),
+        ("origin_y", f64col(|p| p.origin.y)),
+        ("origin_z", f64col(|p| p.origin.z)),
+        ("dir_x", f64col(|p| p.direction.x)),
+        ("dir_y", f64col(|p| p.direction.y)),
+        ("dir_z", f64col(|p| p.direction.z)),
+        (
+            "scan_angle_deg",
+            Arc::new(Float32Array::from_iter_values(
+                pulses.iter().map(|p| p.scan_angle_deg),
+            )),
+        ),
+        (
+            "line",
+            Arc::new(UInt32Array::from_iter_values(pulses.iter().map(|p| p.line))),
+        ),
+    ]);
+    write_batch(path, b)
+}
+
+pub fn write_waveforms(path: &Path, w: &[Waveform]) -> Result<()> {
+    let b = batch(vec![
+        (
+            "pulse_id",
+            Arc::new(UInt64Array::from_iter_values(w.iter().map(|r| r.pulse_id))),
+        ),
+        (
+            "t0_ns",
+            Arc::new(Float64Array::from_iter_values(w.iter().map(|r| r.t0_ns))),
+        ),
+        (
+            "bin_ns",
+            Arc::new(Float32Array::from_iter_values(w.iter().map(|r| r.bin_ns))),
+        ),
+        (
+            "laser_photons",
+            list_f32(w.iter().map(|r| r.laser_photons.clone())),
+        ),
+        (
+            "impulse_energy_j",
+            list_f32(w.iter().map(|r| r.impulse_energy_j.clone())),
+        ),
+        (
+            "received_energy_j",
+            Arc::new(Float64Array::from_iter_values(
+                w.iter().map(|r| r.received_energy_j),
+            )),
+        ),
+        (
+            "outside_gate_energy_j",
+            Arc::new(Float64Array::from_iter_values(
+                w.iter().map(|r| r.outside_gate_energy_j),
+            )),
+        ),
+        (
+            "order_energy_j",
+            list_f64(w.iter().map(|r| r.order_energy_j.clone())),
+        ),
+        (
+            "order_energy_se_j",
+            list_f64(w.iter().map(|r| r.order_energy_se_j.clone())),
+        ),
+        (
+            "received_energy_se_j",
+            Arc::new(Float64Array::from_iter_values(
+                w.iter().map(|r| r.received_energy_se_j),
+            )),
+        ),
+        (
+            "solar_photons_per_bin",
+            Arc::new(Float32Array::from_iter_values(
+                w.iter().map(|r| r.solar_photons_per_bin),
+            )),
+        ),
+        (
+            "rays",
+            Arc::new(UInt32Array::from_iter_values(w.iter().map(|r| r.rays))),
+        ),
+        (
+            "paths_per_ray",
+            Arc::new(Float32Array::from_iter_values(
+                w.iter().map(|r| r.paths_per_ray),
+            )),
+        ),
+    ]);
+    write_batch(path, b)
+}
+
+/// Reads a waveform part back (used by tests and later stages).
+pub fn read_waveforms(path: &Path) -> Result<Vec<Waveform>> {
+    use arrow_array::cast::AsArray;
+    use arrow_array::types::{Float32Type, Float64Type, UInt32Type, UInt64Type};
+    use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
+    let err = |e: &dyn std::fmt::Display| Error::file(path, format!("cannot read Parquet: {e}"));
+    let file = std::fs::File::open(path).map_err(|e| err(&e))?;
+    let reader = ParquetRecordBatchReaderBuilder::try_new(file)
+        .map_err(|e| err(&e))?
+        .build()
+        .map_err(|e| err(&e))?;
+    let mut out = Vec::new();
+    for b in reader {
+        let b = b.map_err(|e| err(&e))?;
+        let col = |name: &str| {
+            b.column_by_name(name)
+                .ok_or_else(|| err(&format!("column {name} missing")))
+        };
+        let ids = col("pulse_id")?.as_primitive::<UInt64Type>().clone();
+        let t0 = col("t0_ns")?.as_primitive::<Float64Type>().clone();
+        let bin = col("bin_ns")?.as_primitive::<Float32Type>().clone();
+        let lp = col("laser_photons")?.as_list::<i32>().clone();
+        let ie = col("impulse_energy_j")?.as_list::<i32>().clone();
+        let rec = col("received_energy_j")?
+            .as_primitive::<Float64Type>()
+            .clone();
+        let out_g = col("outside_gate_energy_j")?
+            .as_primitive::<Float64Type>()
+            .clone();
+        let oe = col("order_energy_j")?.as_list::<i32>().clone();
+        let ose = col("order_energy_se_j")?.as_list::<i32>().clone();
+        let rse = col("received_energy_se_j")?
+            .as_primitive::<Float64Type>()
+            .clone();
+        let sol = col("solar_photons_per_bin")?
+            .as_primitive::<Float32Type>()
+            .clone();
+        let rays = col("rays")?.as_primitive::<UInt32Type>().clone();
+        let ppr = col("paths_per_ray")?.as_primitive::<Float32Type>().clone();
+        let f32s = |l: &arrow_array::ListArray, i: usize| {
+            l.value(i).as_primitive::<Float32Type>().values().to_vec()
+        };
+        let f64s = |l: &arrow_array::ListArray, i: usize| {
+            l.value(i).as_primitive::<Float64Type>().values().to_vec()
+        };
+        for i in 0..b.num_rows() {
+            out.push(Waveform {
+                pulse_id: ids.value(i),
+                t0_ns: t0.value(i),
+                bin_ns: bin.value(i),
+                laser_photons: f32s(&lp, i),
+                impulse_energy_j: f32s(&ie, i),
+                received_energy_j: rec.value(i),
+                outside_gate_energy_j: out_g.value(i),
+                order_energy_j: f64s(&oe, i),
+                order_energy_se_j: f64s(&ose, i),
+                received_energy_se_j: rse.value(i),
+                solar_photons_per_bin: sol.value(i),
+                rays: rays.value(i),
+                paths_per_ray: ppr.value(i),
+            });
+        }
+    }
+    Ok(out)
+}

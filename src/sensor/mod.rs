@@ -1,0 +1,259 @@
+//! The LiDAR sensor: laser source (paper Eq. 5-8, Appendix B) and receiver (Eq. 9).
+//!
+//! Both are mono-static and co-aligned: they share the pulse's position and axis.
+
+use crate::campaign::Instrument;
+use glam::DVec3;
+use std::f64::consts::PI;
+
+/// An orthonormal frame (u, v, w) with w along a given axis.
+#[derive(Clone, Copy, Debug)]
+pub struct Frame {
+    pub u: DVec3,
+    pub v: DVec3,
+    pub w: DVec3,
+}
+
+impl Frame {
+    /// Frisvad-style construction (Duff et al. 2017), branchless and stable for any unit `w`.
+    pub fn from_axis(w: DVec3) -> Frame {
+        let sign = 1.0f64.copysign(w.z);
+        let a = -1.0 / (sign + w.z);
+        let b = w.x * w.y * a;
+        let u = DVec3::new(1.0 + sign * w.x * w.x * a, sign * b, -sign * w.x);
+        let v = DVec3::new(b, sign + w.y * w.y * a, -w.y);
+        Frame { u, v, w }
+    }
+
+    pub fn to_world(&self, x: f64, y: f64, z: f64) -> DVec3 {
+        self.u * x + self.v * y + self.w * z
+    }
+}
+
+/// Point laser with a Gaussian footprint in tan-space truncated at the edge fraction η.
+#[derive(Clone, Copy, Debug)]
+pub struct Laser {
+    pub position: DVec3,
+    pub frame: Frame,
+    /// Pulse energy Q_e, J.
+    pub energy: f64,
+    /// tan θ_fp.
+    pub tan_fp: f64,
+    /// σ = tan θ_fp / sqrt(-2 ln η).
+    pub sigma: f64,
+    pub eta: f64,
+}
+
+impl Laser {
+    pub fn new(inst: &Instrument, position: DVec3, axis: DVec3) -> Laser {
+        let tan_fp = (inst.footprint_half_angle_mrad * 1e-3).tan();
+        let eta = inst.edge_energy_fraction;
+        Laser {
+            position,
+            frame: Frame::from_axis(axis.normalize()),
+            energy: inst.pulse_energy_j,
+            tan_fp,
+            sigma: tan_fp / (-2.0 * eta.ln()).sqrt(),
+            eta,
+        }
+    }
+
+    /// Samples an emission direction by inverting Eq. B.4: tan²θ = -2σ² ln(1 - U1 (1 - η)).
+    /// Returns the direction and its solid-angle pdf (Eq. 6).
+    pub fn sample(&self, u1: f64, u2: f64) -> (DVec3, f64) {
+        let tan2 = -2.0 * self.sigma * self.sigma * (1.0 - u1 * (1.0 - self.eta)).ln();
+        let tan = tan2.max(0.0).sqrt().min(self.tan_fp);
+        let phi = 2.0 * PI * u2;
+        let d = self
+            .frame
+            .to_world(tan * phi.cos(), tan * phi.sin(), 1.0)
+            .normalize();
+        (d, self.pdf_tan2(tan * tan))
+    }
+
+    /// Solid-angle pdf of emitting along the unit direction `d` (0 outside the footprint cone).
+    pub fn pdf(&self, d: DVec3) -> f64 {
+        let cos = d.dot(self.frame.w);
+        if cos <= 0.0 {
+            return 0.0;
+        }
+        let x = d.dot(self.frame.u) / cos;
+        let y = d.dot(self.frame.v) / cos;
+        let tan2 = x * x + y * y;
+        if tan2 > self.tan_fp * self.tan_fp {
+            return 0.0;
+        }
+        self.pdf_tan2(tan2)
+    }
+
+    /// Eq. 6 written with cos³θ = (1 + tan²θ)^-3/2.
+    fn pdf_tan2(&self, tan2: f64) -> f64 {
+        let s2 = self.sigma * self.sigma;
+        let cos3 = (1.0 + tan2).powf(-1.5);
+        (-tan2 / (2.0 * s2)).exp() / (2.0 * PI * s2 * cos3 * (1.0 - self.eta))
+    }
+}
+
+/// Disk aperture of area A_tel, normal along the axis, accepting rays within θ_fov of it.
+#[derive(Clone, Copy, Debug)]
+pub struct Receiver {
+    pub center: DVec3,
+    pub frame: Frame,
+    pub radius: f64,
+    pub area: f64,
+    pub tan_fov: f64,
+    pub cos_fov: f64,
+}
+
+impl Receiver {
+    pub fn new(inst: &Instrument, center: DVec3, axis: DVec3) -> Receiver {
+        let fov = inst.fov_half_angle_mrad * 1e-3;
+        Receiver {
+            center,
+            frame: Frame::from_axis(axis.normalize()),
+            radius: (inst.receiver_area_m2 / PI).sqrt(),
+            area: inst.receiver_area_m2,
+            tan_fov: fov.tan(),
+            cos_fov: fov.cos(),
+        }
+    }
+
+    /// Uniform point on the aperture disk (pdf 1 / A_tel).
+    pub fn sample_point(&self, u1: f64, u2: f64) -> DVec3 {
+        let r = self.radius * u1.sqrt();
+        let phi = 2.0 * PI * u2;
+        self.center + self.frame.u * (r * phi.cos()) + self.frame.v * (r * phi.sin())
+    }
+
+    /// Samples a direction through an aperture point by picking a point uniformly on the
+    /// sub-sensor disk of radius tan θ_fov at F = 1 behind it (Eq. 9). Returns the direction
+    /// and W_e cos θ / p(ω) = A_sub cos⁴θ (the aperture pdf is left to the caller).
+    pub fn sample_direction(&self, u1: f64, u2: f64) -> (DVec3, f64) {
+        let r = self.tan_fov * u1.sqrt();
+        let phi = 2.0 * PI * u2;
+        let d = self.frame.to_world(r * phi.cos(), r * phi.sin(), 1.0);
+        let cos = 1.0 / d.length();
+        let a_sub = PI * self.tan_fov * self.tan_fov;
+        (d * cos, a_sub * cos.powi(4))
+    }
+
+    /// Cosine between the axis and the unit direction `d` leaving the aperture towards the
+    /// scene, or None when `d` is outside the field of view (W_e = 0).
+    pub fn accepts(&self, d: DVec3) -> Option<f64> {
+        let cos = d.dot(self.frame.w);
+        (cos >= self.cos_fov && cos > 0.0).then_some(cos)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn inst() -> Instrument {
+        serde_yaml::from_str(
+            "pulse_energy_j: 1\npulse_fwhm_ns: 1\nfootprint_half_angle_mrad: 50\nfov_half_angle_mrad: 80\nreceiver_area_m2: 0.1",
+        )
+        .unwrap()
+    }
+
+    #[test]
+    fn frame_is_orthonormal() {
+        for w in [
+            DVec3::Z,
+            -DVec3::Z,
+            DVec3::new(0.3, -0.5, 0.2).normalize(),
+            DVec3::new(0.0, 0.0, -1.0),
+        ] {
+            let f = Frame::from_axis(w);
+            assert!(
+                f.u.dot(f.v).abs() < 1e-12
+                    && f.u.dot(f.w).abs() < 1e-12
+                    && f.v.dot(f.w).abs() < 1e-12
+            );
+            assert!((f.u.cross(f.v) - f.w).length() < 1e-12);
+        }
+    }
+
+    #[test]
+    fn laser_pdf_integrates_to_one_and_matches_sampling() {
+        let laser = Laser::new(&inst(), DVec3::ZERO, -DVec3::Z);
+        // ∫ p dω over the cone, by quadrature in θ.
+        let n = 20000;
+        let th_max = laser.tan_fp.atan();
+        let mut sum = 0.0;
+        for i in 0..n {
+            let th = (i as f64 + 0.5) / n as f64 * th_max;
+            let d = laser.frame.to_world(th.sin(), 0.0, th.cos());
+            sum += laser.pdf(d) * th.sin() * 2.0 * PI * th_max / n as f64;
+        }
+        assert!((sum - 1.0).abs() < 1e-6, "{sum}");
+        let (d, p) = laser.sample(0.37, 0.81);
+        assert!((laser.pdf(d) - p).abs() < 1e-9 * p);
+        assert_eq!(
+            laser.pdf(
+                laser
+                    .frame
+                    .to_world(laser.tan_fp * 1.01, 0.0, 1.0)
+                    .normalize()
+            ),
+            0.0
+        );
+    }
+}
+
+/// The receiver's range gate: bin ξ covers [t0 + ξ Δt, t0 + (ξ+1) Δt) after emission (Eq. 18).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Gate {
+    /// Start of bin 0 after emission, s.
+    pub t0: f64,
+    /// Bin width Δt, s.
+    pub dt: f64,
+    pub bins: usize,
+}
+
+impl Gate {
+    /// The gate a campaign asks for, or one that covers every range from the sensor to the
+    /// scene's bounding box, with room for the pulse's tails. The nearest range of the box
+    /// falls in the middle of a bin, so that a flat target at the top of the scene returns
+    /// into one bin rather than straddling two.
+    pub fn for_pulse(inst: &Instrument, origin: DVec3, bounds: (DVec3, DVec3)) -> Gate {
+        let dt = inst.bin_ns * 1e-9;
+        if let Some(g) = &inst.range_gate {
+            return Gate {
+                t0: g.start_ns * 1e-9,
+                dt,
+                bins: g.bins as usize,
+            };
+        }
+        let (lo, hi) = bounds;
+        let nearest = origin.clamp(lo, hi);
+        let r_min = (nearest - origin).length();
+        let mut r_max: f64 = 0.0;
+        for i in 0..8 {
+            let corner = DVec3::new(
+                if i & 1 == 0 { lo.x } else { hi.x },
+                if i & 2 == 0 { lo.y } else { hi.y },
+                if i & 4 == 0 { lo.z } else { hi.z },
+            );
+            r_max = r_max.max((corner - origin).length());
+        }
+        let sigma = pulse_sigma_s(inst);
+        let margin = (4.0 * sigma / dt).ceil() + 2.0;
+        let t0 = 2.0 * r_min / crate::C - (margin + 0.5) * dt;
+        let bins = ((2.0 * r_max / crate::C - t0) / dt).ceil() + margin;
+        Gate {
+            t0,
+            dt,
+            bins: bins.max(1.0) as usize,
+        }
+    }
+
+    pub fn end(&self) -> f64 {
+        self.t0 + self.dt * self.bins as f64
+    }
+}
+
+/// Standard deviation of the pulse's Gaussian time profile, s.
+pub fn pulse_sigma_s(inst: &Instrument) -> f64 {
+    inst.pulse_fwhm_ns * 1e-9 / (8.0 * std::f64::consts::LN_2).sqrt()
+}

@@ -1,0 +1,166 @@
+//! Bad input ends with exit code 1 and one message naming the file, the line and the key.
+
+mod common;
+use common::*;
+use std::path::PathBuf;
+
+const SCENE: &str = "name: s
+materials:
+  soil: { reflectance: { 1064: 0.3 } }
+objects:
+  - plane: { z: 0, extent: [[0, 0], [10, 10]], material: soil }
+";
+
+const CAMPAIGN: &str = "name: bad
+scene: scene.yaml
+wavelength_nm: 1064
+instrument:
+  pulse_energy_j: 0.001
+  pulse_fwhm_ns: 2
+  footprint_half_angle_mrad: 1
+  fov_half_angle_mrad: 2
+  receiver_area_m2: 0.1
+platform:
+  kind: static
+  pulses:
+    - position: [5, 5, 100]
+      direction: [0, 0, -1]
+simulation: { rays_per_pulse: 100 }
+";
+
+/// Writes a campaign and scene (either may be edited) and runs `lidarsim check` on it.
+fn check(name: &str, campaign: &str, scene: &str) -> (i32, String, PathBuf) {
+    let dir = tmp(&format!("bad_{name}"));
+    write(&dir, "scene.yaml", scene);
+    let path = write(&dir, "campaign.yaml", campaign);
+    let (code, _out, err) = lidarsim(&["check", path.to_str().unwrap()]);
+    (code, err, dir)
+}
+
+fn assert_one_message(code: i32, err: &str, words: &[&str]) {
+    assert_eq!(code, 1, "exit code for: {err}");
+    assert!(!err.contains("panicked") && !err.contains("RUST_BACKTRACE"), "{err}");
+    assert_eq!(err.trim().lines().count(), 1, "one line expected: {err}");
+    for w in words {
+        assert!(err.contains(w), "expected {w:?} in: {err}");
+    }
+}
+
+#[test]
+fn valid_input_passes() {
+    let (code, err, _) = check("valid", CAMPAIGN, SCENE);
+    assert_eq!(code, 0, "{err}");
+}
+
+#[test]
+fn unknown_key() {
+    let c = CAMPAIGN.replace("  receiver_area_m2: 0.1", "  receiver_area_m2: 0.1\n  reciever_gain: 3");
+    let (code, err, _) = check("unknown_key", &c, SCENE);
+    assert_one_message(code, &err, &["campaign.yaml:10:", "instrument.reciever_gain", "unknown field"]);
+}
+
+#[test]
+fn wrong_type() {
+    let c = CAMPAIGN.replace("pulse_energy_j: 0.001", "pulse_energy_j: high");
+    let (code, err, _) = check("wrong_type", &c, SCENE);
+    assert_one_message(code, &err, &["campaign.yaml:5:", "instrument.pulse_energy_j", "invalid type", "high"]);
+}
+
+#[test]
+fn missing_campaign_file() {
+    let (code, _, err) = lidarsim(&["check", "/nonexistent/campaign.yaml"]);
+    assert_one_message(code, &err, &["/nonexistent/campaign.yaml", "does not exist"]);
+    let (code, _, err) = lidarsim(&["run", "/nonexistent/campaign.yaml"]);
+    assert_one_message(code, &err, &["/nonexistent/campaign.yaml", "does not exist"]);
+}
+
+#[test]
+fn missing_scene_file() {
+    let c = CAMPAIGN.replace("scene: scene.yaml", "scene: nowhere.yaml");
+    let (code, err, _) = check("missing_scene", &c, SCENE);
+    assert_one_message(code, &err, &["campaign.yaml:2:", "scene", "nowhere.yaml", "does not exist"]);
+}
+
+#[test]
+fn missing_mesh_file() {
+    let s = format!("{SCENE}  - mesh: {{ file: meshes/tree.obj, material: soil }}\n");
+    let (code, err, _) = check("missing_mesh", CAMPAIGN, &s);
+    assert_one_message(code, &err, &["scene.yaml", "tree.obj", "does not exist"]);
+}
+
+#[test]
+fn negative_energy() {
+    let c = CAMPAIGN.replace("pulse_energy_j: 0.001", "pulse_energy_j: -0.001");
+    let (code, err, _) = check("negative_energy", &c, SCENE);
+    assert_one_message(code, &err, &["campaign.yaml:5:", "instrument.pulse_energy_j", "positive", "-0.001"]);
+}
+
+#[test]
+fn nan_energy() {
+    let c = CAMPAIGN.replace("pulse_energy_j: 0.001", "pulse_energy_j: .nan");
+    let (code, err, _) = check("nan_energy", &c, SCENE);
+    assert_one_message(code, &err, &["campaign.yaml:5:", "instrument.pulse_energy_j", "finite", "NaN"]);
+}
+
+#[test]
+fn wavelength_missing_from_material() {
+    let s = SCENE.replace("{ 1064: 0.3 }", "{ 532: 0.1 }");
+    let (code, err, _) = check("missing_wavelength", CAMPAIGN, &s);
+    assert_one_message(code, &err, &["scene.yaml:3:", "materials.soil.reflectance", "1064"]);
+}
+
+#[test]
+fn empty_mesh() {
+    let dir = tmp("bad_empty_mesh_files");
+    let obj = write(&dir, "empty.obj", "# no faces\nv 0 0 0\nv 1 0 0\nv 0 1 0\n");
+    let s = format!("{SCENE}  - mesh: {{ file: {}, material: soil }}\n", obj.display());
+    let (code, err, _) = check("empty_mesh", CAMPAIGN, &s);
+    assert_one_message(code, &err, &["empty.obj", "no triangles"]);
+}
+
+#[test]
+fn degenerate_mesh() {
+    let dir = tmp("bad_degenerate_mesh_files");
+    let obj = write(&dir, "flat.obj", "v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\nf 1 1 2\n");
+    let s = format!("{SCENE}  - mesh: {{ file: {}, material: soil }}\n", obj.display());
+    let (code, err, _) = check("degenerate_mesh", CAMPAIGN, &s);
+    assert_one_message(code, &err, &["flat.obj", "degenerate"]);
+}
+
+#[test]
+fn instance_row_with_wrong_column_count() {
+    let dir = tmp("bad_csv_files");
+    write(&dir, "leaf.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
+    write(&dir, "trees.csv", "# x y z rotation scale\n1 2\n3, 4, 0\n5 6 0 10 1 9\n");
+    let s = format!(
+        "{SCENE}  - mesh: {{ file: {}, material: soil, instances: {} }}\n",
+        dir.join("leaf.obj").display(),
+        dir.join("trees.csv").display()
+    );
+    let (code, err, _) = check("csv_columns", CAMPAIGN, &s);
+    assert_one_message(code, &err, &["trees.csv:4:", "columns", "6"]);
+}
+
+#[test]
+fn out_of_range_numbers() {
+    for (from, to, key) in [
+        ("edge_energy_fraction", "  edge_energy_fraction: 1.5\n", "instrument.edge_energy_fraction"),
+        ("receiver_area_m2: 0.1", "receiver_area_m2: 0", "instrument.receiver_area_m2"),
+        ("rays_per_pulse: 100", "rays_per_pulse: 0", "simulation.rays_per_pulse"),
+    ] {
+        let c = if from == "edge_energy_fraction" {
+            CAMPAIGN.replace("  fov_half_angle_mrad: 2\n", &format!("  fov_half_angle_mrad: 2\n{to}"))
+        } else {
+            CAMPAIGN.replace(from, to)
+        };
+        let (code, err, _) = check("range", &c, SCENE);
+        assert_one_message(code, &err, &["campaign.yaml:", key]);
+    }
+}
+
+#[test]
+fn bad_yaml_syntax() {
+    let c = CAMPAIGN.replace("kind: static", "kind: [static");
+    let (code, err, _) = check("syntax", &c, SCENE);
+    assert_one_message(code, &err, &["campaign.yaml:"]);
+}

@@ -1,0 +1,185 @@
+//! Shared helpers for the integration tests: temporary run folders, campaign text, and the
+//! closed forms of ../shared/spec/physics.md computed by quadrature.
+#![allow(dead_code)]
+
+use lidarsim::pipeline::{self, parquet, RunOptions};
+use lidarsim::waveform::Waveform;
+use std::f64::consts::PI;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+pub const C: f64 = 299_792_458.0;
+
+/// A fresh, empty folder for one test.
+pub fn tmp(name: &str) -> PathBuf {
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join(name);
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+pub fn write(dir: &Path, name: &str, text: &str) -> PathBuf {
+    let p = dir.join(name);
+    std::fs::write(&p, text).unwrap();
+    p
+}
+
+pub fn repo() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+/// Instrument block of a campaign, in YAML flow style.
+#[derive(Clone, Debug)]
+pub struct Inst {
+    pub energy: f64,
+    pub fwhm_ns: f64,
+    pub fp_mrad: f64,
+    pub fov_mrad: f64,
+    pub area: f64,
+    pub bin_ns: f64,
+    pub eta: f64,
+}
+
+impl Default for Inst {
+    fn default() -> Self {
+        Inst { energy: 0.01, fwhm_ns: 0.0, fp_mrad: 1.0, fov_mrad: 1.5, area: 0.1, bin_ns: 1.0, eta: (-2.0f64).exp() }
+    }
+}
+
+/// Campaign text with one static pulse.
+pub fn campaign(scene: &Path, inst: &Inst, pos: [f64; 3], dir: [f64; 3], method: &str, rays: u64, max_order: u32) -> String {
+    format!(
+        "name: t\nscene: {}\nseed: 3\nwavelength_nm: 1064\ninstrument:\n  pulse_energy_j: {}\n  pulse_fwhm_ns: {}\n  footprint_half_angle_mrad: {}\n  edge_energy_fraction: {}\n  fov_half_angle_mrad: {}\n  receiver_area_m2: {}\n  bin_ns: {}\nplatform:\n  kind: static\n  pulses:\n    - {{ position: [{}, {}, {}], direction: [{}, {}, {}] }}\nsimulation: {{ method: {method}, rays_per_pulse: {rays}, max_order: {max_order} }}\n",
+        scene.display(),
+        inst.energy,
+        inst.fwhm_ns,
+        inst.fp_mrad,
+        inst.eta,
+        inst.fov_mrad,
+        inst.area,
+        inst.bin_ns,
+        pos[0],
+        pos[1],
+        pos[2],
+        dir[0],
+        dir[1],
+        dir[2]
+    )
+}
+
+/// Runs a campaign text through the library pipeline and reads its waveforms back.
+pub fn run(dir: &Path, campaign_text: &str, threads: Option<usize>) -> Vec<Waveform> {
+    let path = write(dir, "campaign.yaml", campaign_text);
+    let out = dir.join("run");
+    pipeline::run(&path, &RunOptions { out: Some(out.clone()), threads }).unwrap_or_else(|e| panic!("{e}"));
+    parquet::read_waveforms(&out.join("waveforms/part-00000.parquet")).unwrap()
+}
+
+/// Runs the binary; returns (exit code, stdout, stderr).
+pub fn lidarsim(args: &[&str]) -> (i32, String, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_lidarsim")).args(args).output().unwrap();
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+pub fn plane_scene(dir: &Path, rho: f64, half: f64) -> PathBuf {
+    write(
+        dir,
+        "plane.yaml",
+        &format!(
+            "name: p\nmaterials:\n  soil: {{ reflectance: {rho} }}\nobjects:\n  - plane: {{ z: 0, extent: [[{}, {}], [{}, {}]], material: soil }}\n",
+            -half, -half, half, half
+        ),
+    )
+}
+
+/// σ of the footprint's Gaussian in tan-space (Appendix B).
+pub fn sigma(fp_mrad: f64, eta: f64) -> f64 {
+    (fp_mrad * 1e-3).tan() / (-2.0 * eta.ln()).sqrt()
+}
+
+/// Laser pdf in tan-space (per unit tan-plane area), truncated at tan θ_fp.
+pub fn p_tan(u: f64, fp_mrad: f64, eta: f64) -> f64 {
+    let s = sigma(fp_mrad, eta);
+    if u > (fp_mrad * 1e-3).tan() {
+        0.0
+    } else {
+        (-u * u / (2.0 * s * s)).exp() / (2.0 * PI * s * s * (1.0 - eta))
+    }
+}
+
+/// Area shared by two disks of radii a and b whose centres are d apart.
+pub fn disk_overlap(a: f64, b: f64, d: f64) -> f64 {
+    if d >= a + b {
+        return 0.0;
+    }
+    let (small, big) = if a < b { (a, b) } else { (b, a) };
+    if d <= big - small {
+        return PI * small * small;
+    }
+    let alpha = ((d * d + a * a - b * b) / (2.0 * d * a)).clamp(-1.0, 1.0).acos();
+    let beta = ((d * d + b * b - a * a) / (2.0 * d * b)).clamp(-1.0, 1.0).acos();
+    a * a * (alpha - alpha.sin() * alpha.cos()) + b * b * (beta - beta.sin() * beta.cos())
+}
+
+/// Closed form 1 (physics.md), with the aperture's finite size:
+/// Q_r = (Q_e ρ / (π H²)) ∫ p_ground(g) A_overlap(|g|) dA_g.
+pub fn plane_energy(inst: &Inst, rho: f64, h: f64) -> f64 {
+    let r_tel = (inst.area / PI).sqrt();
+    let r_fov = h * (inst.fov_mrad * 1e-3).tan();
+    let g_max = h * (inst.fp_mrad * 1e-3).tan();
+    let n = 200_000;
+    let dg = g_max / n as f64;
+    let mut sum = 0.0;
+    for i in 0..n {
+        let g = (i as f64 + 0.5) * dg;
+        let p_ground = p_tan(g / h, inst.fp_mrad, inst.eta) / (h * h);
+        sum += p_ground * disk_overlap(r_tel, r_fov, g) * 2.0 * PI * g * dg;
+    }
+    inst.energy * rho / (PI * h * h) * sum
+}
+
+/// E_footprint[cos θ] of the laser's directions.
+pub fn footprint_mean_cos(fp_mrad: f64, eta: f64) -> f64 {
+    let u_max = (fp_mrad * 1e-3).tan();
+    let n = 100_000;
+    let du = u_max / n as f64;
+    (0..n)
+        .map(|i| {
+            let u = (i as f64 + 0.5) * du;
+            p_tan(u, fp_mrad, eta) / (1.0 + u * u).sqrt() * 2.0 * PI * u * du
+        })
+        .sum()
+}
+
+/// Closed form 3: energy of scattering order k (1-based) in an integrating sphere.
+pub fn sphere_order_energy(inst: &Inst, albedo: f64, radius: f64, k: u32) -> f64 {
+    if k == 1 {
+        albedo * inst.energy * inst.area / (PI * radius * radius) * footprint_mean_cos(inst.fp_mrad, inst.eta)
+    } else {
+        let s = (inst.fov_mrad * 1e-3).sin();
+        albedo.powi(k as i32) * inst.energy * inst.area * s * s / (4.0 * PI * radius * radius)
+    }
+}
+
+pub fn sphere_scene(dir: &Path, albedo: f64) -> PathBuf {
+    let mesh = repo().join("scenes/meshes/sphere_r10.obj");
+    write(
+        dir,
+        "sphere.yaml",
+        &format!(
+            "name: s\nmaterials:\n  wall: {{ reflectance: {albedo} }}\nobjects:\n  - mesh: {{ file: {}, material: wall }}\n",
+            mesh.display()
+        ),
+    )
+}
+
+/// rRMSE of `a` against the reference `r`: RMS difference over the mean of the reference.
+pub fn rrmse(a: &[f64], r: &[f64]) -> f64 {
+    let n = r.len() as f64;
+    let mse = a.iter().zip(r).map(|(x, y)| (x - y) * (x - y)).sum::<f64>() / n;
+    mse.sqrt() / (r.iter().sum::<f64>() / n)
+}

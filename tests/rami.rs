@@ -1,0 +1,61 @@
+//! The real RAMI Wellington citrus orchard (../shared/data/rami-wco): loads through
+//! scenes/rami_wco.yaml with instances, and `lidarsim check` reports its size and memory.
+//! Skips, saying so, when the data folder is absent.
+
+mod common;
+use common::*;
+use std::path::PathBuf;
+
+fn rami_dir() -> Option<PathBuf> {
+    let d = repo().join("../shared/data/rami-wco");
+    if d.join("CISI1/foliage.ply").is_file() {
+        Some(d)
+    } else {
+        println!("SKIPPED: RAMI data not found at {} (see README, Scenes)", d.display());
+        None
+    }
+}
+
+/// Face count from a PLY header, read here independently of the simulator's reader.
+fn ply_faces(path: &std::path::Path) -> u64 {
+    let bytes = std::fs::read(path).unwrap();
+    let end = bytes.windows(10).position(|w| w == b"end_header").unwrap();
+    let header = String::from_utf8_lossy(&bytes[..end]);
+    header
+        .lines()
+        .find_map(|l| l.strip_prefix("element face ").map(|n| n.trim().parse().unwrap()))
+        .unwrap()
+}
+
+fn count(report: &str, key: &str) -> u64 {
+    report
+        .lines()
+        .find_map(|l| l.strip_prefix(key).map(|v| v.trim().split_whitespace().next().unwrap().parse::<f64>().unwrap() as u64))
+        .unwrap_or_else(|| panic!("no {key} in:\n{report}"))
+}
+
+#[test]
+fn orchard_check_reports_counts_and_memory() {
+    let Some(dir) = rami_dir() else { return };
+    let mut trees = 0u64;
+    let mut triangles = 0u64;
+    for n in 1..=10 {
+        let t = dir.join(format!("CISI{n}"));
+        let text = std::fs::read_to_string(t.join("location.txt")).unwrap();
+        let k = text.lines().filter(|l| !l.trim().is_empty()).count() as u64;
+        trees += k;
+        triangles += k * (ply_faces(&t.join("foliage.ply")) + ply_faces(&t.join("trunk.ply")));
+    }
+    assert_eq!(trees, 1115);
+    let camp = repo().join("pipelines/rami_wco_gedi.yaml");
+    let (code, out, err) = lidarsim(&["check", camp.to_str().unwrap()]);
+    assert_eq!(code, 0, "{err}");
+    println!("{out}");
+    // one instance per tree for the foliage and one for the trunk, plus the ground plane
+    assert_eq!(count(&out, "instances:"), 2 * trees + 1);
+    assert_eq!(count(&out, "triangles (instanced):"), triangles + 2);
+    assert!(triangles > 80_000_000, "{triangles}");
+    let mb = count(&out, "scene memory:");
+    let peak = count(&out, "peak process memory:");
+    assert!(mb < 2000 && peak < 2000, "scene {mb} MB, process peak {peak} MB");
+}

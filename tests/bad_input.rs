@@ -39,7 +39,10 @@ fn check(name: &str, campaign: &str, scene: &str) -> (i32, String, PathBuf) {
 
 fn assert_one_message(code: i32, err: &str, words: &[&str]) {
     assert_eq!(code, 1, "exit code for: {err}");
-    assert!(!err.contains("panicked") && !err.contains("RUST_BACKTRACE"), "{err}");
+    assert!(
+        !err.contains("panicked") && !err.contains("RUST_BACKTRACE"),
+        "{err}"
+    );
     assert_eq!(err.trim().lines().count(), 1, "one line expected: {err}");
     for w in words {
         assert!(err.contains(w), "expected {w:?} in: {err}");
@@ -54,66 +57,137 @@ fn valid_input_passes() {
 
 #[test]
 fn unknown_key() {
-    let c = CAMPAIGN.replace("  receiver_area_m2: 0.1", "  receiver_area_m2: 0.1\n  reciever_gain: 3");
+    let c = CAMPAIGN.replace(
+        "  receiver_area_m2: 0.1",
+        "  receiver_area_m2: 0.1\n  reciever_gain: 3",
+    );
     let (code, err, _) = check("unknown_key", &c, SCENE);
-    assert_one_message(code, &err, &["campaign.yaml:10:", "instrument.reciever_gain", "unknown field"]);
+    assert_one_message(
+        code,
+        &err,
+        &[
+            "campaign.yaml:10:",
+            "instrument.reciever_gain",
+            "unknown field",
+        ],
+    );
 }
 
 #[test]
 fn wrong_type() {
     let c = CAMPAIGN.replace("pulse_energy_j: 0.001", "pulse_energy_j: high");
     let (code, err, _) = check("wrong_type", &c, SCENE);
-    assert_one_message(code, &err, &["campaign.yaml:5:", "instrument.pulse_energy_j", "invalid type", "high"]);
+    assert_one_message(
+        code,
+        &err,
+        &[
+            "campaign.yaml:5:",
+            "instrument.pulse_energy_j",
+            "invalid type",
+            "high",
+        ],
+    );
 }
 
 #[test]
 fn missing_campaign_file() {
     let (code, _, err) = lidarsim(&["check", "/nonexistent/campaign.yaml"]);
-    assert_one_message(code, &err, &["/nonexistent/campaign.yaml", "does not exist"]);
+    assert_one_message(
+        code,
+        &err,
+        &["/nonexistent/campaign.yaml", "does not exist"],
+    );
     let (code, _, err) = lidarsim(&["run", "/nonexistent/campaign.yaml"]);
-    assert_one_message(code, &err, &["/nonexistent/campaign.yaml", "does not exist"]);
+    assert_one_message(
+        code,
+        &err,
+        &["/nonexistent/campaign.yaml", "does not exist"],
+    );
 }
 
 #[test]
 fn missing_scene_file() {
     let c = CAMPAIGN.replace("scene: scene.yaml", "scene: nowhere.yaml");
     let (code, err, _) = check("missing_scene", &c, SCENE);
-    assert_one_message(code, &err, &["campaign.yaml:2:", "scene", "nowhere.yaml", "does not exist"]);
+    assert_one_message(
+        code,
+        &err,
+        &[
+            "campaign.yaml:2:",
+            "scene",
+            "nowhere.yaml",
+            "does not exist",
+        ],
+    );
 }
 
 #[test]
 fn missing_mesh_file() {
     let s = format!("{SCENE}  - mesh: {{ file: meshes/tree.obj, material: soil }}\n");
     let (code, err, _) = check("missing_mesh", CAMPAIGN, &s);
-    assert_one_message(code, &err, &["scene.yaml", "tree.obj", "does not exist"]);
+    assert_one_message(
+        code,
+        &err,
+        &[
+            "scene.yaml:6:",
+            "objects[1].mesh.file",
+            "tree.obj",
+            "does not exist",
+        ],
+    );
 }
 
 #[test]
 fn negative_energy() {
     let c = CAMPAIGN.replace("pulse_energy_j: 0.001", "pulse_energy_j: -0.001");
     let (code, err, _) = check("negative_energy", &c, SCENE);
-    assert_one_message(code, &err, &["campaign.yaml:5:", "instrument.pulse_energy_j", "positive", "-0.001"]);
+    assert_one_message(
+        code,
+        &err,
+        &[
+            "campaign.yaml:5:",
+            "instrument.pulse_energy_j",
+            "positive",
+            "-0.001",
+        ],
+    );
 }
 
 #[test]
 fn nan_energy() {
     let c = CAMPAIGN.replace("pulse_energy_j: 0.001", "pulse_energy_j: .nan");
     let (code, err, _) = check("nan_energy", &c, SCENE);
-    assert_one_message(code, &err, &["campaign.yaml:5:", "instrument.pulse_energy_j", "finite", "NaN"]);
+    assert_one_message(
+        code,
+        &err,
+        &[
+            "campaign.yaml:5:",
+            "instrument.pulse_energy_j",
+            "finite",
+            "NaN",
+        ],
+    );
 }
 
 #[test]
 fn wavelength_missing_from_material() {
     let s = SCENE.replace("{ 1064: 0.3 }", "{ 532: 0.1 }");
     let (code, err, _) = check("missing_wavelength", CAMPAIGN, &s);
-    assert_one_message(code, &err, &["scene.yaml:3:", "materials.soil.reflectance", "1064"]);
+    assert_one_message(
+        code,
+        &err,
+        &["scene.yaml:3:", "materials.soil.reflectance", "1064"],
+    );
 }
 
 #[test]
 fn empty_mesh() {
     let dir = tmp("bad_empty_mesh_files");
     let obj = write(&dir, "empty.obj", "# no faces\nv 0 0 0\nv 1 0 0\nv 0 1 0\n");
-    let s = format!("{SCENE}  - mesh: {{ file: {}, material: soil }}\n", obj.display());
+    let s = format!(
+        "{SCENE}  - mesh: {{ file: {}, material: soil }}\n",
+        obj.display()
+    );
     let (code, err, _) = check("empty_mesh", CAMPAIGN, &s);
     assert_one_message(code, &err, &["empty.obj", "no triangles"]);
 }
@@ -121,8 +195,15 @@ fn empty_mesh() {
 #[test]
 fn degenerate_mesh() {
     let dir = tmp("bad_degenerate_mesh_files");
-    let obj = write(&dir, "flat.obj", "v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\nf 1 1 2\n");
-    let s = format!("{SCENE}  - mesh: {{ file: {}, material: soil }}\n", obj.display());
+    let obj = write(
+        &dir,
+        "flat.obj",
+        "v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\nf 1 1 2\n",
+    );
+    let s = format!(
+        "{SCENE}  - mesh: {{ file: {}, material: soil }}\n",
+        obj.display()
+    );
     let (code, err, _) = check("degenerate_mesh", CAMPAIGN, &s);
     assert_one_message(code, &err, &["flat.obj", "degenerate"]);
 }
@@ -131,7 +212,11 @@ fn degenerate_mesh() {
 fn instance_row_with_wrong_column_count() {
     let dir = tmp("bad_csv_files");
     write(&dir, "leaf.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
-    write(&dir, "trees.csv", "# x y z rotation scale\n1 2\n3, 4, 0\n5 6 0 10 1 9\n");
+    write(
+        &dir,
+        "trees.csv",
+        "# x y z rotation scale\n1 2\n3, 4, 0\n5 6 0 10 1 9\n",
+    );
     let s = format!(
         "{SCENE}  - mesh: {{ file: {}, material: soil, instances: {} }}\n",
         dir.join("leaf.obj").display(),
@@ -144,12 +229,27 @@ fn instance_row_with_wrong_column_count() {
 #[test]
 fn out_of_range_numbers() {
     for (from, to, key) in [
-        ("edge_energy_fraction", "  edge_energy_fraction: 1.5\n", "instrument.edge_energy_fraction"),
-        ("receiver_area_m2: 0.1", "receiver_area_m2: 0", "instrument.receiver_area_m2"),
-        ("rays_per_pulse: 100", "rays_per_pulse: 0", "simulation.rays_per_pulse"),
+        (
+            "edge_energy_fraction",
+            "  edge_energy_fraction: 1.5\n",
+            "instrument.edge_energy_fraction",
+        ),
+        (
+            "receiver_area_m2: 0.1",
+            "receiver_area_m2: 0",
+            "instrument.receiver_area_m2",
+        ),
+        (
+            "rays_per_pulse: 100",
+            "rays_per_pulse: 0",
+            "simulation.rays_per_pulse",
+        ),
     ] {
         let c = if from == "edge_energy_fraction" {
-            CAMPAIGN.replace("  fov_half_angle_mrad: 2\n", &format!("  fov_half_angle_mrad: 2\n{to}"))
+            CAMPAIGN.replace(
+                "  fov_half_angle_mrad: 2\n",
+                &format!("  fov_half_angle_mrad: 2\n{to}"),
+            )
         } else {
             CAMPAIGN.replace(from, to)
         };

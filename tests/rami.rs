@@ -11,7 +11,10 @@ fn rami_dir() -> Option<PathBuf> {
     if d.join("CISI1/foliage.ply").is_file() {
         Some(d)
     } else {
-        println!("SKIPPED: RAMI data not found at {} (see README, Scenes)", d.display());
+        println!(
+            "SKIPPED: RAMI data not found at {} (see README, Scenes)",
+            d.display()
+        );
         None
     }
 }
@@ -23,14 +26,20 @@ fn ply_faces(path: &std::path::Path) -> u64 {
     let header = String::from_utf8_lossy(&bytes[..end]);
     header
         .lines()
-        .find_map(|l| l.strip_prefix("element face ").map(|n| n.trim().parse().unwrap()))
+        .find_map(|l| {
+            l.strip_prefix("element face ")
+                .map(|n| n.trim().parse().unwrap())
+        })
         .unwrap()
 }
 
 fn count(report: &str, key: &str) -> u64 {
     report
         .lines()
-        .find_map(|l| l.strip_prefix(key).map(|v| v.trim().split_whitespace().next().unwrap().parse::<f64>().unwrap() as u64))
+        .find_map(|l| {
+            l.strip_prefix(key)
+                .map(|v| v.split_whitespace().next().unwrap().parse::<f64>().unwrap() as u64)
+        })
         .unwrap_or_else(|| panic!("no {key} in:\n{report}"))
 }
 
@@ -57,5 +66,8 @@ fn orchard_check_reports_counts_and_memory() {
     assert!(triangles > 80_000_000, "{triangles}");
     let mb = count(&out, "scene memory:");
     let peak = count(&out, "peak process memory:");
-    assert!(mb < 2000 && peak < 2000, "scene {mb} MB, process peak {peak} MB");
+    assert!(
+        mb < 2000 && peak < 2000,
+        "scene {mb} MB, process peak {peak} MB"
+    );
 }

@@ -204,12 +204,22 @@ pub struct Sun {
 #[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq, Default)]
 #[serde(rename_all = "snake_case")]
 pub enum Method {
-    /// Light paths from the laser, each vertex connected to the receiver.
+    /// Bidirectional path tracing with every connection strategy.
     #[default]
+    Bdpt,
+    /// Light paths from the laser, each vertex connected to the receiver.
     Forward,
     /// Receiver paths from the aperture, each vertex connected to the laser.
     Backward,
-    Bdpt,
+}
+
+/// How multiple importance sampling weighs the strategies that can make a path.
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum MisHeuristic {
+    #[default]
+    Power,
+    Balance,
 }
 
 #[derive(Clone, Debug, Deserialize, Serialize)]
@@ -221,6 +231,8 @@ pub struct Simulation {
     pub rays_per_pulse: u64,
     #[serde(default = "default_max_order")]
     pub max_order: u32,
+    #[serde(default)]
+    pub mis: MisHeuristic,
 }
 
 impl Default for Simulation {
@@ -229,6 +241,7 @@ impl Default for Simulation {
             method: Method::default(),
             rays_per_pulse: default_rays(),
             max_order: default_max_order(),
+            mis: MisHeuristic::default(),
         }
     }
 }
@@ -437,12 +450,6 @@ impl Campaign {
             c.non_negative("sun.irradiance_w_m2_um", s.irradiance_w_m2_um)?;
         }
         let s = &self.simulation;
-        if s.method == Method::Bdpt {
-            return Err(doc.error(
-                "simulation.method",
-                "`bdpt` is not available yet in this version; use `forward` or `backward`",
-            ));
-        }
         if s.rays_per_pulse == 0 {
             return Err(doc.error("simulation.rays_per_pulse", "must be at least 1"));
         }

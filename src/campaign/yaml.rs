@@ -65,8 +65,8 @@ pub fn parse<T: DeserializeOwned>(path: &Path, text: &str) -> Result<T> {
             // serde reports an unknown key against its parent: name the key itself.
             let key = match unknown_field_name(&message) {
                 Some(field) if key.is_empty() => field,
-                Some(field) => format!("{key}.{field}"),
-                None => key,
+                Some(field) if !key.ends_with(&field) => format!("{key}.{field}"),
+                _ => key,
             };
             Err(Error::at(path, location, &key, message))
         }

@@ -147,6 +147,7 @@ pub fn simulate(loaded: &Loaded, scene: &Scene, pulses: &[Pulse]) -> Vec<Wavefor
                 gate,
                 sub_bins,
                 method: c.simulation.method,
+                heuristic: c.simulation.mis,
                 max_order: c.simulation.max_order,
                 seed: c.seed,
                 pulse_id: p.id,

@@ -123,6 +123,10 @@ pub fn write_waveforms(path: &Path, w: &[Waveform]) -> Result<()> {
             list_f32(w.iter().map(|r| r.impulse_energy_j.clone())),
         ),
         (
+            "impulse_energy_se_j",
+            list_f32(w.iter().map(|r| r.impulse_energy_se_j.clone())),
+        ),
+        (
             "received_energy_j",
             Arc::new(Float64Array::from_iter_values(
                 w.iter().map(|r| r.received_energy_j),
@@ -191,6 +195,7 @@ pub fn read_waveforms(path: &Path) -> Result<Vec<Waveform>> {
         let bin = col("bin_ns")?.as_primitive::<Float32Type>().clone();
         let lp = col("laser_photons")?.as_list::<i32>().clone();
         let ie = col("impulse_energy_j")?.as_list::<i32>().clone();
+        let ise = col("impulse_energy_se_j")?.as_list::<i32>().clone();
         let rec = col("received_energy_j")?
             .as_primitive::<Float64Type>()
             .clone();
@@ -220,6 +225,7 @@ pub fn read_waveforms(path: &Path) -> Result<Vec<Waveform>> {
                 bin_ns: bin.value(i),
                 laser_photons: f32s(&lp, i),
                 impulse_energy_j: f32s(&ie, i),
+                impulse_energy_se_j: f32s(&ise, i),
                 received_energy_j: rec.value(i),
                 outside_gate_energy_j: out_g.value(i),
                 order_energy_j: f64s(&oe, i),

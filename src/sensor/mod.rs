@@ -137,6 +137,31 @@ impl Receiver {
         (d * cos, a_sub * cos.powi(4))
     }
 
+    /// Solid-angle pdf of [`Receiver::sample_direction`]: 1 / (A_sub cos³θ) within the field
+    /// of view, 0 outside.
+    pub fn pdf_dir(&self, d: DVec3) -> f64 {
+        match self.accepts(d) {
+            Some(cos) => 1.0 / (PI * self.tan_fov * self.tan_fov * cos * cos * cos),
+            None => 0.0,
+        }
+    }
+
+    /// Distance along the unit direction `d` from `o` to the aperture disk, when the ray
+    /// crosses it from the scene's side.
+    pub fn hit_distance(&self, o: DVec3, d: DVec3) -> Option<f64> {
+        let w = self.frame.w;
+        let denom = d.dot(w);
+        if denom >= 0.0 {
+            return None;
+        }
+        let t = (self.center - o).dot(w) / denom;
+        if t.is_nan() || t <= 0.0 {
+            return None;
+        }
+        let p = o + d * t - self.center;
+        (p.length_squared() <= self.radius * self.radius).then_some(t)
+    }
+
     /// Cosine between the axis and the unit direction `d` leaving the aperture towards the
     /// scene, or None when `d` is outside the field of view (W_e = 0).
     pub fn accepts(&self, d: DVec3) -> Option<f64> {

@@ -1,28 +1,37 @@
-//! Light transport: time-resolved path sampling between the laser and the receiver.
+//! Light transport: time-resolved bidirectional path tracing with multiple importance
+//! sampling (paper section 2.3, Eq. 10-17; Veach 1997, ch. 10; pbrt-v4's BDPTIntegrator).
 //!
 //! The measurement (physics.md, "Receiver") is
 //!   Q = ∫_{A_tel} ∫_{θ ≤ θ_fov} L(q, ω) cos θ dω dA,
-//! time-resolved by path length l (τ = l / c, Eq. 11-12). Two unidirectional estimators:
+//! resolved in time by each path's length l (τ = l / c). A path x_0 … x_n runs from the
+//! laser x_0 to a point x_n of the aperture through n - 1 surface interactions (its order).
 //!
-//! - `forward` (light tracing): the laser emits Q_e along a direction drawn from Eq. 6, so the
-//!   light sub-path starts with throughput β = Q_e. At every surface vertex x the path is
-//!   connected to a point q drawn uniformly on the aperture (pdf 1/A_tel):
-//!     ΔQ = β f(x) |cos θ_x| cos θ_q / |x - q|² · A_tel,  if x is seen from q within θ_fov.
-//! - `backward` (receiver path tracing): q uniform on the aperture and a direction through
-//!   the sub-sensor disk (Eq. 9) give β = W_e cos θ / (p_A p_ω) = A_tel A_sub cos⁴θ. At every
-//!   vertex y the path is connected to the laser, a point source of intensity Q_e p_L(ω):
-//!     ΔQ = β f(y) |cos θ_y| Q_e p_L(ω) / |y - P_L|².
+//! Every sample traces a light sub-path from the laser (x_0 is a delta position, the first
+//! direction follows Eq. 6) and a receiver sub-path from the aperture (uniform point, direction
+//! through the sub-sensor disk, Eq. 9), then joins them in every way:
+//! - s = 1, t ≥ 2: a receiver vertex is connected to the laser ("connect to light");
+//! - s ≥ 2, t = 1: a light vertex is connected to a point drawn on the aperture ("connect to
+//!   receiver");
+//! - s ≥ 2, t ≥ 2: a light vertex is connected to a receiver vertex ("connect vertices");
+//! - t = 0: the light sub-path itself crosses the aperture within the field of view.
 //!
-//! Both continue by sampling the Lambertian BSDF (reflection on the incident side or
-//! transmission) in proportion to ρ and τ, so the throughput is multiplied by the albedo
-//! ρ_side + τ at each bounce; Russian roulette on that albedo after a few bounces keeps the
-//! estimate unbiased, and `max_order` caps the number of surface interactions.
+//! A receiver sub-path never hits the laser (a point), so s = 0 has no weight.
+//!
+//! Each strategy's estimate f/p is weighted by the power (or balance) heuristic over the
+//! strategies that could have made the same path (Eq. 16-17). Vertices keep the area densities
+//! of being sampled forwards (`pdf_fwd`, by their own sub-path) and in reverse (`pdf_rev`, by
+//! the other one), so a weight costs O(n) and only the densities next to the junction are
+//! recomputed per connection.
+//!
+//! `forward` and `backward` are this same tracer with one sub-path capped (paper section 4.2):
+//! forward keeps the receiver sub-path to its aperture point (strategies t ≤ 1), backward the
+//! light sub-path to the laser (s = 1). So the three methods cannot drift apart.
 
 pub mod rng;
 
-use crate::campaign::Method;
+use crate::campaign::{Method, MisHeuristic};
 use crate::scene::{FacetId, Scene, Surface};
-use crate::sensor::{Gate, Laser, Receiver};
+use crate::sensor::{Frame, Gate, Laser, Receiver};
 use glam::DVec3;
 use rayon::prelude::*;
 use rng::Rng;
@@ -30,8 +39,8 @@ use std::f64::consts::{FRAC_1_PI, PI};
 
 /// Rays per independent random stream and per unit of parallel work.
 pub const CHUNK_RAYS: u64 = 2048;
-/// Bounces before Russian roulette may stop a path.
-const ROULETTE_AFTER: u32 = 3;
+/// Surface interactions before Russian roulette may stop a sub-path.
+const ROULETTE_AFTER: usize = 3;
 
 /// Everything one pulse's paths need.
 #[derive(Clone, Copy)]
@@ -44,9 +53,65 @@ pub struct PulseSetup<'a> {
     /// convolution does not depend on where a path falls inside its bin.
     pub sub_bins: usize,
     pub method: Method,
+    pub heuristic: MisHeuristic,
     pub max_order: u32,
     pub seed: u64,
     pub pulse_id: u64,
+}
+
+impl PulseSetup<'_> {
+    /// Most vertices the light and the receiver sub-paths may have, end points included.
+    pub fn caps(&self) -> (usize, usize) {
+        let full = self.max_order as usize + 1;
+        match self.method {
+            Method::Forward => (full, 1),
+            Method::Backward => (1, full),
+            Method::Bdpt => (full, full),
+        }
+    }
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Kind {
+    Laser,
+    Aperture,
+    Surface,
+}
+
+/// A vertex of a light or receiver sub-path.
+#[derive(Clone, Copy, Debug)]
+pub struct Vertex {
+    pub kind: Kind,
+    pub p: DVec3,
+    /// Front normal of a facet, or the sensor axis for the laser and the aperture.
+    pub n: DVec3,
+    pub surface: u32,
+    pub facet: FacetId,
+    /// Throughput of the sub-path up to this vertex over its sampling densities: energy (J)
+    /// on a light sub-path, importance (m² sr) on a receiver sub-path.
+    pub beta: f64,
+    /// Length of the sub-path from its start to this vertex, m.
+    pub len: f64,
+    /// Area density of this vertex as sampled by its own sub-path.
+    pub pdf_fwd: f64,
+    /// Area density of this vertex if the other sub-path had sampled it.
+    pub pdf_rev: f64,
+}
+
+impl Vertex {
+    pub fn endpoint(kind: Kind, p: DVec3, axis: DVec3, pdf_fwd: f64) -> Vertex {
+        Vertex {
+            kind,
+            p,
+            n: axis,
+            surface: u32::MAX,
+            facet: FacetId::NONE,
+            beta: 1.0,
+            len: 0.0,
+            pdf_fwd,
+            pdf_rev: 0.0,
+        }
+    }
 }
 
 /// Received laser energy of one pulse, by time and by scattering order, with the sums of
@@ -55,6 +120,8 @@ pub struct PulseSetup<'a> {
 pub struct Tally {
     /// Energy per sub-bin over the gate, J.
     pub sub: Vec<f64>,
+    /// Σ over rays of the square of each ray's energy per bin.
+    pub bin_sq: Vec<f64>,
     /// Energy whose time fell outside the gate, J.
     pub outside: f64,
     /// Σ over rays of each ray's energy per order (index 0 = order 1).
@@ -69,9 +136,10 @@ pub struct Tally {
 }
 
 impl Tally {
-    fn new(sub_len: usize, max_order: u32) -> Tally {
+    fn new(bins: usize, sub_bins: usize, max_order: u32) -> Tally {
         Tally {
-            sub: vec![0.0; sub_len],
+            sub: vec![0.0; bins * sub_bins],
+            bin_sq: vec![0.0; bins],
             outside: 0.0,
             order_sum: vec![0.0; max_order as usize],
             order_sq: vec![0.0; max_order as usize],
@@ -82,16 +150,12 @@ impl Tally {
     }
 
     fn merge(&mut self, o: &Tally) {
-        for (a, b) in self.sub.iter_mut().zip(&o.sub) {
-            *a += b;
-        }
+        let add = |a: &mut [f64], b: &[f64]| a.iter_mut().zip(b).for_each(|(x, y)| *x += y);
+        add(&mut self.sub, &o.sub);
+        add(&mut self.bin_sq, &o.bin_sq);
+        add(&mut self.order_sum, &o.order_sum);
+        add(&mut self.order_sq, &o.order_sq);
         self.outside += o.outside;
-        for (a, b) in self.order_sum.iter_mut().zip(&o.order_sum) {
-            *a += b;
-        }
-        for (a, b) in self.order_sq.iter_mut().zip(&o.order_sq) {
-            *a += b;
-        }
         self.total_sq += o.total_sq;
         self.rays += o.rays;
         self.paths += o.paths;
@@ -119,6 +183,15 @@ impl Tally {
     pub fn total_se(&self) -> f64 {
         se(self.order_sum.iter().sum(), self.total_sq, self.rays)
     }
+
+    /// Standard error of each bin's impulse energy, J.
+    pub fn bin_se(&self, sub_bins: usize) -> Vec<f64> {
+        self.sub
+            .chunks(sub_bins)
+            .zip(&self.bin_sq)
+            .map(|(c, q)| se(c.iter().sum(), *q, self.rays))
+            .collect()
+    }
 }
 
 /// Standard error of a mean from the sum and sum of squares of n samples.
@@ -131,42 +204,53 @@ fn se(sum: f64, sq: f64, n: u64) -> f64 {
     ((sq / n - mean * mean).max(0.0) / (n - 1.0)).sqrt()
 }
 
-/// Per-chunk accumulator: one ray's contributions are staged per order, so that the
-/// sums of squares are over whole rays.
-struct Accum<'a> {
+/// Per-chunk accumulator. A ray's contributions are staged per order and per bin, so that
+/// sums of squares are over whole rays (a ray is one sample of the estimator).
+struct Accum {
     tally: Tally,
-    gate: &'a Gate,
+    t0: f64,
     sub_dt: f64,
+    sub_bins: usize,
     ray_order: Vec<f64>,
-    touched: Vec<u32>,
+    ray_bin: Vec<f64>,
+    touched_orders: Vec<u32>,
+    touched_bins: Vec<u32>,
 }
 
-impl<'a> Accum<'a> {
-    fn new(setup: &'a PulseSetup) -> Accum<'a> {
+impl Accum {
+    fn new(setup: &PulseSetup) -> Accum {
         Accum {
-            tally: Tally::new(setup.gate.bins * setup.sub_bins, setup.max_order),
-            gate: &setup.gate,
+            tally: Tally::new(setup.gate.bins, setup.sub_bins, setup.max_order),
+            t0: setup.gate.t0,
             sub_dt: setup.gate.dt / setup.sub_bins as f64,
+            sub_bins: setup.sub_bins,
             ray_order: vec![0.0; setup.max_order as usize],
-            touched: Vec::with_capacity(8),
+            ray_bin: vec![0.0; setup.gate.bins],
+            touched_orders: Vec::with_capacity(16),
+            touched_bins: Vec::with_capacity(16),
         }
     }
 
     /// A path of `length` metres and `order` surface interactions carrying `energy` joules.
-    fn add(&mut self, length: f64, energy: f64, order: u32) {
-        if !(energy > 0.0) || !energy.is_finite() {
+    fn add(&mut self, length: f64, energy: f64, order: usize) {
+        if !(energy > 0.0 && energy.is_finite()) || order == 0 {
             return;
         }
-        let tau = length / crate::C;
-        let x = (tau - self.gate.t0) / self.sub_dt;
+        let x = (length / crate::C - self.t0) / self.sub_dt;
         if x >= 0.0 && (x as usize) < self.tally.sub.len() {
-            self.tally.sub[x as usize] += energy;
+            let i = x as usize;
+            self.tally.sub[i] += energy;
+            let b = i / self.sub_bins;
+            if self.ray_bin[b] == 0.0 {
+                self.touched_bins.push(b as u32);
+            }
+            self.ray_bin[b] += energy;
         } else {
             self.tally.outside += energy;
         }
-        let k = order as usize - 1;
+        let k = order - 1;
         if self.ray_order[k] == 0.0 {
-            self.touched.push(k as u32);
+            self.touched_orders.push(k as u32);
         }
         self.ray_order[k] += energy;
         self.tally.paths += 1;
@@ -174,41 +258,62 @@ impl<'a> Accum<'a> {
 
     fn end_ray(&mut self) {
         let mut total = 0.0;
-        for &k in &self.touched {
-            let x = self.ray_order[k as usize];
+        for &k in &self.touched_orders {
+            let x = std::mem::take(&mut self.ray_order[k as usize]);
             self.tally.order_sum[k as usize] += x;
             self.tally.order_sq[k as usize] += x * x;
             total += x;
-            self.ray_order[k as usize] = 0.0;
         }
-        self.touched.clear();
+        for &b in &self.touched_bins {
+            let x = std::mem::take(&mut self.ray_bin[b as usize]);
+            self.tally.bin_sq[b as usize] += x * x;
+        }
+        self.touched_orders.clear();
+        self.touched_bins.clear();
         self.tally.total_sq += total * total;
         self.tally.rays += 1;
     }
 }
 
-/// Lambertian BSDF of a facet for light arriving from `wi` and leaving along `wo` (both unit,
-/// pointing away from the surface): ρ/π on the side the light comes from, τ/π through it.
+/// Lambertian BSDF of a facet between the unit directions `a` and `b` (both pointing away
+/// from the surface): ρ/π on the side they share, τ/π through the facet.
 #[inline]
-pub fn bsdf(s: &Surface, n: DVec3, wi: DVec3, wo: DVec3) -> f64 {
-    let ci = n.dot(wi);
-    let co = n.dot(wo);
-    if ci * co > 0.0 {
-        (if ci > 0.0 {
+pub fn bsdf(s: &Surface, n: DVec3, a: DVec3, b: DVec3) -> f64 {
+    let (ca, cb) = (n.dot(a), n.dot(b));
+    if ca * cb > 0.0 {
+        (if ca > 0.0 {
             s.reflectance
         } else {
             s.back_reflectance
         }) * FRAC_1_PI
-    } else if ci * co < 0.0 {
+    } else if ca * cb < 0.0 {
         s.transmittance * FRAC_1_PI
     } else {
         0.0
     }
 }
 
+/// Solid-angle density with which [`sample_bsdf`] picks `w_next` at a facet reached from
+/// `w_prev`: reflection with probability ρ_side / a, transmission τ / a, each cosine-shaped.
+#[inline]
+pub fn bsdf_pdf(s: &Surface, n: DVec3, w_prev: DVec3, w_next: DVec3) -> f64 {
+    let c = n.dot(w_prev);
+    let rho = if c > 0.0 {
+        s.reflectance
+    } else {
+        s.back_reflectance
+    };
+    let a = rho + s.transmittance;
+    let co = n.dot(w_next);
+    if c == 0.0 || a <= 0.0 || co == 0.0 {
+        return 0.0;
+    }
+    let p = if c * co > 0.0 { rho } else { s.transmittance };
+    p / a * co.abs() * FRAC_1_PI
+}
+
 /// Samples the next direction at a facet reached from `w_prev` (unit, pointing back along the
-/// path): reflection on that side with probability ρ_side / a, transmission with τ / a, each
-/// cosine-distributed. Returns the direction and the throughput factor f cos / pdf = a.
+/// path). Returns it with the throughput factor f |cos| / pdf, which is the albedo a.
 #[inline]
 fn sample_bsdf(s: &Surface, n: DVec3, w_prev: DVec3, rng: &mut Rng) -> Option<(DVec3, f64)> {
     let c = n.dot(w_prev);
@@ -226,20 +331,163 @@ fn sample_bsdf(s: &Surface, n: DVec3, w_prev: DVec3, rng: &mut Rng) -> Option<(D
         return None;
     }
     let axis = if rng.uniform() * a < rho { side } else { -side };
-    let u1 = rng.uniform();
-    let u2 = rng.uniform();
+    let (u1, u2) = (rng.uniform(), rng.uniform());
     let r = u1.sqrt();
     let phi = 2.0 * PI * u2;
-    let f = crate::sensor::Frame::from_axis(axis);
-    let d = f.to_world(r * phi.cos(), r * phi.sin(), (1.0 - u1).max(0.0).sqrt());
+    let d =
+        Frame::from_axis(axis).to_world(r * phi.cos(), r * phi.sin(), (1.0 - u1).max(0.0).sqrt());
     Some((d.normalize(), a))
 }
 
-/// Russian roulette on the albedo just applied: survive with probability a, and undo the
-/// factor on survival, so the expectation is unchanged.
+/// Area density at `to` of sampling it from `from`, itself reached from `prev` (the end
+/// points' own distributions do not depend on a previous vertex).
+fn pdf_area(setup: &PulseSetup, prev: Option<&Vertex>, from: &Vertex, to: &Vertex) -> f64 {
+    let d = to.p - from.p;
+    let r2 = d.length_squared();
+    if r2 == 0.0 {
+        return 0.0;
+    }
+    let w = d / r2.sqrt();
+    let pdf_dir = match from.kind {
+        Kind::Laser => setup.laser.pdf(w),
+        Kind::Aperture => setup.receiver.pdf_dir(w),
+        Kind::Surface => match prev {
+            Some(pv) => {
+                let surf = &setup.scene.surfaces[from.surface as usize];
+                bsdf_pdf(surf, from.n, (pv.p - from.p).normalize(), w)
+            }
+            None => 0.0,
+        },
+    };
+    pdf_dir * to.n.dot(w).abs() / r2
+}
+
+/// Sets the densities that the last vertex of a sub-path makes known: its own forward
+/// density, and the reverse density of the vertex two steps back.
+pub fn link(setup: &PulseSetup, path: &mut [Vertex]) {
+    let i = path.len() - 1;
+    if i >= 1 {
+        let prev = if i >= 2 { Some(path[i - 2]) } else { None };
+        path[i].pdf_fwd = pdf_area(setup, prev.as_ref(), &path[i - 1], &path[i]);
+    }
+    if i >= 2 {
+        path[i - 2].pdf_rev = pdf_area(setup, Some(&path[i]), &path[i - 1], &path[i - 2]);
+    }
+}
+
+/// MIS weight of the strategy that joined `light` (s vertices, from the laser) and `cam`
+/// (t vertices, from the aperture) into the path x_k = light[k] (k < s), cam[n - k] (k ≥ s).
+///
+/// With p_l[k] and p_c[k] the area densities of x_k sampled from the light side and from the
+/// receiver side, strategy s' has density P(s') = Π_{k<s'} p_l[k] Π_{k≥s'} p_c[k], so
+/// P(s'+1)/P(s') = p_l[s']/p_c[s']: the weight is 1 / Σ_{s'} (P(s')/P(s))^β over the strategies
+/// the method allows (s' ≥ 1: the laser is a delta position).
+pub fn mis_weight(
+    setup: &PulseSetup,
+    light: &[Vertex],
+    cam: &[Vertex],
+    scratch: &mut Vec<f64>,
+) -> f64 {
+    let (s, t) = (light.len(), cam.len());
+    let nv = s + t;
+    let (s_cap, t_cap) = setup.caps();
+    let lo = nv.saturating_sub(t_cap).max(1);
+    let hi = nv.min(s_cap);
+    if lo >= hi {
+        return 1.0;
+    }
+    let x = |k: usize| -> &Vertex {
+        if k < s {
+            &light[k]
+        } else {
+            &cam[nv - 1 - k]
+        }
+    };
+    scratch.clear();
+    scratch.resize(2 * nv, 0.0);
+    let (pl, pc) = scratch.split_at_mut(nv);
+    for k in 0..nv {
+        if k < s {
+            pl[k] = light[k].pdf_fwd;
+            pc[k] = light[k].pdf_rev;
+        } else {
+            pl[k] = cam[nv - 1 - k].pdf_rev;
+            pc[k] = cam[nv - 1 - k].pdf_fwd;
+        }
+    }
+    // The densities next to the junction depend on this connection.
+    if t >= 1 {
+        pl[s] = pdf_area(
+            setup,
+            if s >= 2 { Some(x(s - 2)) } else { None },
+            x(s - 1),
+            x(s),
+        );
+        if t >= 2 {
+            pl[s + 1] = pdf_area(setup, Some(x(s - 1)), x(s), x(s + 1));
+        }
+        pc[s - 1] = pdf_area(
+            setup,
+            if t >= 2 { Some(x(s + 1)) } else { None },
+            x(s),
+            x(s - 1),
+        );
+        if s >= 2 {
+            pc[s - 2] = pdf_area(setup, Some(x(s)), x(s - 1), x(s - 2));
+        }
+    } else {
+        // t = 0: the light sub-path ends on the aperture, which the receiver samples uniformly.
+        pc[nv - 1] = 1.0 / setup.receiver.area;
+        pc[nv - 2] = pdf_area(setup, None, x(nv - 1), x(nv - 2));
+    }
+    let h = |r: f64| match setup.heuristic {
+        MisHeuristic::Power => r * r,
+        MisHeuristic::Balance => r,
+    };
+    let mut sum = 1.0;
+    let mut r = 1.0;
+    for k in s..hi {
+        r *= pl[k] / pc[k];
+        sum += h(r);
+    }
+    r = 1.0;
+    for k in (lo..s).rev() {
+        r *= pc[k] / pl[k];
+        sum += h(r);
+    }
+    if sum.is_finite() {
+        1.0 / sum
+    } else {
+        0.0
+    }
+}
+
+/// Reusable per-thread buffers.
+struct Buffers {
+    light: Vec<Vertex>,
+    cam: Vec<Vertex>,
+    scratch: Vec<f64>,
+}
+
+fn surface_vertex(hit: &crate::scene::Hit, beta: f64, len: f64) -> Vertex {
+    Vertex {
+        kind: Kind::Surface,
+        p: hit.position,
+        n: hit.normal,
+        surface: hit.surface,
+        facet: hit.facet,
+        beta,
+        len,
+        pdf_fwd: 0.0,
+        pdf_rev: 0.0,
+    }
+}
+
+/// Russian roulette on the albedo just applied: survive with probability a (at least 0.05)
+/// and undo the factor on survival, so the expectation is unchanged.
 #[inline]
-fn roulette(order: u32, beta: &mut f64, a: f64, rng: &mut Rng) -> bool {
-    if order < ROULETTE_AFTER || a >= 1.0 {
+fn survives(surfaces: usize, beta: &mut f64, a: f64, rng: &mut Rng) -> bool {
+    if surfaces < ROULETTE_AFTER || a >= 1.0 {
         return true;
     }
     let p = a.max(0.05);
@@ -250,104 +498,185 @@ fn roulette(order: u32, beta: &mut f64, a: f64, rng: &mut Rng) -> bool {
     true
 }
 
-fn trace_forward(setup: &PulseSetup, rng: &mut Rng, acc: &mut Accum) {
+/// Extends a sub-path whose last vertex emits along `dir` with throughput `beta`, up to
+/// `cap` vertices. On a light sub-path (`light`), a segment that crosses the aperture before
+/// any facet is the strategy t = 0 and is scored on the way.
+#[allow(clippy::too_many_arguments)]
+fn walk(
+    setup: &PulseSetup,
+    path: &mut Vec<Vertex>,
+    mut dir: DVec3,
+    mut beta: f64,
+    cap: usize,
+    light: bool,
+    rng: &mut Rng,
+    acc: &mut Accum,
+    scratch: &mut Vec<f64>,
+) {
     let scene = setup.scene;
-    let (laser, recv) = (&setup.laser, &setup.receiver);
-    let (mut dir, _) = laser.sample(rng.uniform(), rng.uniform());
-    let mut origin = laser.position;
-    let mut beta = laser.energy;
-    let mut length = 0.0;
-    let mut skip = FacetId::NONE;
-    for order in 1..=setup.max_order {
-        let Some(hit) = scene.intersect(origin, dir, f64::INFINITY, skip) else {
-            break;
-        };
-        length += hit.t;
-        let x = hit.position;
-        let surf = &scene.surfaces[hit.surface as usize];
-        let wi = -dir;
-        // Connect to a point of the aperture.
-        let q = recv.sample_point(rng.uniform(), rng.uniform());
-        let d = x - q;
-        let r2 = d.length_squared();
-        let r = r2.sqrt();
-        let dn = d / r;
-        if let Some(cos_q) = recv.accepts(dn) {
-            let wo = -dn;
-            let f = bsdf(surf, hit.normal, wi, wo);
-            let cos_x = hit.normal.dot(wo).abs();
-            if f > 0.0 && cos_x > 0.0 && !scene.occluded(x, q, hit.facet, FacetId::NONE) {
-                acc.add(length + r, beta * f * cos_x * cos_q / r2 * recv.area, order);
+    let recv = &setup.receiver;
+    while path.len() < cap {
+        let last = *path.last().expect("a sub-path starts at its end point");
+        let surfaces = path.len() - 1;
+        let hit = scene.intersect(last.p, dir, f64::INFINITY, last.facet);
+        if light && surfaces >= 1 {
+            if let Some(tq) = recv.hit_distance(last.p, dir) {
+                if hit.as_ref().is_none_or(|h| tq < h.t) && recv.accepts(-dir).is_some() {
+                    let mut q =
+                        Vertex::endpoint(Kind::Aperture, last.p + dir * tq, recv.frame.w, 0.0);
+                    q.beta = beta;
+                    q.len = last.len + tq;
+                    path.push(q);
+                    link(setup, path);
+                    let w = mis_weight(setup, path, &[], scratch);
+                    acc.add(q.len, beta * w, surfaces);
+                    path.pop();
+                }
             }
         }
-        if order == setup.max_order {
+        let Some(hit) = hit else { break };
+        path.push(surface_vertex(&hit, beta, last.len + hit.t));
+        link(setup, path);
+        if path.len() >= cap {
             break;
         }
-        let Some((next, a)) = sample_bsdf(surf, hit.normal, wi, rng) else {
+        let surf = &scene.surfaces[hit.surface as usize];
+        let Some((next, a)) = sample_bsdf(surf, hit.normal, -dir, rng) else {
             break;
         };
         beta *= a;
-        if !roulette(order, &mut beta, a, rng) {
+        if !survives(surfaces + 1, &mut beta, a, rng) {
             break;
         }
-        origin = x;
         dir = next;
-        skip = hit.facet;
     }
 }
 
-fn trace_backward(setup: &PulseSetup, rng: &mut Rng, acc: &mut Accum) {
-    let scene = setup.scene;
+/// Unweighted estimate f/p of the path light[..s] + cam[..t] (t ≥ 1, s ≥ 1, s + t ≥ 3) and
+/// its length, or None when it carries nothing. Visibility is not tested here.
+fn contribution(setup: &PulseSetup, light: &[Vertex], cam: &[Vertex]) -> Option<(f64, f64)> {
+    let surfaces = &setup.scene.surfaces;
+    let (s, t) = (light.len(), cam.len());
+    let x = &light[s - 1];
+    let y = &cam[t - 1];
+    let d = y.p - x.p;
+    let r2 = d.length_squared();
+    if r2 == 0.0 {
+        return None;
+    }
+    let r = r2.sqrt();
+    let w = d / r; // from the light side towards the receiver side
+    let f_x = if s == 1 {
+        // the laser: radiant intensity Q_e p_L(ω) per unit solid angle
+        setup.laser.energy * setup.laser.pdf(w)
+    } else {
+        let towards_prev = (light[s - 2].p - x.p).normalize();
+        bsdf(&surfaces[x.surface as usize], x.n, towards_prev, w) * x.n.dot(w).abs()
+    };
+    if f_x == 0.0 {
+        return None;
+    }
+    let f_y = if t == 1 {
+        // a point drawn on the aperture (pdf 1/A): W_e cos θ_q A
+        setup.receiver.accepts(-w)? * setup.receiver.area
+    } else {
+        let towards_prev = (cam[t - 2].p - y.p).normalize();
+        bsdf(&surfaces[y.surface as usize], y.n, -w, towards_prev) * y.n.dot(w).abs()
+    };
+    let c = x.beta * f_x * f_y * y.beta / r2;
+    (c > 0.0).then_some((c, x.len + r + y.len))
+}
+
+fn trace_ray(setup: &PulseSetup, rng: &mut Rng, acc: &mut Accum, b: &mut Buffers) {
+    let (s_cap, t_cap) = setup.caps();
     let (laser, recv) = (&setup.laser, &setup.receiver);
-    let mut origin = recv.sample_point(rng.uniform(), rng.uniform());
-    let (mut dir, w) = recv.sample_direction(rng.uniform(), rng.uniform());
-    let mut beta = recv.area * w;
-    let mut length = 0.0;
-    let mut skip = FacetId::NONE;
-    for order in 1..=setup.max_order {
-        let Some(hit) = scene.intersect(origin, dir, f64::INFINITY, skip) else {
-            break;
-        };
-        length += hit.t;
-        let y = hit.position;
-        let surf = &scene.surfaces[hit.surface as usize];
-        let wo = -dir;
-        // Connect to the laser, a point source.
-        let d = y - laser.position;
-        let r2 = d.length_squared();
-        let r = r2.sqrt();
-        let dn = d / r;
-        let p = laser.pdf(dn);
-        if p > 0.0 {
-            let wi = -dn;
-            let f = bsdf(surf, hit.normal, wi, wo);
-            let cos_y = hit.normal.dot(wi).abs();
-            if f > 0.0
-                && cos_y > 0.0
-                && !scene.occluded(y, laser.position, hit.facet, FacetId::NONE)
-            {
-                acc.add(length + r, beta * f * cos_y * laser.energy * p / r2, order);
+    let scene = setup.scene;
+
+    b.light.clear();
+    // The laser's energy enters through f_x in `contribution` (s = 1) or as the throughput of
+    // the first surface vertex (s ≥ 2), so the end point itself carries 1.
+    b.light.push(Vertex::endpoint(
+        Kind::Laser,
+        laser.position,
+        laser.frame.w,
+        1.0,
+    ));
+    if s_cap > 1 {
+        let (dir, _) = laser.sample(rng.uniform(), rng.uniform());
+        walk(
+            setup,
+            &mut b.light,
+            dir,
+            laser.energy,
+            s_cap,
+            true,
+            rng,
+            acc,
+            &mut b.scratch,
+        );
+    }
+
+    b.cam.clear();
+    if t_cap > 1 {
+        let q0 = recv.sample_point(rng.uniform(), rng.uniform());
+        let (dir, w) = recv.sample_direction(rng.uniform(), rng.uniform());
+        b.cam.push(Vertex::endpoint(
+            Kind::Aperture,
+            q0,
+            recv.frame.w,
+            1.0 / recv.area,
+        ));
+        walk(
+            setup,
+            &mut b.cam,
+            dir,
+            recv.area * w,
+            t_cap,
+            false,
+            rng,
+            acc,
+            &mut b.scratch,
+        );
+    }
+
+    let max_order = setup.max_order as usize;
+    let mut q = [Vertex::endpoint(
+        Kind::Aperture,
+        recv.center,
+        recv.frame.w,
+        1.0 / recv.area,
+    )];
+    for s in 1..=b.light.len() {
+        // t = 1 needs its own point on the aperture; t ≥ 2 uses the receiver sub-path
+        let t_max = if t_cap > 1 { b.cam.len() } else { 1 };
+        for t in 1..=t_max {
+            let order = s + t - 2;
+            if order == 0 || order > max_order {
+                continue;
             }
+            let light = &b.light[..s];
+            let cam: &[Vertex] = if t == 1 {
+                q[0].p = recv.sample_point(rng.uniform(), rng.uniform());
+                &q
+            } else {
+                &b.cam[..t]
+            };
+            let Some((c, length)) = contribution(setup, light, cam) else {
+                continue;
+            };
+            let (x, y) = (&light[s - 1], &cam[t - 1]);
+            if scene.occluded(x.p, y.p, x.facet, y.facet) {
+                continue;
+            }
+            let w = mis_weight(setup, light, cam, &mut b.scratch);
+            acc.add(length, c * w, order);
         }
-        if order == setup.max_order {
-            break;
-        }
-        let Some((next, a)) = sample_bsdf(surf, hit.normal, wo, rng) else {
-            break;
-        };
-        beta *= a;
-        if !roulette(order, &mut beta, a, rng) {
-            break;
-        }
-        origin = y;
-        dir = next;
-        skip = hit.facet;
     }
 }
 
-/// Traces `rays` paths of one pulse, in chunks of [`CHUNK_RAYS`] run in parallel; each chunk
-/// has its own random stream and the chunks are merged in order, so the result is the same
-/// whatever the number of threads.
+/// Traces `rays` samples of one pulse, in chunks of [`CHUNK_RAYS`] run in parallel; each
+/// chunk has its own random stream and the chunks are merged in order, so the result is the
+/// same whatever the number of threads.
 pub fn simulate_pulse(setup: &PulseSetup, rays: u64) -> Tally {
     let chunks = rays.div_ceil(CHUNK_RAYS);
     let parts: Vec<Tally> = (0..chunks)
@@ -355,19 +684,19 @@ pub fn simulate_pulse(setup: &PulseSetup, rays: u64) -> Tally {
         .map(|c| {
             let mut rng = Rng::new(setup.seed, setup.pulse_id, c);
             let mut acc = Accum::new(setup);
-            let n = CHUNK_RAYS.min(rays - c * CHUNK_RAYS);
-            for _ in 0..n {
-                match setup.method {
-                    Method::Forward => trace_forward(setup, &mut rng, &mut acc),
-                    Method::Backward => trace_backward(setup, &mut rng, &mut acc),
-                    Method::Bdpt => unreachable!("bdpt is rejected when the campaign is validated"),
-                }
+            let mut bufs = Buffers {
+                light: Vec::new(),
+                cam: Vec::new(),
+                scratch: Vec::new(),
+            };
+            for _ in 0..CHUNK_RAYS.min(rays - c * CHUNK_RAYS) {
+                trace_ray(setup, &mut rng, &mut acc, &mut bufs);
                 acc.end_ray();
             }
             acc.tally
         })
         .collect();
-    let mut total = Tally::new(setup.gate.bins * setup.sub_bins, setup.max_order);
+    let mut total = Tally::new(setup.gate.bins, setup.sub_bins, setup.max_order);
     for p in &parts {
         total.merge(p);
     }

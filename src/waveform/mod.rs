@@ -18,6 +18,8 @@ pub struct Waveform {
     pub laser_photons: Vec<f32>,
     /// Received laser energy per bin before pulse convolution, J.
     pub impulse_energy_j: Vec<f32>,
+    /// Standard error of each bin's impulse energy, J.
+    pub impulse_energy_se_j: Vec<f32>,
     pub received_energy_j: f64,
     pub outside_gate_energy_j: f64,
     /// Index 0 = order 1.
@@ -120,6 +122,7 @@ pub fn waveform(
             .map(|e| (e / n / photon_energy_j) as f32)
             .collect(),
         impulse_energy_j: impulse.iter().map(|e| (e / n) as f32).collect(),
+        impulse_energy_se_j: tally.bin_se(sub_bins).iter().map(|&e| e as f32).collect(),
         received_energy_j: tally.total_energy(),
         outside_gate_energy_j: tally.outside / n,
         order_energy_j: tally.order_energy(),

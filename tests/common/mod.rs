@@ -42,12 +42,28 @@ pub struct Inst {
 
 impl Default for Inst {
     fn default() -> Self {
-        Inst { energy: 0.01, fwhm_ns: 0.0, fp_mrad: 1.0, fov_mrad: 1.5, area: 0.1, bin_ns: 1.0, eta: (-2.0f64).exp() }
+        Inst {
+            energy: 0.01,
+            fwhm_ns: 0.0,
+            fp_mrad: 1.0,
+            fov_mrad: 1.5,
+            area: 0.1,
+            bin_ns: 1.0,
+            eta: (-2.0f64).exp(),
+        }
     }
 }
 
 /// Campaign text with one static pulse.
-pub fn campaign(scene: &Path, inst: &Inst, pos: [f64; 3], dir: [f64; 3], method: &str, rays: u64, max_order: u32) -> String {
+pub fn campaign(
+    scene: &Path,
+    inst: &Inst,
+    pos: [f64; 3],
+    dir: [f64; 3],
+    method: &str,
+    rays: u64,
+    max_order: u32,
+) -> String {
     format!(
         "name: t\nscene: {}\nseed: 3\nwavelength_nm: 1064\ninstrument:\n  pulse_energy_j: {}\n  pulse_fwhm_ns: {}\n  footprint_half_angle_mrad: {}\n  edge_energy_fraction: {}\n  fov_half_angle_mrad: {}\n  receiver_area_m2: {}\n  bin_ns: {}\nplatform:\n  kind: static\n  pulses:\n    - {{ position: [{}, {}, {}], direction: [{}, {}, {}] }}\nsimulation: {{ method: {method}, rays_per_pulse: {rays}, max_order: {max_order} }}\n",
         scene.display(),
@@ -71,13 +87,23 @@ pub fn campaign(scene: &Path, inst: &Inst, pos: [f64; 3], dir: [f64; 3], method:
 pub fn run(dir: &Path, campaign_text: &str, threads: Option<usize>) -> Vec<Waveform> {
     let path = write(dir, "campaign.yaml", campaign_text);
     let out = dir.join("run");
-    pipeline::run(&path, &RunOptions { out: Some(out.clone()), threads }).unwrap_or_else(|e| panic!("{e}"));
+    pipeline::run(
+        &path,
+        &RunOptions {
+            out: Some(out.clone()),
+            threads,
+        },
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
     parquet::read_waveforms(&out.join("waveforms/part-00000.parquet")).unwrap()
 }
 
 /// Runs the binary; returns (exit code, stdout, stderr).
 pub fn lidarsim(args: &[&str]) -> (i32, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_lidarsim")).args(args).output().unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_lidarsim"))
+        .args(args)
+        .output()
+        .unwrap();
     (
         out.status.code().unwrap_or(-1),
         String::from_utf8_lossy(&out.stdout).into_owned(),
@@ -120,8 +146,12 @@ pub fn disk_overlap(a: f64, b: f64, d: f64) -> f64 {
     if d <= big - small {
         return PI * small * small;
     }
-    let alpha = ((d * d + a * a - b * b) / (2.0 * d * a)).clamp(-1.0, 1.0).acos();
-    let beta = ((d * d + b * b - a * a) / (2.0 * d * b)).clamp(-1.0, 1.0).acos();
+    let alpha = ((d * d + a * a - b * b) / (2.0 * d * a))
+        .clamp(-1.0, 1.0)
+        .acos();
+    let beta = ((d * d + b * b - a * a) / (2.0 * d * b))
+        .clamp(-1.0, 1.0)
+        .acos();
     a * a * (alpha - alpha.sin() * alpha.cos()) + b * b * (beta - beta.sin() * beta.cos())
 }
 
@@ -158,11 +188,102 @@ pub fn footprint_mean_cos(fp_mrad: f64, eta: f64) -> f64 {
 /// Closed form 3: energy of scattering order k (1-based) in an integrating sphere.
 pub fn sphere_order_energy(inst: &Inst, albedo: f64, radius: f64, k: u32) -> f64 {
     if k == 1 {
-        albedo * inst.energy * inst.area / (PI * radius * radius) * footprint_mean_cos(inst.fp_mrad, inst.eta)
+        albedo * inst.energy * inst.area / (PI * radius * radius)
+            * footprint_mean_cos(inst.fp_mrad, inst.eta)
     } else {
         let s = (inst.fov_mrad * 1e-3).sin();
         albedo.powi(k as i32) * inst.energy * inst.area * s * s / (4.0 * PI * radius * radius)
     }
+}
+
+/// A closed icosphere of radius `r` with `subdiv` subdivisions, normals facing the centre,
+/// as OBJ text (the same construction as tools/icosphere.py).
+pub fn icosphere_obj(r: f64, subdiv: u32) -> String {
+    use std::collections::HashMap;
+    use std::fmt::Write;
+    let t = (1.0 + 5f64.sqrt()) / 2.0;
+    let mut v: Vec<[f64; 3]> = [
+        [-1.0, t, 0.0],
+        [1.0, t, 0.0],
+        [-1.0, -t, 0.0],
+        [1.0, -t, 0.0],
+        [0.0, -1.0, t],
+        [0.0, 1.0, t],
+        [0.0, -1.0, -t],
+        [0.0, 1.0, -t],
+        [t, 0.0, -1.0],
+        [t, 0.0, 1.0],
+        [-t, 0.0, -1.0],
+        [-t, 0.0, 1.0],
+    ]
+    .iter()
+    .map(|p| {
+        let n = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
+        [p[0] / n, p[1] / n, p[2] / n]
+    })
+    .collect();
+    let mut f: Vec<[usize; 3]> = vec![
+        [0, 11, 5],
+        [0, 5, 1],
+        [0, 1, 7],
+        [0, 7, 10],
+        [0, 10, 11],
+        [1, 5, 9],
+        [5, 11, 4],
+        [11, 10, 2],
+        [10, 7, 6],
+        [7, 1, 8],
+        [3, 9, 4],
+        [3, 4, 2],
+        [3, 2, 6],
+        [3, 6, 8],
+        [3, 8, 9],
+        [4, 9, 5],
+        [2, 4, 11],
+        [6, 2, 10],
+        [8, 6, 7],
+        [9, 8, 1],
+    ];
+    for _ in 0..subdiv {
+        let mut cache: HashMap<(usize, usize), usize> = HashMap::new();
+        let mut mid = |a: usize, b: usize, v: &mut Vec<[f64; 3]>| {
+            *cache.entry((a.min(b), a.max(b))).or_insert_with(|| {
+                let p = [
+                    (v[a][0] + v[b][0]) / 2.0,
+                    (v[a][1] + v[b][1]) / 2.0,
+                    (v[a][2] + v[b][2]) / 2.0,
+                ];
+                let n = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
+                v.push([p[0] / n, p[1] / n, p[2] / n]);
+                v.len() - 1
+            })
+        };
+        let mut nf = Vec::with_capacity(f.len() * 4);
+        for [a, b, c] in f {
+            let (ab, bc, ca) = (mid(a, b, &mut v), mid(b, c, &mut v), mid(c, a, &mut v));
+            nf.extend([[a, ab, ca], [b, bc, ab], [c, ca, bc], [ab, bc, ca]]);
+        }
+        f = nf;
+    }
+    let mut out = String::new();
+    for p in &v {
+        writeln!(out, "v {} {} {}", r * p[0], r * p[1], r * p[2]).unwrap();
+    }
+    for [a, b, c] in f {
+        writeln!(out, "f {} {} {}", a + 1, c + 1, b + 1).unwrap();
+    }
+    out
+}
+
+/// The integrating sphere of radius 10 m, tessellated finely enough that its facets'
+/// near-field exchange is negligible even for a narrow field of view.
+pub fn fine_sphere_scene(dir: &Path, albedo: f64, subdiv: u32) -> PathBuf {
+    write(dir, "fine_sphere.obj", &icosphere_obj(10.0, subdiv));
+    write(
+        dir,
+        "fine_sphere.yaml",
+        &format!("name: s\nmaterials:\n  wall: {{ reflectance: {albedo} }}\nobjects:\n  - mesh: {{ file: fine_sphere.obj, material: wall }}\n"),
+    )
 }
 
 pub fn sphere_scene(dir: &Path, albedo: f64) -> PathBuf {

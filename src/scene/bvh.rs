@@ -1,0 +1,258 @@
+//! Bottom-level acceleration (one wide BVH per distinct mesh) and the watertight ray-triangle
+//! test used at that level.
+
+use glam::{DVec3, Vec3, Vec3A};
+use obvhs::cwbvh::builder::build_cwbvh_from_tris;
+use obvhs::cwbvh::CwBvh;
+use obvhs::ray::Ray;
+use obvhs::triangle::Triangle;
+use obvhs::BvhBuildParams;
+use std::time::Duration;
+
+use super::mesh::{MeshData, SlotName};
+
+/// obvhs culls BVH nodes whose exit distance is below 1e-4 (its node test clamps tmin there).
+/// Rays are started this far behind their true origin and hits are accepted only beyond it,
+/// so that geometry closer than 1e-4 to the origin is not lost.
+pub(crate) const BACKOFF: f32 = 1e-3;
+
+/// One distinct mesh with its BVH. Triangles are stored in BVH leaf order, so the id obvhs
+/// hands to the callback indexes them directly; `bvh.primitive_indices[k]` gives the
+/// triangle's index in the mesh as loaded, which is what `FacetId::triangle` reports.
+pub(crate) struct Blas {
+    pub tris: Vec<[Vec3; 3]>,
+    pub slots: Vec<u32>,
+    pub bvh: CwBvh,
+    pub slot_names: Vec<SlotName>,
+    /// Mesh-local position of the stored coordinates' origin.
+    pub offset: DVec3,
+    /// Bounds of the stored coordinates.
+    pub lo: Vec3,
+    pub hi: Vec3,
+}
+
+impl Blas {
+    pub fn build(mesh: MeshData) -> Blas {
+        let prims: Vec<Triangle> = mesh
+            .tris
+            .iter()
+            .map(|t| Triangle {
+                v0: Vec3A::from(t[0]),
+                v1: Vec3A::from(t[1]),
+                v2: Vec3A::from(t[2]),
+            })
+            .collect();
+        let mut lo = Vec3::splat(f32::INFINITY);
+        let mut hi = Vec3::splat(f32::NEG_INFINITY);
+        for t in &mesh.tris {
+            for v in t {
+                lo = lo.min(*v);
+                hi = hi.max(*v);
+            }
+        }
+        let mut bvh = build_cwbvh_from_tris(
+            &prims,
+            BvhBuildParams::medium_build(),
+            &mut Duration::default(),
+        );
+        drop(prims);
+        shrink(&mut bvh);
+        let mut tris = Vec::with_capacity(bvh.primitive_indices.len());
+        let mut slots = Vec::with_capacity(bvh.primitive_indices.len());
+        for &i in &bvh.primitive_indices {
+            tris.push(mesh.tris[i as usize]);
+            slots.push(mesh.slots[i as usize]);
+        }
+        Blas {
+            tris,
+            slots,
+            bvh,
+            slot_names: mesh.slot_names,
+            offset: mesh.offset,
+            lo,
+            hi,
+        }
+    }
+
+    pub fn memory_bytes(&self) -> usize {
+        use std::mem::size_of;
+        self.tris.capacity() * size_of::<[Vec3; 3]>()
+            + self.slots.capacity() * size_of::<u32>()
+            + bvh_bytes(&self.bvh)
+            + self
+                .slot_names
+                .iter()
+                .map(|s| s.group.capacity() + s.usemtl.as_ref().map_or(0, |u| u.capacity()))
+                .sum::<usize>()
+            + self.slot_names.capacity() * size_of::<SlotName>()
+    }
+}
+
+/// obvhs reserves room for a binary tree's node count; the wide tree needs about a tenth.
+pub(crate) fn shrink(bvh: &mut CwBvh) {
+    bvh.nodes.shrink_to_fit();
+    bvh.primitive_indices.shrink_to_fit();
+}
+
+pub(crate) fn bvh_bytes(bvh: &CwBvh) -> usize {
+    use std::mem::size_of;
+    bvh.nodes.capacity() * size_of::<obvhs::cwbvh::node::CwBvhNode>()
+        + bvh.primitive_indices.capacity() * size_of::<u32>()
+        + bvh
+            .exact_node_aabbs
+            .as_ref()
+            .map_or(0, |a| a.capacity() * size_of::<obvhs::aabb::Aabb>())
+}
+
+/// An obvhs ray whose inverse direction stays finite for zero components, so the node slab
+/// test stays conservative (obvhs's own `safe_inverse` clamps at 1/ε, which
+/// can cut rays that run nearly parallel to a slab).
+#[inline(always)]
+pub(crate) fn make_ray(origin: Vec3A, direction: Vec3A, tmax: f32) -> Ray {
+    #[inline(always)]
+    fn inv(x: f32) -> f32 {
+        // The sign must follow obvhs's `direction < 0.0` slab choice, which counts -0 as positive.
+        if x.abs() < 1e-20 {
+            if x < 0.0 {
+                -1e20
+            } else {
+                1e20
+            }
+        } else {
+            1.0 / x
+        }
+    }
+    Ray {
+        origin,
+        direction,
+        inv_direction: Vec3A::new(inv(direction.x), inv(direction.y), inv(direction.z)),
+        tmin: 0.0,
+        tmax,
+    }
+}
+
+/// Per-ray constants of the watertight ray-triangle test (Woop, Benthin, Wald 2013, JCGT 2(1)):
+/// the ray is sheared so that it runs along +z, and edge functions are evaluated in 2D, so a
+/// ray through a shared edge or vertex hits at least one of the triangles.
+#[derive(Clone, Copy)]
+pub(crate) struct WatertightRay {
+    o: Vec3,
+    kx: usize,
+    ky: usize,
+    kz: usize,
+    sx: f32,
+    sy: f32,
+    sz: f32,
+}
+
+impl WatertightRay {
+    #[inline(always)]
+    pub fn new(o: Vec3, d: Vec3) -> Self {
+        let a = d.abs();
+        let kz = if a.x > a.y {
+            if a.x > a.z {
+                0
+            } else {
+                2
+            }
+        } else if a.y > a.z {
+            1
+        } else {
+            2
+        };
+        let mut kx = if kz == 2 { 0 } else { kz + 1 };
+        let mut ky = if kx == 2 { 0 } else { kx + 1 };
+        // Swapping keeps the winding, hence the sign of det, independent of the ray's octant.
+        if d[kz] < 0.0 {
+            std::mem::swap(&mut kx, &mut ky);
+        }
+        WatertightRay {
+            o,
+            kx,
+            ky,
+            kz,
+            sx: d[kx] / d[kz],
+            sy: d[ky] / d[kz],
+            sz: 1.0 / d[kz],
+        }
+    }
+
+    /// Ray parameter of the hit, or infinity when there is none in (tmin, tmax).
+    #[inline(always)]
+    pub fn intersect(&self, tri: &[Vec3; 3], tmin: f32, tmax: f32) -> f32 {
+        let a = tri[0] - self.o;
+        let b = tri[1] - self.o;
+        let c = tri[2] - self.o;
+        let (kx, ky, kz) = (self.kx, self.ky, self.kz);
+        let ax = a[kx] - self.sx * a[kz];
+        let ay = a[ky] - self.sy * a[kz];
+        let bx = b[kx] - self.sx * b[kz];
+        let by = b[ky] - self.sy * b[kz];
+        let cx = c[kx] - self.sx * c[kz];
+        let cy = c[ky] - self.sy * c[kz];
+        let mut u = cx * by - cy * bx;
+        let mut v = ax * cy - ay * cx;
+        let mut w = bx * ay - by * ax;
+        // An edge function of exactly zero is re-evaluated in f64, as the paper does, so that
+        // the sign test is consistent between the two triangles sharing that edge.
+        if u == 0.0 || v == 0.0 || w == 0.0 {
+            let (cxd, byd, cyd, bxd) = (cx as f64, by as f64, cy as f64, bx as f64);
+            let (axd, ayd) = (ax as f64, ay as f64);
+            u = (cxd * byd - cyd * bxd) as f32;
+            v = (axd * cyd - ayd * cxd) as f32;
+            w = (bxd * ayd - byd * axd) as f32;
+        }
+        if (u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0) {
+            return f32::INFINITY;
+        }
+        let det = u + v + w;
+        if det == 0.0 {
+            return f32::INFINITY;
+        }
+        let az = self.sz * a[kz];
+        let bz = self.sz * b[kz];
+        let cz = self.sz * c[kz];
+        let t = (u * az + v * bz + w * cz) / det;
+        if t > tmin && t < tmax {
+            t
+        } else {
+            f32::INFINITY
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn watertight_hits_shared_edge_once_or_more() {
+        // Two triangles sharing the diagonal of the unit square; rays through the diagonal
+        // must hit at least one of them.
+        let t1 = [
+            Vec3::new(0.0, 0.0, 0.0),
+            Vec3::new(1.0, 0.0, 0.0),
+            Vec3::new(1.0, 1.0, 0.0),
+        ];
+        let t2 = [
+            Vec3::new(0.0, 0.0, 0.0),
+            Vec3::new(1.0, 1.0, 0.0),
+            Vec3::new(0.0, 1.0, 0.0),
+        ];
+        for i in 1..1000 {
+            let s = i as f32 / 1000.0;
+            let r = WatertightRay::new(Vec3::new(s, s, 1.0), Vec3::new(0.0, 0.0, -1.0));
+            let h1 = r.intersect(&t1, 0.0, 10.0);
+            let h2 = r.intersect(&t2, 0.0, 10.0);
+            assert!(h1.is_finite() || h2.is_finite(), "gap at {s}");
+        }
+        let r = WatertightRay::new(Vec3::new(0.7, 0.2, 1.0), Vec3::new(0.0, 0.0, -1.0));
+        assert!((r.intersect(&t1, 0.0, 10.0) - 1.0).abs() < 1e-6);
+        assert!(r.intersect(&t2, 0.0, 10.0).is_infinite());
+        // From below, through the back side.
+        let r = WatertightRay::new(Vec3::new(0.7, 0.2, -2.0), Vec3::new(0.0, 0.0, 1.0));
+        assert!((r.intersect(&t1, 0.0, 10.0) - 2.0).abs() < 1e-6);
+        // Outside (tmin, tmax).
+        assert!(r.intersect(&t1, 0.0, 1.5).is_infinite());
+    }
+}

@@ -1,0 +1,329 @@
+//! The scene file as written by the user, and material resolution at one wavelength.
+
+use crate::campaign::yaml::Doc;
+use crate::error::{Error, Result};
+use serde::de::{self, Deserializer, MapAccess, Visitor};
+use serde::Deserialize;
+use std::collections::BTreeMap;
+use std::fmt;
+
+use super::SurfaceClass;
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct SceneFile {
+    pub name: String,
+    #[serde(default)]
+    pub materials: BTreeMap<String, MaterialSpec>,
+    #[serde(default)]
+    pub objects: Vec<ObjectSpec>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct MaterialSpec {
+    pub reflectance: Spectral,
+    #[serde(default)]
+    pub back_reflectance: Option<Spectral>,
+    #[serde(default)]
+    pub transmittance: Option<Spectral>,
+}
+
+/// One list item `kind: { ... }`. Deserialized by hand: serde_yaml 0.9 reads externally tagged
+/// enums only from `!tag` syntax, and the contract uses single-key maps.
+#[derive(Debug)]
+pub(crate) enum ObjectSpec {
+    Plane(PlaneSpec),
+    Mesh(MeshSpec),
+    Heightfield(HeightfieldSpec),
+}
+
+const KINDS: &[&str] = &["plane", "mesh", "heightfield"];
+
+impl<'de> Deserialize<'de> for ObjectSpec {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> std::result::Result<Self, D::Error> {
+        struct V;
+        impl<'de> Visitor<'de> for V {
+            type Value = ObjectSpec;
+            fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
+                f.write_str("one of `plane: {...}`, `mesh: {...}`, `heightfield: {...}`")
+            }
+            fn visit_map<A: MapAccess<'de>>(
+                self,
+                mut map: A,
+            ) -> std::result::Result<ObjectSpec, A::Error> {
+                let Some(kind) = map.next_key::<String>()? else {
+                    return Err(de::Error::invalid_length(0, &self));
+                };
+                let obj = match kind.as_str() {
+                    "plane" => ObjectSpec::Plane(map.next_value()?),
+                    "mesh" => ObjectSpec::Mesh(map.next_value()?),
+                    "heightfield" => ObjectSpec::Heightfield(map.next_value()?),
+                    _ => return Err(de::Error::unknown_variant(&kind, KINDS)),
+                };
+                if let Some(extra) = map.next_key::<String>()? {
+                    return Err(de::Error::custom(format!(
+                        "one object per list item: found `{extra}` after `{kind}`; start a new item with `- {extra}: ...`"
+                    )));
+                }
+                Ok(obj)
+            }
+        }
+        d.deserialize_map(V)
+    }
+}
+
+impl ObjectSpec {
+    pub fn kind(&self) -> &'static str {
+        match self {
+            ObjectSpec::Plane(_) => "plane",
+            ObjectSpec::Mesh(_) => "mesh",
+            ObjectSpec::Heightfield(_) => "heightfield",
+        }
+    }
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct PlaneSpec {
+    pub z: f64,
+    pub extent: [[f64; 2]; 2],
+    pub material: String,
+    #[serde(default)]
+    pub class: Option<ClassSpec>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct MeshSpec {
+    pub file: String,
+    #[serde(default)]
+    pub material: Option<String>,
+    #[serde(default)]
+    pub materials: Option<BTreeMap<String, String>>,
+    #[serde(default)]
+    pub instances: Option<String>,
+    #[serde(default)]
+    pub class: Option<ClassSpec>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct HeightfieldSpec {
+    pub file: String,
+    pub cell_m: f64,
+    pub material: String,
+    #[serde(default)]
+    pub origin: Option<[f64; 2]>,
+    #[serde(default)]
+    pub class: Option<ClassSpec>,
+}
+
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub(crate) enum ClassSpec {
+    Ground,
+    Vegetation,
+    Building,
+    Other,
+}
+
+impl From<ClassSpec> for SurfaceClass {
+    fn from(c: ClassSpec) -> Self {
+        match c {
+            ClassSpec::Ground => SurfaceClass::Ground,
+            ClassSpec::Vegetation => SurfaceClass::Vegetation,
+            ClassSpec::Building => SurfaceClass::Building,
+            ClassSpec::Other => SurfaceClass::Other,
+        }
+    }
+}
+
+/// A value for all wavelengths, or a table wavelength_nm -> value.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) enum Spectral {
+    Single(f64),
+    Table(Vec<(f64, f64)>),
+}
+
+impl<'de> Deserialize<'de> for Spectral {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> std::result::Result<Self, D::Error> {
+        struct V;
+        impl<'de> Visitor<'de> for V {
+            type Value = Spectral;
+            fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
+                f.write_str("a number or a table of wavelength_nm: value")
+            }
+            fn visit_f64<E: de::Error>(self, v: f64) -> std::result::Result<Spectral, E> {
+                Ok(Spectral::Single(v))
+            }
+            fn visit_i64<E: de::Error>(self, v: i64) -> std::result::Result<Spectral, E> {
+                Ok(Spectral::Single(v as f64))
+            }
+            fn visit_u64<E: de::Error>(self, v: u64) -> std::result::Result<Spectral, E> {
+                Ok(Spectral::Single(v as f64))
+            }
+            fn visit_map<A: MapAccess<'de>>(
+                self,
+                mut map: A,
+            ) -> std::result::Result<Spectral, A::Error> {
+                let mut table = Vec::new();
+                while let Some(Wavelength(w)) = map.next_key::<Wavelength>()? {
+                    let v: f64 = map.next_value()?;
+                    if table.iter().any(|&(k, _)| k == w) {
+                        return Err(de::Error::custom(format!(
+                            "wavelength {w} nm is given twice"
+                        )));
+                    }
+                    table.push((w, v));
+                }
+                if table.is_empty() {
+                    return Err(de::Error::custom("the table is empty"));
+                }
+                Ok(Spectral::Table(table))
+            }
+        }
+        d.deserialize_any(V)
+    }
+}
+
+/// A table key: YAML integers (`532:`), floats (`532.5:`) and numeric strings are accepted.
+struct Wavelength(f64);
+
+impl<'de> Deserialize<'de> for Wavelength {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> std::result::Result<Self, D::Error> {
+        struct V;
+        impl Visitor<'_> for V {
+            type Value = Wavelength;
+            fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
+                f.write_str("a wavelength in nm")
+            }
+            fn visit_f64<E: de::Error>(self, v: f64) -> std::result::Result<Wavelength, E> {
+                check_wavelength(v)
+            }
+            fn visit_i64<E: de::Error>(self, v: i64) -> std::result::Result<Wavelength, E> {
+                check_wavelength(v as f64)
+            }
+            fn visit_u64<E: de::Error>(self, v: u64) -> std::result::Result<Wavelength, E> {
+                check_wavelength(v as f64)
+            }
+            fn visit_str<E: de::Error>(self, v: &str) -> std::result::Result<Wavelength, E> {
+                match v.trim().parse::<f64>() {
+                    Ok(x) => check_wavelength(x),
+                    Err(_) => Err(E::custom(format!(
+                        "expected a wavelength in nm as key, found \"{v}\""
+                    ))),
+                }
+            }
+        }
+        d.deserialize_any(V)
+    }
+}
+
+fn check_wavelength<E: de::Error>(v: f64) -> std::result::Result<Wavelength, E> {
+    if v.is_finite() && v > 0.0 {
+        Ok(Wavelength(v))
+    } else {
+        Err(E::custom(format!(
+            "wavelength {v} nm is not a positive number"
+        )))
+    }
+}
+
+/// A material's optical properties at the campaign wavelength.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct Resolved {
+    pub reflectance: f64,
+    pub back_reflectance: f64,
+    pub transmittance: f64,
+}
+
+fn same_wavelength(a: f64, b: f64) -> bool {
+    (a - b).abs() <= 1e-9 * a.abs().max(b.abs())
+}
+
+fn value_at(doc: &Doc, key: &str, s: &Spectral, wavelength_nm: f64) -> Result<f64> {
+    let v = match s {
+        Spectral::Single(v) => *v,
+        Spectral::Table(t) => match t.iter().find(|(w, _)| same_wavelength(*w, wavelength_nm)) {
+            Some(&(_, v)) => v,
+            None => {
+                let given: Vec<String> = t.iter().map(|(w, _)| format!("{w}")).collect();
+                return Err(doc.error(
+                    key,
+                    format!(
+                        "no value for {wavelength_nm} nm (the table gives {} nm); add {wavelength_nm}: <value> or give a single number",
+                        given.join(", ")
+                    ),
+                ));
+            }
+        },
+    };
+    if !v.is_finite() || !(0.0..=1.0).contains(&v) {
+        return Err(doc.error(
+            key,
+            format!("{v} at {wavelength_nm} nm is not within [0, 1]"),
+        ));
+    }
+    Ok(v)
+}
+
+/// Resolves every material at `wavelength_nm`, with located errors.
+pub(crate) fn resolve_materials(
+    doc: &Doc,
+    file: &SceneFile,
+    wavelength_nm: f64,
+) -> Result<BTreeMap<String, Resolved>> {
+    if !(wavelength_nm.is_finite() && wavelength_nm > 0.0) {
+        return Err(Error::msg(format!(
+            "wavelength {wavelength_nm} nm is not a positive number"
+        )));
+    }
+    let mut out = BTreeMap::new();
+    for (name, m) in &file.materials {
+        let base = format!("materials.{name}");
+        let r = value_at(
+            doc,
+            &format!("{base}.reflectance"),
+            &m.reflectance,
+            wavelength_nm,
+        )?;
+        let rb = match &m.back_reflectance {
+            Some(s) => value_at(doc, &format!("{base}.back_reflectance"), s, wavelength_nm)?,
+            None => r,
+        };
+        let t = match &m.transmittance {
+            Some(s) => value_at(doc, &format!("{base}.transmittance"), s, wavelength_nm)?,
+            None => 0.0,
+        };
+        // A little slack so that tables written as 0.45 + 0.55 pass despite rounding.
+        for (side, key, refl) in [
+            ("front", "reflectance", r),
+            ("back", "back_reflectance", rb),
+        ] {
+            if refl + t > 1.0 + 1e-9 {
+                let at = if key == "back_reflectance" && m.back_reflectance.is_none() {
+                    format!("{base}.reflectance")
+                } else {
+                    format!("{base}.{key}")
+                };
+                return Err(doc.error(
+                    &at,
+                    format!(
+                        "{key} + transmittance = {refl} + {t} = {} > 1 at {wavelength_nm} nm ({side} side): a surface cannot scatter more than it receives",
+                        refl + t
+                    ),
+                ));
+            }
+        }
+        out.insert(
+            name.clone(),
+            Resolved {
+                reflectance: r,
+                back_reflectance: rb,
+                transmittance: t,
+            },
+        );
+    }
+    Ok(out)
+}

@@ -1,0 +1,452 @@
+//! From a scene file to a traceable `Scene`: objects, materials, meshes, instances, top level.
+
+use crate::campaign::yaml::Doc;
+use crate::error::{Error, Result};
+use glam::{DVec3, Vec3A};
+use obvhs::aabb::Aabb;
+use obvhs::cwbvh::builder::build_cwbvh;
+use obvhs::BvhBuildParams;
+use rayon::prelude::*;
+use std::collections::{BTreeMap, HashMap};
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+use super::bvh::Blas;
+use super::config::{resolve_materials, ObjectSpec, Resolved, SceneFile};
+use super::mesh;
+use super::table::{parse_grid, parse_instances, InstanceRow};
+use super::{Instance, Scene, Surface, SurfaceClass};
+
+/// Geometry to load once, shared by every object that names it.
+enum Source {
+    Mesh(PathBuf),
+    Plane {
+        z: f64,
+        a: [f64; 2],
+        b: [f64; 2],
+    },
+    Heightfield {
+        path: PathBuf,
+        cell_m: f64,
+        origin: [f64; 2],
+    },
+}
+
+impl Source {
+    fn build(&self, scene: &Path) -> Result<Blas> {
+        let data = match self {
+            Source::Mesh(p) => mesh::load_mesh(p)?,
+            Source::Plane { z, a, b } => mesh::plane(scene, *z, *a, *b)?,
+            Source::Heightfield {
+                path,
+                cell_m,
+                origin,
+            } => {
+                let text = crate::error::read_text(path)?;
+                let grid = parse_grid(path, &text)?;
+                mesh::heightfield(path, &grid, *cell_m, *origin)?
+            }
+        };
+        Ok(Blas::build(data))
+    }
+}
+
+enum Mapping {
+    One(String),
+    Map(BTreeMap<String, String>),
+}
+
+/// One object of the scene file, checked, waiting for its geometry.
+struct Plan {
+    key: String,
+    source: usize,
+    mapping: Mapping,
+    class: Option<SurfaceClass>,
+    /// Is a mesh (class defaults by transmittance) rather than a plane or heightfield (ground).
+    is_mesh: bool,
+    /// None: one instance with the identity transform.
+    rows: Option<Vec<InstanceRow>>,
+    /// The file as the scene names it, for messages.
+    file: String,
+}
+
+fn existing(doc: &Doc, key: &str, name: &str) -> Result<PathBuf> {
+    let p = doc.resolve(name);
+    if !p.is_file() {
+        let what = if p.exists() {
+            "is not a file"
+        } else {
+            "the file does not exist"
+        };
+        return Err(doc.error(key, format!("{}: {what}", p.display())));
+    }
+    Ok(p)
+}
+
+fn check_material(
+    doc: &Doc,
+    key: &str,
+    name: &str,
+    materials: &BTreeMap<String, Resolved>,
+) -> Result<()> {
+    if materials.contains_key(name) {
+        return Ok(());
+    }
+    let defined: Vec<&str> = materials.keys().map(String::as_str).collect();
+    let defined = if defined.is_empty() {
+        "none".to_string()
+    } else {
+        defined.join(", ")
+    };
+    Err(doc.error(
+        key,
+        format!("material \"{name}\" is not defined under materials (defined: {defined})"),
+    ))
+}
+
+pub(crate) fn load(path: &Path, wavelength_nm: f64) -> Result<Scene> {
+    let doc = Doc::read(path)?;
+    let file: SceneFile = doc.parse()?;
+    let materials = resolve_materials(&doc, &file, wavelength_nm)?;
+    if file.objects.is_empty() {
+        return Err(doc.error("objects", "the scene has no objects"));
+    }
+
+    let mut sources: Vec<Source> = Vec::new();
+    let mut mesh_sources: HashMap<PathBuf, usize> = HashMap::new();
+    let mut plans: Vec<Plan> = Vec::new();
+    for (i, obj) in file.objects.iter().enumerate() {
+        let key = format!("objects[{i}].{}", obj.kind());
+        let plan = match obj {
+            ObjectSpec::Plane(p) => {
+                check_material(&doc, &format!("{key}.material"), &p.material, &materials)?;
+                let [a, b] = p.extent;
+                let finite = p.z.is_finite() && a.iter().chain(b.iter()).all(|v| v.is_finite());
+                if !finite || a[0] == b[0] || a[1] == b[1] {
+                    return Err(doc.error(
+                        &format!("{key}.extent"),
+                        "the plane must have a finite, non-empty extent [[x0, y0], [x1, y1]] with x0 ≠ x1 and y0 ≠ y1",
+                    ));
+                }
+                sources.push(Source::Plane { z: p.z, a, b });
+                Plan {
+                    key,
+                    source: sources.len() - 1,
+                    mapping: Mapping::One(p.material.clone()),
+                    class: p.class.map(Into::into),
+                    is_mesh: false,
+                    rows: None,
+                    file: String::new(),
+                }
+            }
+            ObjectSpec::Heightfield(h) => {
+                check_material(&doc, &format!("{key}.material"), &h.material, &materials)?;
+                if !(h.cell_m.is_finite() && h.cell_m > 0.0) {
+                    return Err(doc.error(
+                        &format!("{key}.cell_m"),
+                        format!(
+                            "expected a positive cell size in metres, found {}",
+                            h.cell_m
+                        ),
+                    ));
+                }
+                let origin = h.origin.unwrap_or([0.0, 0.0]);
+                if !origin.iter().all(|v| v.is_finite()) {
+                    return Err(doc.error(&format!("{key}.origin"), "expected finite coordinates"));
+                }
+                let p = existing(&doc, &format!("{key}.file"), &h.file)?;
+                sources.push(Source::Heightfield {
+                    path: p,
+                    cell_m: h.cell_m,
+                    origin,
+                });
+                Plan {
+                    key,
+                    source: sources.len() - 1,
+                    mapping: Mapping::One(h.material.clone()),
+                    class: h.class.map(Into::into),
+                    is_mesh: false,
+                    rows: None,
+                    file: h.file.clone(),
+                }
+            }
+            ObjectSpec::Mesh(m) => {
+                let mapping = match (&m.material, &m.materials) {
+                    (Some(name), None) => {
+                        check_material(&doc, &format!("{key}.material"), name, &materials)?;
+                        Mapping::One(name.clone())
+                    }
+                    (None, Some(map)) => {
+                        if map.is_empty() {
+                            return Err(doc.error(&format!("{key}.materials"), "the map is empty"));
+                        }
+                        for (group, name) in map {
+                            check_material(&doc, &format!("{key}.materials.{group}"), name, &materials)?;
+                        }
+                        Mapping::Map(map.clone())
+                    }
+                    _ => {
+                        return Err(doc.error(
+                            &key,
+                            "give either `material: NAME` (one material for the whole mesh) or `materials: { group_or_usemtl: NAME, ... }`",
+                        ))
+                    }
+                };
+                let p = existing(&doc, &format!("{key}.file"), &m.file)?;
+                let canonical = std::fs::canonicalize(&p).unwrap_or(p);
+                let source = *mesh_sources.entry(canonical.clone()).or_insert_with(|| {
+                    sources.push(Source::Mesh(canonical));
+                    sources.len() - 1
+                });
+                let rows = match &m.instances {
+                    Some(name) => {
+                        let p = existing(&doc, &format!("{key}.instances"), name)?;
+                        let text = crate::error::read_text(&p)?;
+                        Some(parse_instances(&p, &text)?)
+                    }
+                    None => None,
+                };
+                Plan {
+                    key,
+                    source,
+                    mapping,
+                    class: m.class.map(Into::into),
+                    is_mesh: true,
+                    rows,
+                    file: m.file.clone(),
+                }
+            }
+        };
+        plans.push(plan);
+    }
+
+    // Every distinct mesh is read and its BVH built in parallel; the first error in file order wins.
+    let built: Vec<Result<Blas>> = sources.par_iter().map(|s| s.build(path)).collect();
+    let meshes: Vec<Blas> = built.into_iter().collect::<Result<_>>()?;
+
+    // Material slots of each object -> surfaces (material, class).
+    let mut surfaces: Vec<Surface> = Vec::new();
+    let mut surface_index: HashMap<(String, SurfaceClass), u32> = HashMap::new();
+    let mut slot_surfaces: Vec<u32> = Vec::new();
+    let mut object_base: Vec<u32> = Vec::with_capacity(plans.len());
+    for plan in &plans {
+        let blas = &meshes[plan.source];
+        let names: Vec<&str> = match &plan.mapping {
+            Mapping::One(name) => vec![name.as_str(); blas.slot_names.len()],
+            Mapping::Map(map) => map_slots(&doc, plan, blas, map)?,
+        };
+        let transmits = names.iter().any(|n| materials[*n].transmittance > 0.0);
+        let class = plan.class.unwrap_or(if !plan.is_mesh {
+            SurfaceClass::Ground
+        } else if transmits {
+            SurfaceClass::Vegetation
+        } else {
+            SurfaceClass::Other
+        });
+        object_base.push(slot_surfaces.len() as u32);
+        for name in names {
+            let id = *surface_index
+                .entry((name.to_string(), class))
+                .or_insert_with(|| {
+                    let m = &materials[name];
+                    surfaces.push(Surface {
+                        name: name.to_string(),
+                        reflectance: m.reflectance,
+                        back_reflectance: m.back_reflectance,
+                        transmittance: m.transmittance,
+                        class,
+                    });
+                    (surfaces.len() - 1) as u32
+                });
+            slot_surfaces.push(id);
+        }
+    }
+
+    // World transforms and bounds, in f64.
+    struct Placed {
+        translation: DVec3,
+        cos: f64,
+        sin: f64,
+        scale: f64,
+        lo: DVec3,
+        hi: DVec3,
+        mesh: u32,
+        surfaces: u32,
+    }
+    let identity = [InstanceRow {
+        x: 0.0,
+        y: 0.0,
+        z: 0.0,
+        rotation_deg: 0.0,
+        scale: 1.0,
+    }];
+    let mut placed: Vec<Placed> = Vec::new();
+    for (plan, &base) in plans.iter().zip(&object_base) {
+        let blas = &meshes[plan.source];
+        let rows: &[InstanceRow] = plan.rows.as_deref().unwrap_or(&identity);
+        for r in rows {
+            let (sin, cos) = r.rotation_deg.to_radians().sin_cos();
+            let rot = |v: DVec3| DVec3::new(cos * v.x - sin * v.y, sin * v.x + cos * v.y, v.z);
+            let translation = DVec3::new(r.x, r.y, r.z) + rot(blas.offset) * r.scale;
+            let mut lo = DVec3::splat(f64::INFINITY);
+            let mut hi = DVec3::splat(f64::NEG_INFINITY);
+            for c in 0..8 {
+                let corner = DVec3::new(
+                    if c & 1 == 0 { blas.lo.x } else { blas.hi.x } as f64,
+                    if c & 2 == 0 { blas.lo.y } else { blas.hi.y } as f64,
+                    if c & 4 == 0 { blas.lo.z } else { blas.hi.z } as f64,
+                );
+                let w = translation + rot(corner) * r.scale;
+                lo = lo.min(w);
+                hi = hi.max(w);
+            }
+            placed.push(Placed {
+                translation,
+                cos,
+                sin,
+                scale: r.scale,
+                lo,
+                hi,
+                mesh: plan.source as u32,
+                surfaces: base,
+            });
+        }
+    }
+    if placed.len() >= u32::MAX as usize {
+        return Err(Error::file(path, "too many instances"));
+    }
+    let mut world_lo = DVec3::splat(f64::INFINITY);
+    let mut world_hi = DVec3::splat(f64::NEG_INFINITY);
+    for p in &placed {
+        world_lo = world_lo.min(p.lo);
+        world_hi = world_hi.max(p.hi);
+    }
+    let origin = (world_lo + world_hi) * 0.5;
+    let extent = (world_hi - world_lo).max_element();
+    // The clip box must contain every instance box after rounding to f32 and leave room for
+    // rays that graze a flat scene (a single plane has zero height).
+    let pad = 1e-3 + 1e-6 * extent;
+    let clip_lo = world_lo - DVec3::splat(pad);
+    let clip_hi = world_hi + DVec3::splat(pad);
+
+    let instance_pad = |v: DVec3| (v.abs().max_element() * 4.0 * f32::EPSILON as f64 + 1e-6) as f32;
+    let mut instances: Vec<Instance> = Vec::with_capacity(placed.len());
+    let mut boxes: Vec<Aabb> = Vec::with_capacity(placed.len());
+    let mut instanced_triangles = 0u64;
+    for (id, p) in placed.iter().enumerate() {
+        let lo = p.lo - origin;
+        let hi = p.hi - origin;
+        let pad = instance_pad(lo).max(instance_pad(hi));
+        boxes.push(Aabb::new(
+            Vec3A::from(lo.as_vec3() - pad),
+            Vec3A::from(hi.as_vec3() + pad),
+        ));
+        instances.push(Instance {
+            translation: Vec3A::from((p.translation - origin).as_vec3()),
+            cos: p.cos as f32,
+            sin: p.sin as f32,
+            inv_scale: (1.0 / p.scale) as f32,
+            mesh: p.mesh,
+            surfaces: p.surfaces,
+            id: id as u32,
+        });
+        instanced_triangles += meshes[p.mesh as usize].tris.len() as u64;
+    }
+    drop(placed);
+    let mut tlas = build_cwbvh(
+        &boxes,
+        BvhBuildParams::medium_build(),
+        &mut Duration::default(),
+    );
+    super::bvh::shrink(&mut tlas);
+    let instances: Vec<Instance> = tlas
+        .primitive_indices
+        .iter()
+        .map(|&i| instances[i as usize])
+        .collect();
+
+    Ok(Scene {
+        name: file.name,
+        surfaces,
+        origin,
+        meshes,
+        instances,
+        tlas,
+        slot_surfaces,
+        world_lo,
+        world_hi,
+        clip_lo,
+        clip_hi,
+        instanced_triangles,
+    })
+}
+
+/// Materials of a mesh's slots from a `materials:` map: a slot's usemtl name first, then its
+/// group (or, for PLY, file stem). Every slot must be mapped and every key must name a slot,
+/// so that typos do not pass silently.
+fn map_slots<'a>(
+    doc: &Doc,
+    plan: &Plan,
+    blas: &Blas,
+    map: &'a BTreeMap<String, String>,
+) -> Result<Vec<&'a str>> {
+    let key = format!("{}.materials", plan.key);
+    let mut used: Vec<&str> = Vec::new();
+    let mut names = Vec::with_capacity(blas.slot_names.len());
+    let file = &plan.file;
+    let known = || {
+        let mut k: Vec<String> = Vec::new();
+        for s in &blas.slot_names {
+            if let Some(u) = &s.usemtl {
+                if !k.contains(u) {
+                    k.push(u.clone());
+                }
+            }
+            if !k.contains(&s.group) {
+                k.push(s.group.clone());
+            }
+        }
+        k.join(", ")
+    };
+    for s in &blas.slot_names {
+        let hit = s
+            .usemtl
+            .as_ref()
+            .and_then(|u| map.get_key_value(u))
+            .or_else(|| map.get_key_value(&s.group));
+        match hit {
+            Some((k, v)) => {
+                used.push(k.as_str());
+                names.push(v.as_str());
+            }
+            None => {
+                let what = match &s.usemtl {
+                    Some(u) => format!("usemtl \"{u}\" (group \"{}\")", s.group),
+                    None => format!("\"{}\"", s.group),
+                };
+                let suggest = s.usemtl.as_ref().unwrap_or(&s.group);
+                return Err(doc.error(
+                    &key,
+                    format!("{what} in {file} has no material here; add `{suggest}: <material>` (names in the file: {})", known()),
+                ));
+            }
+        }
+    }
+    for k in map.keys() {
+        if !used.contains(&k.as_str())
+            && !blas
+                .slot_names
+                .iter()
+                .any(|s| &s.group == k || s.usemtl.as_ref() == Some(k))
+        {
+            return Err(doc.error(
+                &format!("{key}.{k}"),
+                format!(
+                    "\"{k}\" is not a group or usemtl name of {file} (names there: {})",
+                    known()
+                ),
+            ));
+        }
+    }
+    Ok(names)
+}

@@ -1,0 +1,415 @@
+//! Scene: geometry, materials and the two-level acceleration structure.
+//!
+//! World coordinates are f64 (`DVec3`). Geometry is stored and traced in f32 relative to the
+//! scene's own origin (`Scene::origin`, the centre of its bounding box): a ray coming from
+//! 419 km is first moved analytically, in f64, to the scene's bounding box, then traced in
+//! scene-local f32, and the hit distance is added back in f64.
+//!
+//! Two levels: one BVH per distinct mesh (bottom level), one BVH over instances (top level),
+//! so memory grows with the number of distinct meshes, not with the number of instances.
+
+mod bvh;
+mod config;
+mod load;
+mod mesh;
+mod table;
+#[cfg(test)]
+mod tests;
+
+pub use table::{parse_instances, InstanceRow};
+
+use crate::error::Result;
+use bvh::{make_ray, Blas, WatertightRay, BACKOFF};
+use glam::{DVec3, Vec3, Vec3A};
+use obvhs::cwbvh::CwBvh;
+use obvhs::ray::RayHit;
+use std::path::Path;
+
+/// Class of a surface, used by products to label returns with the truth.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum SurfaceClass {
+    Ground,
+    Vegetation,
+    Building,
+    Other,
+}
+
+impl SurfaceClass {
+    /// ASPRS LAS classification code.
+    pub fn las_code(self) -> u8 {
+        match self {
+            SurfaceClass::Ground => 2,
+            SurfaceClass::Vegetation => 5,
+            SurfaceClass::Building => 6,
+            SurfaceClass::Other => 1,
+        }
+    }
+}
+
+/// Optical properties of one material at the campaign's wavelength, with its class.
+/// The BSDF is ρ/π on the side the geometric normal points to (`reflectance`), ρ_b/π on the
+/// other side (`back_reflectance`), and τ/π through the facet from either side.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Surface {
+    pub name: String,
+    pub reflectance: f64,
+    pub back_reflectance: f64,
+    pub transmittance: f64,
+    pub class: SurfaceClass,
+}
+
+/// Identifies one facet of one instance; used to keep a ray from hitting the facet it leaves.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct FacetId {
+    pub instance: u32,
+    pub triangle: u32,
+}
+
+impl FacetId {
+    pub const NONE: FacetId = FacetId {
+        instance: u32::MAX,
+        triangle: u32::MAX,
+    };
+}
+
+/// A ray-surface intersection in world coordinates.
+#[derive(Clone, Copy, Debug)]
+pub struct Hit {
+    /// Distance along the (unit) ray direction from the ray origin, metres (f64).
+    pub t: f64,
+    pub position: DVec3,
+    /// Unit geometric normal of the facet, in world coordinates (front side).
+    pub normal: DVec3,
+    /// Index into `Scene::surfaces`.
+    pub surface: u32,
+    pub facet: FacetId,
+}
+
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct SceneStats {
+    pub distinct_meshes: usize,
+    /// Triangles stored once (sum over distinct meshes).
+    pub distinct_triangles: u64,
+    /// Triangles once instanced (sum over instances of their mesh's triangles).
+    pub instanced_triangles: u64,
+    pub instances: u64,
+    /// Bytes held by geometry and acceleration structures.
+    pub memory_bytes: u64,
+}
+
+pub struct Scene {
+    pub name: String,
+    pub surfaces: Vec<Surface>,
+    /// f64 world position of the scene-local origin.
+    pub origin: DVec3,
+    // the rest is private to the scene module
+    meshes: Vec<Blas>,
+    /// In top-level BVH leaf order, so the top-level callback id indexes them directly.
+    instances: Vec<Instance>,
+    tlas: CwBvh,
+    /// Material slot -> index into `surfaces`, per object from `Instance::surfaces` on.
+    slot_surfaces: Vec<u32>,
+    world_lo: DVec3,
+    world_hi: DVec3,
+    /// `world_lo/hi` padded: rays are clipped to this box in f64 before the f32 trace.
+    clip_lo: DVec3,
+    clip_hi: DVec3,
+    instanced_triangles: u64,
+}
+
+/// One placement of a mesh. Scene-local point x maps to mesh storage coordinates as
+/// R(-θ) (x - translation) / scale; the direction maps the same way without the translation
+/// and is not renormalised, so a ray parameter t means the same point in both frames.
+#[derive(Clone, Copy, Debug)]
+struct Instance {
+    translation: Vec3A,
+    cos: f32,
+    sin: f32,
+    inv_scale: f32,
+    mesh: u32,
+    /// Offset of this object's slots in `Scene::slot_surfaces`.
+    surfaces: u32,
+    /// Index in scene-file order (objects, then instance rows), reported in `FacetId`.
+    id: u32,
+}
+
+impl Instance {
+    #[inline(always)]
+    fn dir_to_local(&self, d: Vec3A) -> Vec3A {
+        let q = d * self.inv_scale;
+        Vec3A::new(
+            self.cos * q.x + self.sin * q.y,
+            self.cos * q.y - self.sin * q.x,
+            q.z,
+        )
+    }
+
+    #[inline(always)]
+    fn point_to_local(&self, p: Vec3A) -> Vec3A {
+        self.dir_to_local(p - self.translation)
+    }
+
+    fn normal_to_world(&self, n: DVec3) -> DVec3 {
+        let (c, s) = (self.cos as f64, self.sin as f64);
+        DVec3::new(c * n.x - s * n.y, s * n.x + c * n.y, n.z)
+    }
+}
+
+/// A ray moved into scene-local f32, started `BACKOFF` behind its clipped origin.
+struct LocalRay {
+    /// World distance of the local origin (before backing off).
+    t0: f64,
+    origin: Vec3A,
+    dir: Vec3A,
+    /// Local parameter limit, backoff included.
+    tmax: f32,
+    /// How near (m) a facet's plane may pass to the ray's start before a hit on it is taken
+    /// for f32 round-off: a few ulps of the local coordinates.
+    eps: f32,
+}
+
+/// True when a hit `dist` metres along the ray lies on a facet whose plane passes within
+/// `eps` of the ray's start: a ray leaving a facet cannot meet a coplanar neighbour except
+/// at distance 0, and in f32 that zero comes out as a small positive number.
+/// The watertight test computes t from vertex coordinates relative to the ray origin, so its
+/// round-off grows with the triangle's distance from the origin as well as with `eps`.
+#[inline]
+fn starts_on_plane(tri: &[Vec3; 3], o: Vec3A, d: Vec3A, dist: f32, eps: f32) -> bool {
+    let o = Vec3::from(o);
+    let n = (tri[1] - tri[0]).cross(tri[2] - tri[0]);
+    let inv_len = 1.0 / d.length(); // world metres per local unit
+    let cos = n.dot(Vec3::from(d)).abs() * inv_len / n.length();
+    let reach = (tri[0] - o)
+        .abs()
+        .max((tri[1] - o).abs())
+        .max((tri[2] - o).abs())
+        .max_element();
+    dist * cos < eps + 4e-7 * reach * inv_len
+}
+
+impl Scene {
+    /// Loads a scene file (see ../shared/spec/campaign.md, "Scene") with materials resolved at
+    /// `wavelength_nm`.
+    pub fn load(path: &Path, wavelength_nm: f64) -> Result<Scene> {
+        load::load(path, wavelength_nm)
+    }
+
+    /// Clips `origin + t dir`, 0 < t < t_max, to the scene box in f64 and moves it to f32.
+    #[inline]
+    fn local_ray(&self, origin: DVec3, dir: DVec3, t_max: f64) -> Option<LocalRay> {
+        if self.instances.is_empty() || !origin.is_finite() || !dir.is_finite() {
+            return None;
+        }
+        let mut t0 = 0.0f64;
+        let mut t1 = t_max;
+        for k in 0..3 {
+            let (o, d) = (origin[k], dir[k]);
+            if d == 0.0 {
+                if o < self.clip_lo[k] || o > self.clip_hi[k] {
+                    return None;
+                }
+            } else {
+                let a = (self.clip_lo[k] - o) / d;
+                let b = (self.clip_hi[k] - o) / d;
+                t0 = t0.max(a.min(b));
+                t1 = t1.min(a.max(b));
+            }
+        }
+        if t0.is_nan() || t1.is_nan() || t0 > t1 {
+            return None;
+        }
+        let d = Vec3A::from(dir.as_vec3());
+        if d == Vec3A::ZERO {
+            return None;
+        }
+        let p = Vec3A::from((origin + dir * t0 - self.origin).as_vec3());
+        // A little beyond the box exit: the exit is rounded to f32 like everything else.
+        let span = ((t1 - t0) * (1.0 + 1e-6)) as f32 + BACKOFF + 1e-5;
+        Some(LocalRay {
+            t0,
+            origin: p - d * BACKOFF,
+            dir: d,
+            tmax: span,
+            eps: 4e-7 * p.abs().max_element() + 1e-8,
+        })
+    }
+
+    /// Closest hit along the ray `origin + t dir`, `dir` a unit vector, with 0 < t < t_max,
+    /// ignoring the facet `skip` (the one the ray leaves).
+    pub fn intersect(&self, origin: DVec3, dir: DVec3, t_max: f64, skip: FacetId) -> Option<Hit> {
+        let lr = self.local_ray(origin, dir, t_max)?;
+        // only a ray that starts on a facet (not one clipped to the box) can meet its
+        // facet's coplanar neighbours at distance 0
+        let on_surface = skip != FacetId::NONE && lr.t0 == 0.0;
+        let mut best_t = f32::INFINITY;
+        let mut best_inst = 0usize;
+        let mut best_tri = 0usize;
+        let mut top_hit = RayHit::none();
+        self.tlas.ray_traverse(
+            make_ray(lr.origin, lr.dir, lr.tmax),
+            &mut top_hit,
+            |ray, id| {
+                let inst = &self.instances[id];
+                let blas = &self.meshes[inst.mesh as usize];
+                let o = inst.point_to_local(ray.origin);
+                let d = inst.dir_to_local(ray.direction);
+                let wr = WatertightRay::new(Vec3::from(o), Vec3::from(d));
+                let skip_tri = if inst.id == skip.instance {
+                    skip.triangle
+                } else {
+                    u32::MAX
+                };
+                let mut found = usize::MAX;
+                let mut found_t = f32::INFINITY;
+                let mut hit = RayHit::none();
+                blas.bvh
+                    .ray_traverse(make_ray(o, d, ray.tmax), &mut hit, |r, k| {
+                        if skip_tri != u32::MAX && blas.bvh.primitive_indices[k] == skip_tri {
+                            return f32::INFINITY;
+                        }
+                        let t = wr.intersect(&blas.tris[k], BACKOFF, r.tmax);
+                        if t < r.tmax
+                            && on_surface
+                            && starts_on_plane(&blas.tris[k], o, d, t - BACKOFF, lr.eps)
+                        {
+                            return f32::INFINITY;
+                        }
+                        if t < r.tmax {
+                            found = k;
+                            found_t = t;
+                        }
+                        t
+                    });
+                if found != usize::MAX {
+                    best_t = found_t;
+                    best_inst = id;
+                    best_tri = found;
+                    found_t
+                } else {
+                    f32::INFINITY
+                }
+            },
+        );
+        if !best_t.is_finite() {
+            return None;
+        }
+        let t = lr.t0 + (best_t - BACKOFF) as f64;
+        if !(t > 0.0 && t < t_max) {
+            return None;
+        }
+        let inst = &self.instances[best_inst];
+        let blas = &self.meshes[inst.mesh as usize];
+        let v = &blas.tris[best_tri];
+        let (a, b, c) = (v[0].as_dvec3(), v[1].as_dvec3(), v[2].as_dvec3());
+        let normal = inst.normal_to_world((b - a).cross(c - a)).normalize();
+        Some(Hit {
+            t,
+            position: origin + dir * t,
+            normal,
+            surface: self.slot_surfaces[(inst.surfaces + blas.slots[best_tri]) as usize],
+            facet: FacetId {
+                instance: inst.id,
+                triangle: blas.bvh.primitive_indices[best_tri],
+            },
+        })
+    }
+
+    /// True when the open segment from `a` to `b` crosses any facet other than `skip_a`
+    /// (the facet `a` lies on) and `skip_b` (the facet `b` lies on).
+    pub fn occluded(&self, a: DVec3, b: DVec3, skip_a: FacetId, skip_b: FacetId) -> bool {
+        let delta = b - a;
+        let len = delta.length();
+        if len.is_nan() || len <= 0.0 || !len.is_finite() {
+            return false;
+        }
+        let dir = delta / len;
+        // Stop just short of b, so that b's own neighbourhood does not count as a blocker.
+        let Some(lr) = self.local_ray(a, dir, len * (1.0 - 1e-6)) else {
+            return false;
+        };
+        let t_end = len * (1.0 - 1e-6) - lr.t0;
+        let tmax = (t_end as f32 + BACKOFF).min(lr.tmax);
+        // the facets under either end point: see `starts_on_plane`
+        let start_on_surface = skip_a != FacetId::NONE && lr.t0 == 0.0;
+        let end_on_surface = skip_b != FacetId::NONE;
+        let t_full = (len - lr.t0) as f32 + BACKOFF;
+        let end_eps = 4e-7 * Vec3A::from((b - self.origin).as_vec3()).abs().max_element() + 1e-8;
+        if tmax.is_nan() || tmax <= BACKOFF {
+            return false;
+        }
+        let miss = self
+            .tlas
+            .ray_traverse_miss(make_ray(lr.origin, lr.dir, tmax), |ray, id| {
+                let inst = &self.instances[id];
+                let blas = &self.meshes[inst.mesh as usize];
+                let o = inst.point_to_local(ray.origin);
+                let d = inst.dir_to_local(ray.direction);
+                let wr = WatertightRay::new(Vec3::from(o), Vec3::from(d));
+                let sa = if inst.id == skip_a.instance {
+                    skip_a.triangle
+                } else {
+                    u32::MAX
+                };
+                let sb = if inst.id == skip_b.instance {
+                    skip_b.triangle
+                } else {
+                    u32::MAX
+                };
+                let skipping = sa != u32::MAX || sb != u32::MAX;
+                let clear = blas
+                    .bvh
+                    .ray_traverse_miss(make_ray(o, d, ray.tmax), |r, k| {
+                        if skipping {
+                            let orig = blas.bvh.primitive_indices[k];
+                            if orig == sa || orig == sb {
+                                return f32::INFINITY;
+                            }
+                        }
+                        let t = wr.intersect(&blas.tris[k], BACKOFF, r.tmax);
+                        if t < r.tmax
+                            && ((start_on_surface
+                                && starts_on_plane(&blas.tris[k], o, d, t - BACKOFF, lr.eps))
+                                || (end_on_surface
+                                    && starts_on_plane(&blas.tris[k], o, d, t_full - t, end_eps)))
+                        {
+                            return f32::INFINITY;
+                        }
+                        t
+                    });
+                if clear {
+                    f32::INFINITY
+                } else {
+                    // Any value below tmax stops the top-level traversal.
+                    f32::NEG_INFINITY
+                }
+            });
+        !miss
+    }
+
+    /// World-space bounding box (min, max) of all geometry.
+    pub fn bounds(&self) -> (DVec3, DVec3) {
+        (self.world_lo, self.world_hi)
+    }
+
+    pub fn stats(&self) -> SceneStats {
+        use std::mem::size_of;
+        let memory = self.meshes.iter().map(Blas::memory_bytes).sum::<usize>()
+            + self.meshes.capacity() * size_of::<Blas>()
+            + self.instances.capacity() * size_of::<Instance>()
+            + bvh::bvh_bytes(&self.tlas)
+            + self.slot_surfaces.capacity() * size_of::<u32>()
+            + self.surfaces.capacity() * size_of::<Surface>()
+            + self
+                .surfaces
+                .iter()
+                .map(|s| s.name.capacity())
+                .sum::<usize>();
+        SceneStats {
+            distinct_meshes: self.meshes.len(),
+            distinct_triangles: self.meshes.iter().map(|m| m.tris.len() as u64).sum(),
+            instanced_triangles: self.instanced_triangles,
+            instances: self.instances.len() as u64,
+            memory_bytes: memory as u64,
+        }
+    }
+}

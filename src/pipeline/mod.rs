@@ -1,11 +1,17 @@
 //! The run: stages that turn a campaign into the files of a run folder (outputs.md).
 //!
-//! Every file is written under a temporary name and renamed when complete, so a crash never
-//! leaves a half-written file under its final name.
+//! plan → simulate → products → report. Every file is written under a temporary name and
+//! renamed when complete, so a crash or a kill never leaves a half-written file under its final
+//! name. `manifest.json` records, per stage, its status, the fingerprint of its inputs (the
+//! resolved campaign, the scene's files, the tool version), its outputs and wall time. With
+//! `--resume` a stage whose fingerprint is unchanged is kept, and simulation keeps every part
+//! file already written: a run killed at any moment and resumed gives the same files as an
+//! uninterrupted one, since every random draw derives from (seed, pulse, chunk).
 
+pub mod bench;
 pub mod parquet;
 
-use crate::campaign::Loaded;
+use crate::campaign::{Campaign, InstrumentKind, Loaded};
 use crate::error::{Error, Result};
 use crate::fsutil::write_text_atomic;
 use crate::plan::{self, Pulse};
@@ -15,6 +21,8 @@ use crate::transport::{simulate_pulse, PulseSetup};
 use crate::waveform::{self, Waveform};
 use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -22,10 +30,42 @@ use std::time::Instant;
 /// Pulses per waveform part file.
 pub const PART_PULSES: usize = 1000;
 
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+pub enum Stage {
+    Plan,
+    Simulate,
+    Products,
+    Report,
+}
+
+impl Stage {
+    pub const ALL: [Stage; 4] = [Stage::Plan, Stage::Simulate, Stage::Products, Stage::Report];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Stage::Plan => "plan",
+            Stage::Simulate => "simulate",
+            Stage::Products => "products",
+            Stage::Report => "report",
+        }
+    }
+
+    pub fn parse(s: &str) -> Result<Stage> {
+        Stage::ALL.into_iter().find(|st| st.name() == s).ok_or_else(|| {
+            Error::msg(format!("--stages: unknown stage `{s}`; the stages are plan, simulate, products, report"))
+        })
+    }
+}
+
 #[derive(Clone, Debug, Default)]
 pub struct RunOptions {
     pub out: Option<PathBuf>,
     pub threads: Option<usize>,
+    pub resume: bool,
+    /// Stages to run (all when None).
+    pub stages: Option<Vec<Stage>>,
+    /// Simulate only the parts whose index ≡ K mod N.
+    pub shard: Option<(usize, usize)>,
 }
 
 #[derive(Clone, Debug)]
@@ -34,18 +74,69 @@ pub struct RunSummary {
     pub pulses: usize,
     pub rays: u64,
     pub seconds: f64,
+    /// Parts simulated by this invocation.
+    pub parts_done: usize,
+    /// Whether every stage asked for is complete.
+    pub complete: bool,
 }
 
-/// Runs a campaign file into its run folder.
+#[derive(Clone, Debug, Default, Serialize, Deserialize, PartialEq)]
+pub struct StageRecord {
+    pub status: String,
+    pub fingerprint: String,
+    pub outputs: Vec<String>,
+    pub wall_time_s: f64,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub note: Option<String>,
+}
+
+#[derive(Clone, Debug, Default, Serialize, Deserialize, PartialEq)]
+pub struct Manifest {
+    pub tool_version: String,
+    pub campaign: String,
+    pub stages: BTreeMap<String, StageRecord>,
+}
+
+impl Manifest {
+    fn read(path: &Path) -> Option<Manifest> {
+        serde_json::from_str(&std::fs::read_to_string(path).ok()?).ok()
+    }
+
+    fn done(&self, stage: Stage, fingerprint: &str) -> bool {
+        self.stages
+            .get(stage.name())
+            .is_some_and(|r| r.status == "done" && r.fingerprint == fingerprint)
+    }
+}
+
+/// FNV-1a, 64 bits: a fingerprint that is stable across platforms and tool builds.
+fn fnv(h: &mut u64, bytes: &[u8]) {
+    for b in bytes {
+        *h ^= *b as u64;
+        *h = h.wrapping_mul(0x100_0000_01b3);
+    }
+}
+
+fn fingerprint(parts: &[&[u8]]) -> String {
+    let mut h = 0xcbf2_9ce4_8422_2325u64;
+    for p in parts {
+        fnv(&mut h, &(p.len() as u64).to_le_bytes());
+        fnv(&mut h, p);
+    }
+    format!("{h:016x}")
+}
+
+/// Runs a campaign file into its run folder (each combination of a sweep into a sub-folder).
 pub fn run(campaign_path: &Path, opts: &RunOptions) -> Result<RunSummary> {
     let loaded = Loaded::read(campaign_path)?;
     let out = opts
         .out
         .clone()
         .unwrap_or_else(|| PathBuf::from("runs").join(&loaded.campaign.name));
-    std::fs::create_dir_all(&out)
-        .map_err(|e| Error::file(&out, format!("cannot create run folder: {e}")))?;
-    with_threads(opts.threads, || run_in(&loaded, &out))
+    with_threads(opts.threads, || match &loaded.campaign.sweep {
+        Some(sweep) => run_sweep(&loaded, sweep, &out, opts),
+        None => run_single(&loaded, &out, opts, &mut SceneCache::default()),
+    })
 }
 
 /// Runs `f` on a pool of `threads` threads (all cores when None).
@@ -66,76 +157,512 @@ pub fn with_threads<T: Send>(
     pool.install(f)
 }
 
-fn run_in(loaded: &Loaded, out: &Path) -> Result<RunSummary> {
-    let start = Instant::now();
-    let c = &loaded.campaign;
-    write_text_atomic(&out.join("campaign.resolved.yaml"), &loaded.resolved_yaml())?;
-
-    let pulses = plan::plan(c)?;
-    parquet::write_pulses(&out.join("pulses.parquet"), &pulses)?;
-    log(&format!("planned {} pulses", pulses.len()));
-
-    let t_scene = Instant::now();
-    let scene = Scene::load(&loaded.scene_path, c.wavelength_nm)?;
-    let stats = scene.stats();
-    log(&format!(
-        "scene {}: {} instances, {} triangles ({} distinct), {:.1} MB, loaded in {:.2} s",
-        scene.name,
-        stats.instances,
-        stats.instanced_triangles,
-        stats.distinct_triangles,
-        stats.memory_bytes as f64 / 1e6,
-        t_scene.elapsed().as_secs_f64()
-    ));
-
-    let t_sim = Instant::now();
-    let waveforms = simulate(loaded, &scene, &pulses);
-    let rays: u64 = waveforms.iter().map(|w| w.rays as u64).sum();
-    let secs = t_sim.elapsed().as_secs_f64();
-    for (k, part) in waveforms.chunks(PART_PULSES).enumerate() {
-        parquet::write_waveforms(
-            &out.join("waveforms").join(format!("part-{k:05}.parquet")),
-            part,
-        )?;
-    }
-    log(&format!(
-        "simulated {} pulses, {} rays in {:.2} s ({:.0} pulses/s, {:.3e} rays/s)",
-        pulses.len(),
-        rays,
-        secs,
-        pulses.len() as f64 / secs,
-        rays as f64 / secs
-    ));
-    let manifest = serde_json::json!({
-        "tool_version": env!("CARGO_PKG_VERSION"),
-        "campaign": c.name,
-        "stages": {
-            "plan": { "status": "done", "outputs": ["pulses.parquet"] },
-            "simulate": { "status": "done", "wall_time_s": secs, "pulses": pulses.len(), "rays": rays,
-                          "outputs": (0..waveforms.len().div_ceil(PART_PULSES)).map(|k| format!("waveforms/part-{k:05}.parquet")).collect::<Vec<_>>() },
-        },
-    });
-    write_text_atomic(
-        &out.join("manifest.json"),
-        &serde_json::to_string_pretty(&manifest).unwrap_or_default(),
-    )?;
-    Ok(RunSummary {
-        out: out.to_path_buf(),
-        pulses: pulses.len(),
-        rays,
-        seconds: start.elapsed().as_secs_f64(),
-    })
+/// Scenes already loaded, by (file, wavelength): sweep combinations share them.
+#[derive(Default)]
+struct SceneCache {
+    scenes: Vec<(PathBuf, u64, Scene)>,
 }
 
-/// Simulates every pulse: pulses and each pulse's ray chunks run in parallel.
-pub fn simulate(loaded: &Loaded, scene: &Scene, pulses: &[Pulse]) -> Vec<Waveform> {
+impl SceneCache {
+    fn get(&mut self, path: &Path, wavelength_nm: f64) -> Result<&Scene> {
+        let key = wavelength_nm.to_bits();
+        if let Some(i) = self
+            .scenes
+            .iter()
+            .position(|(p, w, _)| p == path && *w == key)
+        {
+            return Ok(&self.scenes[i].2);
+        }
+        let t = Instant::now();
+        let scene = Scene::load(path, wavelength_nm)?;
+        let s = scene.stats();
+        log(&format!(
+            "scene {}: {} instances, {} triangles ({} distinct), {:.1} MB, loaded in {:.2} s",
+            scene.name,
+            s.instances,
+            s.instanced_triangles,
+            s.distinct_triangles,
+            s.memory_bytes as f64 / 1e6,
+            t.elapsed().as_secs_f64()
+        ));
+        self.scenes.push((path.to_path_buf(), key, scene));
+        Ok(&self.scenes.last().expect("just pushed").2)
+    }
+}
+
+/// One sub-run per combination of the sweep's values, in sub-folders named after them.
+fn run_sweep(
+    loaded: &Loaded,
+    sweep: &BTreeMap<String, Vec<serde_yaml::Value>>,
+    out: &Path,
+    opts: &RunOptions,
+) -> Result<RunSummary> {
+    let keys: Vec<&String> = sweep.keys().collect();
+    for k in &keys {
+        if sweep[*k].is_empty() {
+            return Err(loaded
+                .doc
+                .error(&format!("sweep.{k}"), "the list of values is empty"));
+        }
+    }
+    let mut combos: Vec<Vec<&serde_yaml::Value>> = vec![vec![]];
+    for k in &keys {
+        combos = combos
+            .into_iter()
+            .flat_map(|c| {
+                sweep[*k].iter().map(move |v| {
+                    let mut c = c.clone();
+                    c.push(v);
+                    c
+                })
+            })
+            .collect();
+    }
+    let mut cache = SceneCache::default();
+    let mut total = RunSummary {
+        out: out.to_path_buf(),
+        pulses: 0,
+        rays: 0,
+        seconds: 0.0,
+        parts_done: 0,
+        complete: true,
+    };
+    let mut runs = Vec::new();
+    for combo in combos {
+        let mut tree =
+            serde_yaml::to_value(&loaded.campaign).map_err(|e| Error::msg(e.to_string()))?;
+        let mut names = Vec::new();
+        for (k, v) in keys.iter().zip(&combo) {
+            set_path(&mut tree, k, (*v).clone())
+                .map_err(|m| loaded.doc.error(&format!("sweep.{k}"), m))?;
+            let value = serde_yaml::to_string(v)
+                .unwrap_or_default()
+                .trim()
+                .to_string();
+            names.push(format!("{}={}", k.rsplit('.').next().unwrap_or(k), value));
+        }
+        if let serde_yaml::Value::Mapping(m) = &mut tree {
+            m.remove("sweep");
+        }
+        let campaign: Campaign = serde_yaml::from_value(tree).map_err(|e| {
+            loaded.doc.error(
+                "sweep",
+                format!("a combination does not make a valid campaign: {e}"),
+            )
+        })?;
+        campaign.validate(&loaded.doc).map_err(|e| {
+            Error::msg(format!(
+                "{e} (in the sweep combination {})",
+                names.join(", ")
+            ))
+        })?;
+        let sub = Loaded {
+            campaign,
+            doc: loaded.doc.clone(),
+            scene_path: loaded.scene_path.clone(),
+        };
+        let name = names.join("_").replace(['/', '\\', ' '], "-");
+        log(&format!("sweep: {name}"));
+        let s = run_single(&sub, &out.join(&name), opts, &mut cache)?;
+        total.pulses += s.pulses;
+        total.rays += s.rays;
+        total.seconds += s.seconds;
+        total.parts_done += s.parts_done;
+        total.complete &= s.complete;
+        runs.push(name);
+    }
+    let index = serde_json::json!({ "tool_version": env!("CARGO_PKG_VERSION"), "campaign": loaded.campaign.name, "sweep": runs });
+    write_text_atomic(
+        &out.join("sweep.json"),
+        &serde_json::to_string_pretty(&index).unwrap_or_default(),
+    )?;
+    Ok(total)
+}
+
+/// Sets the value at a dotted key path (`platform.altitude_m`) in a YAML tree.
+fn set_path(
+    tree: &mut serde_yaml::Value,
+    key: &str,
+    value: serde_yaml::Value,
+) -> std::result::Result<(), String> {
+    let mut node = tree;
+    let parts: Vec<&str> = key.split('.').collect();
+    for (i, p) in parts.iter().enumerate() {
+        let map = node
+            .as_mapping_mut()
+            .ok_or_else(|| format!("`{}` is not a section", parts[..i].join(".")))?;
+        let k = serde_yaml::Value::String(p.to_string());
+        if i + 1 == parts.len() {
+            map.insert(k, value);
+            return Ok(());
+        }
+        node = map
+            .entry(k)
+            .or_insert_with(|| serde_yaml::Value::Mapping(Default::default()));
+    }
+    Err("empty key".into())
+}
+
+/// Removes files left under temporary names by a crash or a kill.
+fn clean_temp_files(dir: &Path) {
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return;
+    };
+    for e in entries.flatten() {
+        let p = e.path();
+        if p.is_dir() {
+            clean_temp_files(&p);
+        } else if p
+            .file_name()
+            .and_then(|n| n.to_str())
+            .is_some_and(|n| n.contains(".tmp-"))
+        {
+            let _ = std::fs::remove_file(&p);
+        }
+    }
+}
+
+fn part_name(k: usize) -> String {
+    format!("waveforms/part-{k:05}.parquet")
+}
+
+fn run_single(
+    loaded: &Loaded,
+    out: &Path,
+    opts: &RunOptions,
+    cache: &mut SceneCache,
+) -> Result<RunSummary> {
+    let start = Instant::now();
+    let c = &loaded.campaign;
+    std::fs::create_dir_all(out)
+        .map_err(|e| Error::file(out, format!("cannot create run folder: {e}")))?;
+    let manifest_path = out.join("manifest.json");
+    let mut manifest = if opts.resume {
+        Manifest::read(&manifest_path).unwrap_or_default()
+    } else {
+        Manifest::default()
+    };
+    if opts.resume {
+        // a shard may be running beside us on the same folder: only our own leftovers are
+        // ours to remove, and those can only exist after a crash, so clean before starting
+        if opts.shard.is_none() {
+            clean_temp_files(out);
+        }
+    } else {
+        for name in [
+            "waveforms",
+            "pulses.parquet",
+            "manifest.json",
+            "report.md",
+            "pulse_stats.csv",
+        ] {
+            let p = out.join(name);
+            let _ = if p.is_dir() {
+                std::fs::remove_dir_all(&p)
+            } else {
+                std::fs::remove_file(&p)
+            };
+        }
+    }
+    manifest.tool_version = env!("CARGO_PKG_VERSION").to_string();
+    manifest.campaign = c.name.clone();
+    let before = manifest.clone();
+    let wanted = |s: Stage| opts.stages.as_ref().is_none_or(|v| v.contains(&s));
+
+    let resolved = loaded.resolved_yaml();
+    write_text_atomic(&out.join("campaign.resolved.yaml"), &resolved)?;
+    let fp_plan = fingerprint(&[resolved.as_bytes(), env!("CARGO_PKG_VERSION").as_bytes()]);
+
+    // plan: cheap and deterministic, so the pulses are always planned in memory; the file is
+    // written only when the stage is not already done
+    let t = Instant::now();
+    let pulses = plan_with_progress(c)?;
+    if wanted(Stage::Plan) && !manifest.done(Stage::Plan, &fp_plan) {
+        parquet::write_pulses(&out.join("pulses.parquet"), &pulses)?;
+        record(
+            &mut manifest,
+            Stage::Plan,
+            &fp_plan,
+            vec!["pulses.parquet".into()],
+            t,
+            None,
+        );
+        save(&manifest_path, &manifest)?;
+        log(&format!(
+            "plan: {} pulses in {:.2} s",
+            pulses.len(),
+            t.elapsed().as_secs_f64()
+        ));
+    } else if !manifest.done(Stage::Plan, &fp_plan) {
+        return Err(Error::msg(format!(
+            "{}: stage plan has not run: include it in --stages",
+            out.display()
+        )));
+    } else {
+        log("plan: up to date");
+    }
+
+    let mut summary = RunSummary {
+        out: out.to_path_buf(),
+        pulses: pulses.len(),
+        rays: 0,
+        seconds: 0.0,
+        parts_done: 0,
+        complete: true,
+    };
+    let later = [Stage::Simulate, Stage::Products, Stage::Report];
+    if !later.iter().any(|s| wanted(*s)) {
+        summary.seconds = start.elapsed().as_secs_f64();
+        return Ok(summary);
+    }
+
+    let scene = cache.get(&loaded.scene_path, c.wavelength_nm)?;
+    let mut scene_bytes = Vec::new();
+    for f in &scene.files {
+        let bytes = std::fs::read(f).map_err(|e| Error::file(f, format!("cannot read: {e}")))?;
+        scene_bytes.push(bytes);
+    }
+    let mut inputs: Vec<&[u8]> = vec![fp_plan.as_bytes()];
+    inputs.extend(scene_bytes.iter().map(|b| b.as_slice()));
+    let fp_sim = fingerprint(&inputs);
+
+    // simulate
+    let parts = pulses.len().div_ceil(PART_PULSES);
+    let part_files: Vec<String> = (0..parts).map(part_name).collect();
+    if wanted(Stage::Simulate) && !manifest.done(Stage::Simulate, &fp_sim) {
+        let t = Instant::now();
+        let wf_dir = out.join("waveforms");
+        let marker = wf_dir.join("fingerprint");
+        let stale = std::fs::read_to_string(&marker)
+            .map(|s| s.trim() != fp_sim)
+            .unwrap_or(true);
+        if stale && opts.shard.is_none() && wf_dir.exists() {
+            let _ = std::fs::remove_dir_all(&wf_dir);
+        }
+        write_text_atomic(&marker, &fp_sim)?;
+        let todo: Vec<usize> = (0..parts)
+            .filter(|k| opts.shard.is_none_or(|(i, n)| k % n == i))
+            .filter(|&k| !out.join(part_name(k)).is_file())
+            .collect();
+        let (rays, done) = simulate_parts(loaded, scene, &pulses, &todo, out)?;
+        summary.rays = rays;
+        summary.parts_done = done;
+        let missing = (0..parts)
+            .filter(|&k| !out.join(part_name(k)).is_file())
+            .count();
+        if missing == 0 {
+            record(
+                &mut manifest,
+                Stage::Simulate,
+                &fp_sim,
+                part_files.clone(),
+                t,
+                None,
+            );
+        } else {
+            let note =
+                format!("{missing} of {parts} parts missing: run again with --resume to finish");
+            record(
+                &mut manifest,
+                Stage::Simulate,
+                &fp_sim,
+                part_files.clone(),
+                t,
+                Some(note.clone()),
+            );
+            manifest
+                .stages
+                .get_mut("simulate")
+                .expect("recorded")
+                .status = "partial".into();
+            log(&format!("simulate: {note}"));
+        }
+        invalidate_after(&mut manifest, Stage::Simulate);
+        save(&manifest_path, &manifest)?;
+    } else if manifest.done(Stage::Simulate, &fp_sim) {
+        log("simulate: up to date");
+    }
+    if !manifest.done(Stage::Simulate, &fp_sim) {
+        summary.complete = false;
+        summary.seconds = start.elapsed().as_secs_f64();
+        return Ok(summary);
+    }
+
+    // products: from the waveforms; the discrete-return, photon and DSM products come later
+    let fp_products = fingerprint(&[fp_sim.as_bytes(), b"products"]);
+    if wanted(Stage::Products) && !manifest.done(Stage::Products, &fp_products) {
+        let t = Instant::now();
+        let note = match c.instrument.kind {
+            InstrumentKind::Waveform => "waveform instrument: the waveforms are the product",
+            _ => "discrete returns and photon counts are not produced yet: waveforms only",
+        };
+        record(
+            &mut manifest,
+            Stage::Products,
+            &fp_products,
+            part_files.clone(),
+            t,
+            Some(note.into()),
+        );
+        invalidate_after(&mut manifest, Stage::Products);
+        save(&manifest_path, &manifest)?;
+    }
+
+    // report
+    let fp_report = fingerprint(&[fp_products.as_bytes(), b"report"]);
+    if wanted(Stage::Report)
+        && manifest.done(Stage::Products, &fp_products)
+        && !manifest.done(Stage::Report, &fp_report)
+    {
+        let t = Instant::now();
+        let text = report(loaded, scene, &pulses, out, &manifest)?;
+        write_text_atomic(&out.join("report.md"), &text)?;
+        record(
+            &mut manifest,
+            Stage::Report,
+            &fp_report,
+            vec!["report.md".into()],
+            t,
+            None,
+        );
+        save(&manifest_path, &manifest)?;
+    }
+    if manifest == before {
+        log("nothing to do: every stage is up to date");
+    }
+    summary.complete = opts.stages.is_some() || manifest.done(Stage::Report, &fp_report);
+    summary.seconds = start.elapsed().as_secs_f64();
+    Ok(summary)
+}
+
+fn record(
+    m: &mut Manifest,
+    stage: Stage,
+    fp: &str,
+    outputs: Vec<String>,
+    t: Instant,
+    note: Option<String>,
+) {
+    m.stages.insert(
+        stage.name().into(),
+        StageRecord {
+            status: "done".into(),
+            fingerprint: fp.into(),
+            outputs,
+            wall_time_s: (t.elapsed().as_secs_f64() * 1000.0).round() / 1000.0,
+            note,
+        },
+    );
+}
+
+/// A stage redone makes every later stage stale.
+fn invalidate_after(m: &mut Manifest, stage: Stage) {
+    for s in Stage::ALL.into_iter().filter(|s| *s > stage) {
+        m.stages.remove(s.name());
+    }
+}
+
+fn save(path: &Path, m: &Manifest) -> Result<()> {
+    write_text_atomic(path, &serde_json::to_string_pretty(m).unwrap_or_default())
+}
+
+fn plan_with_progress(c: &Campaign) -> Result<Vec<Pulse>> {
+    let pulses = plan::plan(c)?;
+    if pulses.is_empty() {
+        return Err(Error::msg("the platform plans no pulses"));
+    }
+    Ok(pulses)
+}
+
+/// Simulates the given parts, each written when complete. Pulses within a part and each
+/// pulse's ray chunks run in parallel. Returns (rays traced, parts written).
+fn simulate_parts(
+    loaded: &Loaded,
+    scene: &Scene,
+    pulses: &[Pulse],
+    todo: &[usize],
+    out: &Path,
+) -> Result<(u64, usize)> {
+    let total: usize = todo
+        .iter()
+        .map(|&k| part_range(k, pulses.len()).len())
+        .sum();
+    let bar = progress(total as u64, "simulating");
+    let t = Instant::now();
+    let mut rays = 0u64;
+    let mut done_pulses = 0usize;
+    let terminal = std::io::stderr().is_terminal();
+    for (i, &k) in todo.iter().enumerate() {
+        let range = part_range(k, pulses.len());
+        let (waveforms, secs) = simulate(loaded, scene, &pulses[range], &bar);
+        parquet::write_waveforms(&out.join(part_name(k)), &waveforms)?;
+        write_pulse_stats(
+            &out.join(format!("waveforms/part-{k:05}.stats.csv")),
+            &waveforms,
+            &secs,
+        )?;
+        rays += waveforms.iter().map(|w| w.rays as u64).sum::<u64>();
+        done_pulses += waveforms.len();
+        let elapsed = t.elapsed().as_secs_f64();
+        let rate = done_pulses as f64 / elapsed;
+        if !terminal {
+            log(&format!(
+                "simulate: part {} ({}/{} parts) done, {:.0} pulses/s, {:.0} s left",
+                k,
+                i + 1,
+                todo.len(),
+                rate,
+                (total - done_pulses) as f64 / rate
+            ));
+        }
+    }
+    bar.finish_and_clear();
+    let secs = t.elapsed().as_secs_f64();
+    if done_pulses > 0 {
+        log(&format!(
+            "simulated {done_pulses} pulses, {rays} rays in {secs:.2} s ({:.1} pulses/s, {:.3e} rays/s)",
+            done_pulses as f64 / secs,
+            rays as f64 / secs
+        ));
+    }
+    Ok((rays, todo.len()))
+}
+
+fn part_range(k: usize, n: usize) -> std::ops::Range<usize> {
+    k * PART_PULSES..((k + 1) * PART_PULSES).min(n)
+}
+
+/// Per-pulse counters beside the waveforms: effective paths per ray and time per ray. Kept
+/// out of the waveform files, which must not depend on timing.
+fn write_pulse_stats(path: &Path, waveforms: &[Waveform], secs: &[f64]) -> Result<()> {
+    let mut text = String::from("pulse_id,rays,paths_per_ray,seconds,seconds_per_ray\n");
+    for (w, s) in waveforms.iter().zip(secs) {
+        text.push_str(&format!(
+            "{},{},{},{:.6},{:.4e}\n",
+            w.pulse_id,
+            w.rays,
+            w.paths_per_ray,
+            s,
+            s / w.rays.max(1) as f64
+        ));
+    }
+    write_text_atomic(path, &text)
+}
+
+/// Simulates pulses: pulses and each pulse's ray chunks run in parallel. Returns the
+/// waveforms and each pulse's wall time (with the threads it shared).
+pub fn simulate(
+    loaded: &Loaded,
+    scene: &Scene,
+    pulses: &[Pulse],
+    bar: &ProgressBar,
+) -> (Vec<Waveform>, Vec<f64>) {
     let c = &loaded.campaign;
     let inst = &c.instrument;
     let sigma = pulse_sigma_s(inst);
     let hv = crate::photon_energy_j(c.wavelength_nm);
     let bounds = scene.bounds();
-    let bar = progress(pulses.len() as u64, "simulating");
-    let out = pulses
+    pulses
         .par_iter()
         .map(|p| {
             let gate = Gate::for_pulse(inst, p.origin, bounds);
@@ -152,16 +679,78 @@ pub fn simulate(loaded: &Loaded, scene: &Scene, pulses: &[Pulse]) -> Vec<Wavefor
                 seed: c.seed,
                 pulse_id: p.id,
             };
+            let t = Instant::now();
             let tally = simulate_pulse(&setup, c.simulation.rays_per_pulse);
+            let secs = t.elapsed().as_secs_f64();
             bar.inc(1);
-            waveform::waveform(p.id, &tally, &gate, sub_bins, sigma, hv)
+            (
+                waveform::waveform(p.id, &tally, &gate, sub_bins, sigma, hv),
+                secs,
+            )
         })
-        .collect();
-    bar.finish_and_clear();
-    out
+        .unzip()
 }
 
-/// A progress bar on a terminal; nothing otherwise (the stage logs its own summary line).
+/// `report.md`: what ran, on what, how fast, and what came back.
+fn report(
+    loaded: &Loaded,
+    scene: &Scene,
+    pulses: &[Pulse],
+    out: &Path,
+    manifest: &Manifest,
+) -> Result<String> {
+    let c = &loaded.campaign;
+    let mut received = Vec::new();
+    let mut multiple = 0.0;
+    let mut rays = 0u64;
+    let mut paths = 0.0;
+    for f in std::fs::read_dir(out.join("waveforms"))
+        .map_err(|e| Error::file(out, e))?
+        .flatten()
+    {
+        let p = f.path();
+        if p.extension().is_some_and(|e| e == "parquet") {
+            for w in parquet::read_waveforms(&p)? {
+                received.push(w.received_energy_j);
+                multiple += w.received_energy_j - w.order_energy_j.first().copied().unwrap_or(0.0);
+                rays += w.rays as u64;
+                paths += w.paths_per_ray as f64 * w.rays as f64;
+            }
+        }
+    }
+    let total: f64 = received.iter().sum();
+    let sim = manifest
+        .stages
+        .get("simulate")
+        .map(|r| r.wall_time_s)
+        .unwrap_or(0.0);
+    let s = scene.stats();
+    let mut text = format!("# Run report: {}\n\n", c.name);
+    text += &format!(
+        "| | |\n| --- | --- |\n| scene | {} ({} instances, {} triangles) |\n| instrument | {:?}, {} nm, {} J, footprint {} mrad, field of view {} mrad |\n| method | {:?}, {} rays per pulse, max order {} |\n| pulses | {} |\n| rays | {} |\n| simulation wall time | {:.2} s ({:.1} pulses/s) |\n| effective paths per ray | {:.2} |\n| mean received energy per pulse | {:.4e} J |\n| multiple scattering share | {:.1}% |\n",
+        scene.name,
+        s.instances,
+        s.instanced_triangles,
+        c.instrument.kind,
+        c.wavelength_nm,
+        c.instrument.pulse_energy_j,
+        c.instrument.footprint_half_angle_mrad,
+        c.instrument.fov_half_angle_mrad,
+        c.simulation.method,
+        c.simulation.rays_per_pulse,
+        c.simulation.max_order,
+        pulses.len(),
+        rays,
+        sim,
+        if sim > 0.0 { pulses.len() as f64 / sim } else { 0.0 },
+        paths / rays.max(1) as f64,
+        total / received.len().max(1) as f64,
+        if total > 0.0 { 100.0 * multiple / total } else { 0.0 },
+    );
+    Ok(text)
+}
+
+/// A progress bar on a terminal; hidden otherwise (stages then log plain lines).
 pub fn progress(len: u64, what: &str) -> ProgressBar {
     if !std::io::stderr().is_terminal() {
         return ProgressBar::hidden();

@@ -106,6 +106,7 @@ fn check_material(
 
 pub(crate) fn load(path: &Path, wavelength_nm: f64) -> Result<Scene> {
     let doc = Doc::read(path)?;
+    let mut files = vec![path.to_path_buf()];
     let file: SceneFile = doc.parse()?;
     let materials = resolve_materials(&doc, &file, wavelength_nm)?;
     if file.objects.is_empty() {
@@ -155,6 +156,7 @@ pub(crate) fn load(path: &Path, wavelength_nm: f64) -> Result<Scene> {
                     return Err(doc.error(&format!("{key}.origin"), "expected finite coordinates"));
                 }
                 let p = existing(&doc, &format!("{key}.file"), &h.file)?;
+                files.push(p.clone());
                 sources.push(Source::Heightfield {
                     path: p,
                     cell_m: h.cell_m,
@@ -193,6 +195,7 @@ pub(crate) fn load(path: &Path, wavelength_nm: f64) -> Result<Scene> {
                     }
                 };
                 let p = existing(&doc, &format!("{key}.file"), &m.file)?;
+                files.push(p.clone());
                 let canonical = std::fs::canonicalize(&p).unwrap_or(p);
                 let source = *mesh_sources.entry(canonical.clone()).or_insert_with(|| {
                     sources.push(Source::Mesh(canonical));
@@ -201,6 +204,7 @@ pub(crate) fn load(path: &Path, wavelength_nm: f64) -> Result<Scene> {
                 let rows = match &m.instances {
                     Some(name) => {
                         let p = existing(&doc, &format!("{key}.instances"), name)?;
+                        files.push(p.clone());
                         let text = crate::error::read_text(&p)?;
                         Some(parse_instances(&p, &text)?)
                     }
@@ -365,8 +369,11 @@ pub(crate) fn load(path: &Path, wavelength_nm: f64) -> Result<Scene> {
         .map(|&i| instances[i as usize])
         .collect();
 
+    files.sort();
+    files.dedup();
     Ok(Scene {
         name: file.name,
+        files,
         surfaces,
         origin,
         meshes,

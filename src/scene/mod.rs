@@ -10,6 +10,7 @@
 
 mod bvh;
 mod config;
+pub mod generate;
 mod load;
 mod mesh;
 mod table;
@@ -99,6 +100,8 @@ pub struct SceneStats {
 
 pub struct Scene {
     pub name: String,
+    /// Every file the scene was read from: its YAML, meshes, instance tables, heightfields.
+    pub files: Vec<std::path::PathBuf>,
     pub surfaces: Vec<Surface>,
     /// f64 world position of the scene-local origin.
     pub origin: DVec3,
@@ -168,23 +171,19 @@ struct LocalRay {
     eps: f32,
 }
 
-/// True when a hit `dist` metres along the ray lies on a facet whose plane passes within
-/// `eps` of the ray's start: a ray leaving a facet cannot meet a coplanar neighbour except
-/// at distance 0, and in f32 that zero comes out as a small positive number.
-/// The watertight test computes t from vertex coordinates relative to the ray origin, so its
-/// round-off grows with the triangle's distance from the origin as well as with `eps`.
+/// True when the point `p` (instance-local) lies on the plane of `tri`, to within `eps`
+/// world metres plus the round-off of f32 coordinates of their size. A ray that starts on a
+/// facet cannot meet a coplanar neighbour except at distance 0, and a segment that ends on
+/// one cannot be blocked by its coplanar neighbours; computed from the coordinates rather
+/// than from the hit distance, the test stays exact for surfaces a micrometre apart seen
+/// from far away.
 #[inline]
-fn starts_on_plane(tri: &[Vec3; 3], o: Vec3A, d: Vec3A, dist: f32, eps: f32) -> bool {
-    let o = Vec3::from(o);
+fn on_plane(tri: &[Vec3; 3], p: Vec3A, inv_scale_len: f32, eps: f32) -> bool {
+    let p = Vec3::from(p);
     let n = (tri[1] - tri[0]).cross(tri[2] - tri[0]);
-    let inv_len = 1.0 / d.length(); // world metres per local unit
-    let cos = n.dot(Vec3::from(d)).abs() * inv_len / n.length();
-    let reach = (tri[0] - o)
-        .abs()
-        .max((tri[1] - o).abs())
-        .max((tri[2] - o).abs())
-        .max_element();
-    dist * cos < eps + 4e-7 * reach * inv_len
+    let dist = n.dot(p - tri[0]).abs() / n.length() * inv_scale_len;
+    let size = p.abs().max(tri[0].abs()).max_element() * inv_scale_len;
+    dist < eps + 4e-7 * size
 }
 
 impl Scene {
@@ -254,6 +253,9 @@ impl Scene {
                 let o = inst.point_to_local(ray.origin);
                 let d = inst.dir_to_local(ray.direction);
                 let wr = WatertightRay::new(Vec3::from(o), Vec3::from(d));
+                // the ray's true start (before backing off) and local units per world metre
+                let start = o + d * BACKOFF;
+                let inv_len = 1.0 / d.length();
                 let skip_tri = if inst.id == skip.instance {
                     skip.triangle
                 } else {
@@ -270,7 +272,7 @@ impl Scene {
                         let t = wr.intersect(&blas.tris[k], BACKOFF, r.tmax);
                         if t < r.tmax
                             && on_surface
-                            && starts_on_plane(&blas.tris[k], o, d, t - BACKOFF, lr.eps)
+                            && on_plane(&blas.tris[k], start, inv_len, lr.eps)
                         {
                             return f32::INFINITY;
                         }
@@ -323,17 +325,18 @@ impl Scene {
             return false;
         }
         let dir = delta / len;
-        // Stop just short of b, so that b's own neighbourhood does not count as a blocker.
-        let Some(lr) = self.local_ray(a, dir, len * (1.0 - 1e-6)) else {
+        // How close to b (m) f32 coordinates can tell a blocker from b's own surface; the
+        // segment stops that far short of b, and facets coplanar with b are not blockers.
+        let end_eps = 4e-7 * Vec3A::from((b - self.origin).as_vec3()).abs().max_element() + 1e-8;
+        let reach = len - end_eps as f64;
+        let Some(lr) = self.local_ray(a, dir, reach) else {
             return false;
         };
-        let t_end = len * (1.0 - 1e-6) - lr.t0;
-        let tmax = (t_end as f32 + BACKOFF).min(lr.tmax);
-        // the facets under either end point: see `starts_on_plane`
+        let tmax = ((reach - lr.t0) as f32 + BACKOFF).min(lr.tmax);
+        // see `on_plane`
         let start_on_surface = skip_a != FacetId::NONE && lr.t0 == 0.0;
         let end_on_surface = skip_b != FacetId::NONE;
-        let t_full = (len - lr.t0) as f32 + BACKOFF;
-        let end_eps = 4e-7 * Vec3A::from((b - self.origin).as_vec3()).abs().max_element() + 1e-8;
+        let b_local = Vec3A::from((b - self.origin).as_vec3());
         if tmax.is_nan() || tmax <= BACKOFF {
             return false;
         }
@@ -345,6 +348,9 @@ impl Scene {
                 let o = inst.point_to_local(ray.origin);
                 let d = inst.dir_to_local(ray.direction);
                 let wr = WatertightRay::new(Vec3::from(o), Vec3::from(d));
+                let start = o + d * BACKOFF;
+                let end = inst.point_to_local(b_local);
+                let inv_len = 1.0 / d.length();
                 let sa = if inst.id == skip_a.instance {
                     skip_a.triangle
                 } else {
@@ -368,9 +374,9 @@ impl Scene {
                         let t = wr.intersect(&blas.tris[k], BACKOFF, r.tmax);
                         if t < r.tmax
                             && ((start_on_surface
-                                && starts_on_plane(&blas.tris[k], o, d, t - BACKOFF, lr.eps))
+                                && on_plane(&blas.tris[k], start, inv_len, lr.eps))
                                 || (end_on_surface
-                                    && starts_on_plane(&blas.tris[k], o, d, t_full - t, end_eps)))
+                                    && on_plane(&blas.tris[k], end, inv_len, end_eps)))
                         {
                             return f32::INFINITY;
                         }

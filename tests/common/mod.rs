@@ -92,6 +92,7 @@ pub fn run(dir: &Path, campaign_text: &str, threads: Option<usize>) -> Vec<Wavef
         &RunOptions {
             out: Some(out.clone()),
             threads,
+            ..Default::default()
         },
     )
     .unwrap_or_else(|e| panic!("{e}"));

@@ -1,0 +1,320 @@
+//! `lidarsim bench`: speed against error, measured on this machine.
+//!
+//! A GEDI-like pulse (paper Table 1: 419 km, 0.5 m², 0.3 mrad field of view, 1 ns bins,
+//! 14 ns pulse) over a generated canopy with a 25 m footprint. A reference waveform with
+//! many rays, then, for each method, the fewest rays (on a 1-2-5 ladder) whose waveforms reach
+//! rRMSE ≤ 5% against it (median over several seeds), with their wall time.
+
+use crate::campaign::{Instrument, Method, MisHeuristic};
+use crate::error::{Error, Result};
+use crate::scene::generate::{canopy, Canopy};
+use crate::scene::Scene;
+use crate::sensor::{pulse_sigma_s, Gate, Laser, Receiver};
+use crate::transport::{simulate_pulse, PulseSetup};
+use crate::waveform::{self, Waveform};
+use glam::DVec3;
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+#[derive(Clone, Debug)]
+pub struct BenchOptions {
+    /// Rays of the reference waveform.
+    pub reference_rays: u64,
+    /// Seeds per ray count (the median rRMSE is used).
+    pub seeds: u64,
+    /// Largest ray count tried per method.
+    pub max_rays: u64,
+    /// Folder for the generated scene and the report.
+    pub dir: PathBuf,
+    pub footprint_diameter_m: f64,
+    /// Field-of-view half angle, mrad (GEDI: 0.3).
+    pub fov_mrad: f64,
+    pub canopy: Canopy,
+}
+
+impl Default for BenchOptions {
+    fn default() -> Self {
+        BenchOptions {
+            reference_rays: 10_000_000,
+            seeds: 5,
+            max_rays: 2_000_000,
+            dir: PathBuf::from("runs/bench"),
+            footprint_diameter_m: 25.0,
+            fov_mrad: 0.3,
+            canopy: Canopy::default(),
+        }
+    }
+}
+
+/// One method's row of the table.
+#[derive(Clone, Debug)]
+pub struct Row {
+    pub method: Method,
+    /// Fewest rays reaching the target, or None if `max_rays` did not.
+    pub rays: Option<u64>,
+    pub rrmse: f64,
+    pub seconds: f64,
+    pub rays_per_second: f64,
+    pub paths_per_ray: f64,
+    /// (rays, median rRMSE) along the ladder.
+    pub curve: Vec<(u64, f64)>,
+}
+
+fn gedi(footprint_diameter_m: f64, fov_mrad: f64, altitude: f64) -> Instrument {
+    let half_angle_mrad = (footprint_diameter_m / 2.0 / altitude).atan() * 1e3;
+    serde_yaml::from_str(&format!(
+        "pulse_energy_j: 0.0105\npulse_fwhm_ns: 14\nfootprint_half_angle_mrad: {half_angle_mrad}\nfov_half_angle_mrad: {fov_mrad}\nreceiver_area_m2: 0.5\nbin_ns: 1"
+    ))
+    .expect("a fixed instrument parses")
+}
+
+/// rRMSE of a waveform against a reference over the bins where the reference carries signal
+/// (above 1e-3 of its peak): RMS difference over the reference's mean there.
+pub fn rrmse(w: &[f32], reference: &[f32]) -> f64 {
+    let peak = reference.iter().cloned().fold(0.0f32, f32::max) as f64;
+    let bins: Vec<usize> = (0..reference.len())
+        .filter(|&i| reference[i] as f64 > 1e-3 * peak)
+        .collect();
+    if bins.is_empty() {
+        return f64::NAN;
+    }
+    let n = bins.len() as f64;
+    let mse = bins
+        .iter()
+        .map(|&i| (w[i] as f64 - reference[i] as f64).powi(2))
+        .sum::<f64>()
+        / n;
+    let mean = bins.iter().map(|&i| reference[i] as f64).sum::<f64>() / n;
+    mse.sqrt() / mean
+}
+
+struct Bench<'a> {
+    scene: &'a Scene,
+    inst: Instrument,
+    origin: DVec3,
+    gate: Gate,
+    sub_bins: usize,
+    sigma: f64,
+    hv: f64,
+}
+
+impl Bench<'_> {
+    fn run(&self, method: Method, rays: u64, seed: u64) -> (Waveform, f64) {
+        let axis = -DVec3::Z;
+        let setup = PulseSetup {
+            scene: self.scene,
+            laser: Laser::new(&self.inst, self.origin, axis),
+            receiver: Receiver::new(&self.inst, self.origin, axis),
+            gate: self.gate,
+            sub_bins: self.sub_bins,
+            method,
+            heuristic: MisHeuristic::Power,
+            max_order: 100,
+            seed,
+            pulse_id: 0,
+        };
+        let t = Instant::now();
+        let tally = simulate_pulse(&setup, rays);
+        let secs = t.elapsed().as_secs_f64();
+        (
+            waveform::waveform(0, &tally, &self.gate, self.sub_bins, self.sigma, self.hv),
+            secs,
+        )
+    }
+}
+
+/// Runs the benchmark and returns the markdown report.
+pub fn run(opts: &BenchOptions) -> Result<String> {
+    let scene_dir = opts.dir.join("canopy");
+    let spec = opts.canopy.clone();
+    let scene_path = canopy(&scene_dir, &spec)?;
+    let scene = Scene::load(&scene_path, 1064.0)?;
+    let stats = scene.stats();
+    let altitude = 419_000.0;
+    let inst = gedi(opts.footprint_diameter_m, opts.fov_mrad, altitude);
+    let origin = DVec3::new(spec.size / 2.0, spec.size / 2.0, altitude);
+    let sigma = pulse_sigma_s(&inst);
+    let gate = Gate::for_pulse(&inst, origin, scene.bounds());
+    let b = Bench {
+        scene: &scene,
+        sub_bins: waveform::sub_bins_per_bin(gate.dt, sigma),
+        inst,
+        origin,
+        gate,
+        sigma,
+        hv: crate::photon_energy_j(1064.0),
+    };
+    eprintln!(
+        "lidarsim bench: reference waveform, bdpt, {} rays",
+        opts.reference_rays
+    );
+    let (reference, ref_secs) = b.run(Method::Bdpt, opts.reference_rays, 1_000_003);
+    if reference.received_energy_j <= 0.0 {
+        return Err(Error::msg("bench: the reference waveform is empty"));
+    }
+    let mut rows = Vec::new();
+    for method in [Method::Forward, Method::Backward, Method::Bdpt] {
+        let mut row = Row {
+            method,
+            rays: None,
+            rrmse: f64::NAN,
+            seconds: f64::NAN,
+            rays_per_second: f64::NAN,
+            paths_per_ray: f64::NAN,
+            curve: Vec::new(),
+        };
+        let mut rays = 100u64;
+        let mut step = 0;
+        while rays <= opts.max_rays {
+            let mut errs = Vec::new();
+            let mut secs = Vec::new();
+            let mut paths = Vec::new();
+            for s in 0..opts.seeds {
+                let (w, t) = b.run(method, rays, 17 + s);
+                errs.push(rrmse(&w.laser_photons, &reference.laser_photons));
+                secs.push(t);
+                paths.push(w.paths_per_ray as f64);
+            }
+            let e = median(&mut errs);
+            eprintln!(
+                "lidarsim bench: {method:?} {rays} rays: rRMSE {:.2}%",
+                100.0 * e
+            );
+            row.curve.push((rays, e));
+            if e <= 0.05 {
+                let t = median(&mut secs);
+                row.rays = Some(rays);
+                row.rrmse = e;
+                row.seconds = t;
+                row.rays_per_second = rays as f64 / t;
+                row.paths_per_ray = median(&mut paths);
+                break;
+            }
+            // the 1-2-5 ladder
+            rays = rays * if step % 3 == 1 { 5 } else { 2 } / if step % 3 == 1 { 2 } else { 1 };
+            step += 1;
+        }
+        rows.push(row);
+    }
+    Ok(report(opts, &spec, &stats, &reference, ref_secs, &rows))
+}
+
+fn median(v: &mut [f64]) -> f64 {
+    v.sort_by(|a, b| a.total_cmp(b));
+    let n = v.len();
+    if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        0.5 * (v[n / 2 - 1] + v[n / 2])
+    }
+}
+
+fn report(
+    opts: &BenchOptions,
+    spec: &Canopy,
+    stats: &crate::scene::SceneStats,
+    reference: &Waveform,
+    ref_secs: f64,
+    rows: &[Row],
+) -> String {
+    let mut s = String::new();
+    let threads = rayon::current_num_threads();
+    let _ = writeln!(
+        s,
+        "### Rays to reach rRMSE ≤ 5%: GEDI-like pulse, {} m footprint, generated canopy\n",
+        opts.footprint_diameter_m
+    );
+    let _ = writeln!(
+        s,
+        "Scene: {} crowns ({} templates × {} leaves) on {} m × {} m, {} instanced triangles. Reference: bdpt, {} rays, {:.1} s; {:.1}% of its energy beyond first order. {} seeds per ray count, median; {} threads.\n",
+        spec.trees,
+        spec.templates,
+        spec.leaves,
+        spec.size,
+        spec.size,
+        stats.instanced_triangles,
+        opts.reference_rays,
+        ref_secs,
+        100.0 * (1.0 - reference.order_energy_j[0] / reference.received_energy_j),
+        opts.seeds,
+        threads
+    );
+    let _ = writeln!(
+        s,
+        "| method | rays for rRMSE ≤ 5% | rRMSE | wall s | rays/s | effective paths/ray |"
+    );
+    let _ = writeln!(s, "| --- | ---: | ---: | ---: | ---: | ---: |");
+    for r in rows {
+        let name = format!("{:?}", r.method).to_lowercase();
+        match r.rays {
+            Some(n) => {
+                let _ = writeln!(
+                    s,
+                    "| {name} | {n} | {:.2}% | {:.3} | {:.3e} | {:.2} |",
+                    100.0 * r.rrmse,
+                    r.seconds,
+                    r.rays_per_second,
+                    r.paths_per_ray
+                );
+            }
+            None => {
+                let _ = writeln!(s, "| {name} | > {} | | | | |", opts.max_rays);
+            }
+        }
+    }
+    let _ = writeln!(s, "\nmedian rRMSE by rays:\n");
+    let _ = writeln!(
+        s,
+        "| rays | {} |",
+        rows.iter()
+            .map(|r| format!("{:?}", r.method).to_lowercase())
+            .collect::<Vec<_>>()
+            .join(" | ")
+    );
+    let _ = writeln!(s, "| ---: |{}", " ---: |".repeat(rows.len()));
+    let mut all: Vec<u64> = rows
+        .iter()
+        .flat_map(|r| r.curve.iter().map(|c| c.0))
+        .collect();
+    all.sort();
+    all.dedup();
+    for n in all {
+        let cells: Vec<String> = rows
+            .iter()
+            .map(|r| {
+                r.curve
+                    .iter()
+                    .find(|c| c.0 == n)
+                    .map(|c| format!("{:.2}%", 100.0 * c.1))
+                    .unwrap_or_default()
+            })
+            .collect();
+        let _ = writeln!(s, "| {n} | {} |", cells.join(" | "));
+    }
+    s
+}
+
+/// Writes the report beside the generated scene and returns its path.
+pub fn write_report(opts: &BenchOptions, text: &str) -> Result<PathBuf> {
+    let path = opts.dir.join("bench.md");
+    crate::fsutil::write_text_atomic(&path, text)?;
+    Ok(path)
+}
+
+/// Used by tests: the ladder and the report on a small scene, quickly.
+pub fn quick_options(dir: &Path) -> BenchOptions {
+    BenchOptions {
+        reference_rays: 200_000,
+        seeds: 3,
+        max_rays: 50_000,
+        dir: dir.to_path_buf(),
+        footprint_diameter_m: 10.0,
+        canopy: Canopy {
+            trees: 60,
+            leaves: 5000,
+            ..Canopy::default()
+        },
+        ..BenchOptions::default()
+    }
+}

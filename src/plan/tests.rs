@@ -1,0 +1,468 @@
+use super::*;
+use crate::campaign::Doc;
+use std::path::PathBuf;
+
+const HEAD: &str = "name: t
+scene: plane.yaml
+wavelength_nm: 1064
+instrument: { pulse_energy_j: 0.001, pulse_fwhm_ns: 3, footprint_half_angle_mrad: 0.25,
+              fov_half_angle_mrad: 0.375, receiver_area_m2: 0.1 }
+";
+
+/// A campaign text with `platform` appended to a fixed head (the platform starts on line 6).
+fn text(platform: &str) -> String {
+    format!("{HEAD}{platform}")
+}
+
+fn campaign(platform: &str) -> Campaign {
+    serde_yaml::from_str::<Campaign>(&text(platform)).expect("test campaign parses")
+}
+
+fn pulses(platform: &str) -> Vec<Pulse> {
+    let c = campaign(platform);
+    validate(platform).expect("test campaign validates");
+    plan(&c).unwrap()
+}
+
+fn validate(platform: &str) -> Result<()> {
+    let doc = Doc {
+        path: PathBuf::from("campaign.yaml"),
+        text: text(platform),
+    };
+    campaign(platform).validate(&doc)
+}
+
+fn error(platform: &str) -> String {
+    validate(platform).expect_err("campaign must be rejected").0
+}
+
+fn close(a: DVec3, b: DVec3) -> bool {
+    (a - b).length() < 1e-9
+}
+
+fn approx(a: f64, b: f64) -> bool {
+    (a - b).abs() <= 1e-9 * (1.0 + b.abs())
+}
+
+fn assert_ids_and_times(p: &[Pulse]) {
+    for (k, w) in p.windows(2).enumerate() {
+        assert_eq!(w[0].id, k as u64);
+        assert!(w[1].gps_time_s >= w[0].gps_time_s, "time goes back at {k}");
+    }
+    for q in p {
+        assert!((q.direction.length() - 1.0).abs() < 1e-12);
+    }
+}
+
+const PAPER_ALS: &str = "platform:
+  kind: als
+  altitude_m: 250
+  speed_m_s: 4.444444444444445
+  prf_hz: 100000
+  lines: [ { start: [1, 50], end: [99, 50] } ]
+  scanner: { pattern: line, scan_angle_deg: [-11.0894, 11.0894],
+             look_angle_step_deg: 0.045, along_track_step_m: 0.3 }
+";
+
+#[test]
+fn als_paper_count_is_160392() {
+    // ⌊98 / 0.3⌋ = ⌊326.67⌋ = 326 scan lines; ⌊2·11.0894 / 0.045⌋ = ⌊492.86⌋ = 492 pulses per
+    // line (11.0894° = atan(49/250): the 98 m swath seen from 250 m); 326 · 492 = 160,392.
+    let start = std::time::Instant::now();
+    let p = pulses(PAPER_ALS);
+    assert!(start.elapsed().as_secs_f64() < 1.0);
+    assert_eq!(p.len(), 160_392);
+    assert_ids_and_times(&p);
+    // The paper's rounded ±11.1° would give ⌊22.2/0.045⌋ = 493 per line, 160,718 pulses.
+    let rounded = PAPER_ALS.replace("11.0894", "11.1");
+    assert_eq!(count(&campaign(&rounded).platform).unwrap(), 326 * 493);
+    // Ground swath: flying +x, positive angles look right = −y, so the sweep runs from
+    // y = 50 + 250·tan(11.0894°) = 99.0 down towards y = 1.4.
+    let q = p[0];
+    let hit = q.origin + q.direction * (q.origin.z / -q.direction.z);
+    assert!((hit.y - 99.0).abs() < 1e-3 && (hit.x - 1.0).abs() < 1e-12);
+    // Every origin on the flight line: the last one is 326 − 1/492 lines in.
+    let last = p[p.len() - 1];
+    assert!(approx(last.origin.x, 1.0 + 0.3 * (326.0 - 1.0 / 492.0)));
+    assert!(last.origin.x <= 99.0);
+}
+
+#[test]
+fn als_line_pattern_hand_computed() {
+    // d = 0.5 m given; δ derived = range · lines/s / prf = 20° · (10/0.5) / 100 = 4°,
+    // so ⌊20/4⌋ = 5 angles per line: −10, −6, −2, 2, 6. Line 0 to (10, 0) along +x holds
+    // ⌊10/0.5⌋ = 20 scan lines → 100 pulses; a scan line lasts 0.5/10 = 0.05 s, so pulses are
+    // 0.01 s apart (effective rate 100 Hz = prf, since prf / lines-per-s = 5 is whole).
+    let p = pulses(
+        "platform: { kind: als, altitude_m: 100, speed_m_s: 10, prf_hz: 100, gps_start_s: 5,
+  lines: [ { start: [0, 0], end: [10, 0] }, { start: [10, 20], end: [0, 20] } ],
+  scanner: { pattern: line, scan_angle_deg: [-10, 10], along_track_step_m: 0.5 } }
+",
+    );
+    assert_eq!(p.len(), 200);
+    assert_ids_and_times(&p);
+    let angles: Vec<f32> = p[..6].iter().map(|q| q.scan_angle_deg).collect();
+    assert_eq!(angles, [-10.0, -6.0, -2.0, 2.0, 6.0, -10.0]);
+    // First pulse: origin (0, 0, 100); right of +x is −y, θ = −10° looks left (+y):
+    // direction (0, sin 10°, −cos 10°).
+    let r = 10f64.to_radians();
+    assert!(close(p[0].origin, DVec3::new(0.0, 0.0, 100.0)));
+    assert!(close(p[0].direction, DVec3::new(0.0, r.sin(), -r.cos())));
+    assert!(approx(p[0].gps_time_s, 5.0));
+    // Pulse 3 (θ = 2°): 3/5 of a scan line flown, x = 0.3, t = 5 + 0.03.
+    assert!(close(p[3].origin, DVec3::new(0.3, 0.0, 100.0)));
+    assert!(approx(p[3].gps_time_s, 5.03));
+    // Last pulse of line 0: scan line 19, i = 4: x = 0.5·(19 + 4/5) = 9.9, t = 5 + 0.99.
+    assert!(close(p[99].origin, DVec3::new(9.9, 0.0, 100.0)));
+    assert!(approx(p[99].gps_time_s, 5.99));
+    // Line 1 flies −x: right is +y. The platform finishes line 0 at t = 5 + 1, transits 20 m
+    // (2 s) and starts at t = 8, from (10, 20).
+    assert_eq!(p[100].line, 1);
+    assert!(approx(p[100].gps_time_s, 8.0));
+    assert!(close(p[100].origin, DVec3::new(10.0, 20.0, 100.0)));
+    assert!(close(p[100].direction, DVec3::new(0.0, -r.sin(), -r.cos())));
+    // Last: θ = 6° to the right (+y), x = 10 − 9.9.
+    let (s6, c6) = 6f64.to_radians().sin_cos();
+    assert!(close(p[199].origin, DVec3::new(0.1, 20.0, 100.0)));
+    assert!(close(p[199].direction, DVec3::new(0.0, s6, -c6)));
+    assert!(approx(p[199].gps_time_s, 8.99));
+    for q in &p {
+        assert!((-10.0..=10.0).contains(&q.scan_angle_deg));
+        assert!(approx(
+            off_nadir_deg(q.direction),
+            q.scan_angle_deg.abs() as f64
+        ));
+    }
+}
+
+#[test]
+fn als_oscillating_goes_back_and_forth() {
+    // scan_frequency 5 Hz → 10 scan lines/s, d = 20 / 10 = 2 m; δ = 30° · 10 / 100 = 3°,
+    // ⌊30/3⌋ = 10 per line; line of 20 m → 10 scan lines → 100 pulses, t = k / 100.
+    let p = pulses(
+        "platform: { kind: als, altitude_m: 50, speed_m_s: 20, prf_hz: 100,
+  lines: [ { start: [0, 0], end: [0, 20] } ],
+  scanner: { pattern: oscillating, scan_angle_deg: [-15, 15], scan_frequency_hz: 5 } }
+",
+    );
+    assert_eq!(p.len(), 100);
+    assert_ids_and_times(&p);
+    let a: Vec<f32> = p[8..12].iter().map(|q| q.scan_angle_deg).collect();
+    // End of the forward sweep −15 + 9·3 = 12, then back from 15.
+    assert_eq!(a, [9.0, 12.0, 15.0, 12.0]);
+    for (k, q) in p.iter().enumerate() {
+        assert!(approx(q.gps_time_s, k as f64 / 100.0));
+        assert!((-15.0..=15.0).contains(&q.scan_angle_deg));
+    }
+    // Flying +y, right is +x: θ = −15° looks towards −x.
+    let (s, c) = 15f64.to_radians().sin_cos();
+    assert!(close(p[0].direction, DVec3::new(-s, 0.0, -c)));
+    // Last pulse, backward sweep i = 9: 15 − 27 = −12°, y = 2·(9 + 9/10) = 19.8.
+    assert_eq!(p[99].scan_angle_deg, -12.0);
+    assert!(close(p[99].origin, DVec3::new(0.0, 19.8, 50.0)));
+}
+
+#[test]
+fn als_conic_turns_on_the_cone() {
+    // Cone 20° = max(|−5|, |20|). δ = 360° · 2 / 8 = 90° → 4 pulses per turn: ahead, right,
+    // behind, left. d = 4 / 2 = 2 m; line of 4 m → 2 turns.
+    let p = pulses(
+        "platform: { kind: als, altitude_m: 10, speed_m_s: 4, prf_hz: 8,
+  lines: [ { start: [0, 0], end: [4, 0] } ],
+  scanner: { pattern: conic, scan_angle_deg: [-5, 20], scan_frequency_hz: 2 } }
+",
+    );
+    assert_eq!(p.len(), 8);
+    let (s, c) = 20f64.to_radians().sin_cos();
+    assert!(close(p[0].direction, DVec3::new(s, 0.0, -c)));
+    assert!(close(p[1].direction, DVec3::new(0.0, -s, -c)));
+    assert!(close(p[2].direction, DVec3::new(-s, 0.0, -c)));
+    assert!(close(p[3].direction, DVec3::new(0.0, s, -c)));
+    assert!(close(p[7].origin, DVec3::new(3.5, 0.0, 10.0)));
+    assert!(approx(p[7].gps_time_s, 7.0 / 8.0));
+    assert!(p.iter().all(|q| q.scan_angle_deg == 20.0));
+}
+
+#[test]
+fn spaceborne_hand_computed() {
+    // Shot spacing 7200 / 240 = 30 m; track (50,0)→(50,100) holds shots at 0, 30, 60, 90 m
+    // (inclusive rule, 100/30 = 3.3 → 4 shots), two beams → 8 pulses, shot-major.
+    // Flying +y, right is +x. Tilt 0.01° right: origin moved left (−x) by H·tan(0.01°).
+    let p = pulses(
+        "platform: { kind: spaceborne, altitude_m: 400000, ground_speed_m_s: 7200, prf_hz: 240,
+  track: { start: [50, 0], end: [50, 100] }, beams: [ { cross_track_m: 0 }, { cross_track_m: 10 } ],
+  off_nadir_deg: 0.01, gps_start_s: 100 }
+",
+    );
+    assert_eq!(p.len(), 8);
+    assert_ids_and_times(&p);
+    let (s, c) = 0.01f64.to_radians().sin_cos();
+    let shift = 400000.0 * s / c; // 69.81 m
+    assert!(close(p[0].origin, DVec3::new(50.0 - shift, 0.0, 400000.0)));
+    assert!(close(p[1].origin, DVec3::new(60.0 - shift, 0.0, 400000.0)));
+    assert!(close(p[7].origin, DVec3::new(60.0 - shift, 90.0, 400000.0)));
+    assert!(close(p[0].direction, DVec3::new(s, 0.0, -c)));
+    assert_eq!((p[0].line, p[1].line, p[6].line), (0, 1, 0));
+    assert!(approx(p[1].gps_time_s, 100.0));
+    assert!(approx(p[7].gps_time_s, 100.0 + 3.0 / 240.0));
+    assert!(p.iter().all(|q| q.scan_angle_deg == 0.01));
+    // Footprint centres stay on the offset tracks.
+    let hit = p[7].origin + p[7].direction * (p[7].origin.z / -p[7].direction.z);
+    assert!((hit - DVec3::new(60.0, 90.0, 0.0)).length() < 1e-6);
+    // A whole number of spacings includes the end: 90 m / 30 m → 4 shots, one beam default.
+    let q = pulses(
+        "platform: { kind: spaceborne, altitude_m: 400000, ground_speed_m_s: 7200, prf_hz: 240,
+  track: { start: [0, 0], end: [90, 0] } }
+",
+    );
+    assert_eq!(q.len(), 4);
+    assert!(close(q[3].origin, DVec3::new(90.0, 0.0, 400000.0)));
+    assert!(close(q[3].direction, DVec3::NEG_Z));
+}
+
+#[test]
+fn track_mabel_count_is_6929() {
+    // 98√2 / 0.02 = 6929.65: one shot per whole step gives 6929 (both ends would give 6930).
+    let p = pulses(
+        "platform: { kind: track, altitude_m: 20000, track: { start: [3, 3], end: [101, 101] },
+  along_track_step_m: 0.02 }
+",
+    );
+    assert_eq!(p.len(), 6929);
+    assert_ids_and_times(&p);
+    assert!(close(p[0].origin, DVec3::new(3.0, 3.0, 20000.0)));
+    // Shot 6928 is 138.56 m along the diagonal: 3 + 138.56/√2 on each axis.
+    let e = 3.0 + 6928.0 * 0.02 / 2f64.sqrt();
+    assert!(close(p[6928].origin, DVec3::new(e, e, 20000.0)));
+    assert!(p
+        .iter()
+        .all(|q| q.direction == DVec3::NEG_Z && q.scan_angle_deg == 0.0));
+    // Default 1 kHz for times.
+    assert!(approx(p[6928].gps_time_s, 6.928));
+}
+
+#[test]
+fn track_whole_steps_with_rounding() {
+    // 1.0 / 0.1 = 9.999999999999998 in f64: still 10 whole steps, shots at 0 .. 0.9.
+    let p = pulses(
+        "platform: { kind: track, altitude_m: 100, track: { start: [0, 0], end: [0, 1] },
+  along_track_step_m: 0.1, prf_hz: 10 }
+",
+    );
+    assert_eq!(p.len(), 10);
+    assert!(close(p[9].origin, DVec3::new(0.0, 0.9, 100.0)));
+    assert!(approx(p[9].gps_time_s, 0.9));
+}
+
+#[test]
+fn tls_hand_computed() {
+    // Azimuth [0, 360] by 90: 0, 90, 180, 270 (360 not repeated); zenith [30, 130] by 50:
+    // 30, 80, 130 → 12 pulses, azimuth outer.
+    let p = pulses(
+        "platform: { kind: tls, position: [50, 50, 1.5], azimuth_deg: [0, 360], azimuth_step_deg: 90,
+  zenith_deg: [30, 130], zenith_step_deg: 50, prf_hz: 4 }
+",
+    );
+    assert_eq!(p.len(), 12);
+    assert_ids_and_times(&p);
+    let (s, c) = 30f64.to_radians().sin_cos();
+    assert!(close(p[0].direction, DVec3::new(s, 0.0, c)));
+    assert_eq!(p[0].scan_angle_deg, 30.0);
+    // Pulse 11: azimuth 270 (−y), zenith 130.
+    let (s, c) = 130f64.to_radians().sin_cos();
+    assert!(close(p[11].direction, DVec3::new(0.0, -s, c)));
+    assert_eq!(p[11].scan_angle_deg, 130.0);
+    assert!(p.iter().all(|q| q.origin == DVec3::new(50.0, 50.0, 1.5)));
+    assert!(approx(p[11].gps_time_s, 11.0 / 4.0));
+    // Spec example: 3600 azimuths · 1001 zeniths (100/0.1 = 1000.0000000000001 steps).
+    let spec = campaign(
+        "platform: { kind: tls, position: [50, 50, 1.5], azimuth_deg: [0, 360], azimuth_step_deg: 0.1,
+  zenith_deg: [30, 130], zenith_step_deg: 0.1 }
+",
+    );
+    assert_eq!(count(&spec.platform).unwrap(), 3600 * 1001);
+    // A part turn keeps both ends: [10, 40] by 10 → 10, 20, 30, 40.
+    let q = pulses(
+        "platform: { kind: tls, position: [0, 0, 0], azimuth_deg: [10, 40], azimuth_step_deg: 10,
+  zenith_deg: [90, 90], zenith_step_deg: 1 }
+",
+    );
+    assert_eq!(q.len(), 4);
+    assert!(close(q[3].direction, direction_from_angles(90.0, 40.0)));
+}
+
+#[test]
+fn validation_errors_are_located() {
+    // Line 6 is `platform:`; in `platform: { ...` the value starts at column 11.
+    let e = error("platform: { kind: als, speed_m_s: 4, prf_hz: 10, lines: [ { start: [0, 0], end: [1, 0] } ],
+  scanner: { pattern: line, scan_angle_deg: [-1, 1], scan_frequency_hz: 1 } }
+");
+    assert_eq!(
+        e,
+        "campaign.yaml:6:11: platform: an als platform needs altitude_m"
+    );
+
+    let e = error(
+        "platform:
+  kind: als
+  altitude_m: 100
+  speed_m_s: 4
+  prf_hz: 10
+  lines:
+    - { start: [0, 0], end: [10, 0] }
+    - { start: [0, 5], end: [0, 5] }
+  scanner: { pattern: line, scan_angle_deg: [-1, 1], scan_frequency_hz: 1 }
+",
+    );
+    assert!(e.starts_with("campaign.yaml:13:"), "{e}");
+    assert!(
+        e.contains("platform.lines[1].end: must differ from start"),
+        "{e}"
+    );
+
+    let e = error(
+        "platform:
+  kind: als
+  altitude_m: 100
+  speed_m_s: 4
+  prf_hz: 10
+  lines: [ { start: [0, 0], end: [10, 0] } ]
+  scanner:
+    pattern: zigzag
+    scan_angle_deg: [-1, 1]
+    scan_frequency_hz: 1
+",
+    );
+    assert!(e.starts_with("campaign.yaml:13:"), "{e}");
+    assert!(e.contains("platform.scanner.pattern: unknown scan pattern `zigzag`; use one of oscillating, line, conic"), "{e}");
+
+    let e = error(
+        "platform:
+  kind: als
+  altitude_m: 100
+  speed_m_s: 4
+  prf_hz: 10
+  lines: [ { start: [0, 0], end: [10, 0] } ]
+  scanner:
+    pattern: line
+    scan_angle_deg: [5, -5]
+    scan_frequency_hz: 1
+",
+    );
+    assert!(e.starts_with("campaign.yaml:14:"), "{e}");
+    assert!(
+        e.contains("platform.scanner.scan_angle_deg: must be [min, max] with min < max"),
+        "{e}"
+    );
+
+    let e = error(
+        "platform:
+  kind: track
+  altitude_m: 100
+  track: { start: [0, 0], end: [10, 0] }
+  along_track_step_m: 1
+  speed_m_s: 3
+",
+    );
+    assert!(e.starts_with("campaign.yaml:11:"), "{e}");
+    assert!(
+        e.contains("platform.speed_m_s: not used by a track platform"),
+        "{e}"
+    );
+
+    let e = error(
+        "platform:
+  kind: tls
+  position: [0, 0, 1]
+  azimuth_deg: [0, 360]
+  azimuth_step_deg: 1
+  zenith_deg: [30, 190]
+  zenith_step_deg: 1
+",
+    );
+    assert!(e.starts_with("campaign.yaml:11:"), "{e}");
+    assert!(
+        e.contains("platform.zenith_deg: zenith angles must lie within [0, 180]"),
+        "{e}"
+    );
+
+    let e = error(
+        "platform:
+  kind: spaceborne
+  altitude_m: -5
+  ground_speed_m_s: 7000
+  prf_hz: 242
+  track: { start: [0, 0], end: [10, 0] }
+",
+    );
+    assert!(e.starts_with("campaign.yaml:8:"), "{e}");
+    assert!(
+        e.contains("platform.altitude_m: must be positive, found -5"),
+        "{e}"
+    );
+
+    // 1e6 m at 1e-3 m steps: 1e9 pulses.
+    let e = error(
+        "platform: { kind: track, altitude_m: 100, track: { start: [0, 0], end: [1000000, 0] },
+  along_track_step_m: 0.001 }
+",
+    );
+    assert!(
+        e.contains(
+            "platform: the platform plans 1000000000 pulses, more than the limit of 500000000"
+        ),
+        "{e}"
+    );
+
+    let e = error(
+        "platform: { kind: track, altitude_m: 100, track: { start: [0, 0], end: [1, 0] },
+  along_track_step_m: 2 }
+",
+    );
+    assert!(
+        e.contains("platform.along_track_step_m: 2 m is longer than the track"),
+        "{e}"
+    );
+
+    let e = error("platform: { kind: als, altitude_m: 100, speed_m_s: 4, lines: [ { start: [0, 0], end: [1, 0] } ],
+  scanner: { pattern: line, scan_angle_deg: [-1, 1], scan_frequency_hz: 1 } }
+");
+    assert!(
+        e.contains("an als platform needs prf_hz unless scanner.look_angle_step_deg is given"),
+        "{e}"
+    );
+}
+
+#[test]
+fn spec_examples_validate() {
+    // The four platform examples of the contract (campaign.md) are accepted as written.
+    for platform in [
+        "platform: { kind: als, altitude_m: 250, speed_m_s: 4.44, prf_hz: 100000,
+            lines: [ { start: [0, 1], end: [98, 1] } ],
+            scanner: { pattern: oscillating, scan_angle_deg: [-11.1, 11.1], scan_frequency_hz: 75,
+                       look_angle_step_deg: 0.045, along_track_step_m: 0.3 } }
+",
+        "platform: { kind: spaceborne, altitude_m: 419000, ground_speed_m_s: 7200, prf_hz: 242,
+            track: { start: [50, 0], end: [50, 100] }, beams: [ { cross_track_m: 0 } ],
+            off_nadir_deg: 0 }
+",
+        "platform: { kind: track, altitude_m: 20000, track: { start: [3, 3], end: [101, 101] },
+            along_track_step_m: 0.02 }
+",
+        "platform: { kind: tls, position: [50, 50, 1.5],
+            azimuth_deg: [0, 360], azimuth_step_deg: 0.1,
+            zenith_deg: [30, 130], zenith_step_deg: 0.1 }
+",
+    ] {
+        validate(platform).unwrap_or_else(|e| panic!("{e}\n{platform}"));
+    }
+}
+
+#[test]
+fn als_paper_campaign_file_plans_160392() {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("pipelines/als_paper.yaml");
+    let doc = Doc::read(&path).unwrap();
+    let c: Campaign = doc.parse().unwrap();
+    c.validate(&doc).unwrap();
+    assert_eq!(plan(&c).unwrap().len(), 160_392);
+}

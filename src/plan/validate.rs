@@ -1,0 +1,347 @@
+//! Checks of a campaign's `platform:` block, called from `Campaign::validate`.
+//!
+//! It lives here, beside the planners, because the checks that matter most (a line too
+//! short for one scan line, a step larger than its range, a plan too big) need the same
+//! derived quantities the planners compute.
+
+use super::{als::Als, kind_phrase, Pattern, MAX_PULSES};
+use crate::campaign::{Doc, Platform, PlatformKind, Segment};
+use crate::error::Result;
+
+/// Every platform key and whether this platform gives it.
+fn given(p: &Platform) -> [(&'static str, bool); 17] {
+    [
+        ("pulses", p.pulses.is_some()),
+        ("altitude_m", p.altitude_m.is_some()),
+        ("speed_m_s", p.speed_m_s.is_some()),
+        ("ground_speed_m_s", p.ground_speed_m_s.is_some()),
+        ("prf_hz", p.prf_hz.is_some()),
+        ("lines", p.lines.is_some()),
+        ("scanner", p.scanner.is_some()),
+        ("track", p.track.is_some()),
+        ("beams", p.beams.is_some()),
+        ("off_nadir_deg", p.off_nadir_deg.is_some()),
+        ("along_track_step_m", p.along_track_step_m.is_some()),
+        ("position", p.position.is_some()),
+        ("azimuth_deg", p.azimuth_deg.is_some()),
+        ("azimuth_step_deg", p.azimuth_step_deg.is_some()),
+        ("zenith_deg", p.zenith_deg.is_some()),
+        ("zenith_step_deg", p.zenith_step_deg.is_some()),
+        ("gps_start_s", p.gps_start_s.is_some()),
+    ]
+}
+
+/// (keys the kind needs, keys it may also take). `prf_hz` is conditionally needed by als
+/// (checked in `als`); static's `pulses` is checked with its own message by the caller.
+fn keys_of(kind: PlatformKind) -> (&'static [&'static str], &'static [&'static str]) {
+    match kind {
+        PlatformKind::Static => (&[], &["pulses", "gps_start_s"]),
+        PlatformKind::Als => (
+            &["altitude_m", "speed_m_s", "lines", "scanner"],
+            &["prf_hz", "gps_start_s"],
+        ),
+        PlatformKind::Spaceborne => (
+            &["altitude_m", "ground_speed_m_s", "prf_hz", "track"],
+            &["beams", "off_nadir_deg", "gps_start_s"],
+        ),
+        PlatformKind::Track => (
+            &["altitude_m", "track", "along_track_step_m"],
+            &["prf_hz", "gps_start_s"],
+        ),
+        PlatformKind::Tls => (
+            &[
+                "position",
+                "azimuth_deg",
+                "azimuth_step_deg",
+                "zenith_deg",
+                "zenith_step_deg",
+            ],
+            &["prf_hz", "gps_start_s"],
+        ),
+    }
+}
+
+/// A pointer to the key the user probably meant.
+fn hint(kind: PlatformKind, key: &str) -> &'static str {
+    use PlatformKind::*;
+    match (kind, key) {
+        (Als, "along_track_step_m") => " (an als along-track step goes under `scanner:`)",
+        (Als, "ground_speed_m_s") => " (an als platform takes speed_m_s)",
+        (Spaceborne, "speed_m_s") => " (a spaceborne platform takes ground_speed_m_s)",
+        (Als, "track") => " (an als platform takes `lines: [{ start, end }]`)",
+        (Spaceborne | Track, "lines") => " (this kind takes one `track: { start, end }`)",
+        (Track, "speed_m_s" | "ground_speed_m_s") => " (a track platform is timed by prf_hz alone)",
+        _ => "",
+    }
+}
+
+/// Keys that do not belong to the kind, and keys it needs but lacks.
+pub fn keys(doc: &Doc, p: &Platform) -> Result<()> {
+    let (required, optional) = keys_of(p.kind);
+    let phrase = kind_phrase(p.kind);
+    let given = given(p);
+    for (key, here) in given {
+        if here && !required.contains(&key) && !optional.contains(&key) {
+            return Err(doc.error(
+                &format!("platform.{key}"),
+                format!("not used by {phrase} platform{}", hint(p.kind, key)),
+            ));
+        }
+    }
+    for key in required {
+        if !given.iter().any(|(k, here)| k == key && *here) {
+            return Err(doc.error("platform", format!("{phrase} platform needs {key}")));
+        }
+    }
+    Ok(())
+}
+
+/// Number checks of the non-static kinds (static is checked by the caller).
+pub fn numbers(doc: &Doc, p: &Platform) -> Result<()> {
+    let c = Check { doc };
+    c.opt_finite("platform.gps_start_s", p.gps_start_s)?;
+    c.opt_positive("platform.altitude_m", p.altitude_m)?;
+    c.opt_positive("platform.prf_hz", p.prf_hz)?;
+    match p.kind {
+        PlatformKind::Static => Ok(()),
+        PlatformKind::Als => als(&c, p),
+        PlatformKind::Spaceborne => {
+            c.opt_positive("platform.ground_speed_m_s", p.ground_speed_m_s)?;
+            if let Some(t) = &p.track {
+                c.segment("platform.track", t)?;
+            }
+            if let Some(beams) = &p.beams {
+                if beams.is_empty() {
+                    return Err(doc.error(
+                        "platform.beams",
+                        "the list of beams is empty (leave `beams` out for one nadir beam)",
+                    ));
+                }
+                for (b, beam) in beams.iter().enumerate() {
+                    c.finite(
+                        &format!("platform.beams[{b}].cross_track_m"),
+                        beam.cross_track_m,
+                    )?;
+                }
+            }
+            if let Some(a) = p.off_nadir_deg {
+                c.open("platform.off_nadir_deg", a, -90.0, 90.0)?;
+            }
+            Ok(())
+        }
+        PlatformKind::Track => {
+            if let Some(t) = &p.track {
+                c.segment("platform.track", t)?;
+            }
+            c.opt_positive("platform.along_track_step_m", p.along_track_step_m)?;
+            if let (Some(t), Some(step)) = (&p.track, p.along_track_step_m) {
+                let length = super::GroundPath::new(t).length;
+                if super::whole_steps(length, step) == 0 {
+                    return Err(doc.error(
+                        "platform.along_track_step_m",
+                        format!("{step} m is longer than the track ({length} m): no pulse fits"),
+                    ));
+                }
+            }
+            Ok(())
+        }
+        PlatformKind::Tls => {
+            if let Some(pos) = p.position {
+                c.vec_finite("platform.position", &pos)?;
+            }
+            if let Some([a0, a1]) = p.azimuth_deg {
+                let key = "platform.azimuth_deg";
+                c.finite(key, a0)?;
+                c.finite(key, a1)?;
+                if a1 < a0 || a1 - a0 > 360.0 * (1.0 + super::TOL) {
+                    return Err(doc.error(
+                        key,
+                        format!(
+                            "must be [from, to] with from <= to <= from + 360, found [{a0}, {a1}]"
+                        ),
+                    ));
+                }
+            }
+            c.opt_positive("platform.azimuth_step_deg", p.azimuth_step_deg)?;
+            if let Some([z0, z1]) = p.zenith_deg {
+                let key = "platform.zenith_deg";
+                for z in [z0, z1] {
+                    c.finite(key, z)?;
+                    if !(0.0..=180.0).contains(&z) {
+                        return Err(doc.error(
+                            key,
+                            format!("zenith angles must lie within [0, 180] degrees, found {z}"),
+                        ));
+                    }
+                }
+                if z1 < z0 {
+                    return Err(doc.error(
+                        key,
+                        format!("must be [from, to] with from <= to, found [{z0}, {z1}]"),
+                    ));
+                }
+            }
+            c.opt_positive("platform.zenith_step_deg", p.zenith_step_deg)
+        }
+    }
+}
+
+fn als(c: &Check, p: &Platform) -> Result<()> {
+    let doc = c.doc;
+    c.opt_positive("platform.speed_m_s", p.speed_m_s)?;
+    let Some(s) = &p.scanner else { return Ok(()) };
+    let pattern = Pattern::parse(&s.pattern).ok_or_else(|| {
+        doc.error(
+            "platform.scanner.pattern",
+            format!(
+                "unknown scan pattern `{}`; use one of {}",
+                s.pattern,
+                Pattern::NAMES
+            ),
+        )
+    })?;
+    let key = "platform.scanner.scan_angle_deg";
+    let [lo, hi] = s.scan_angle_deg;
+    for a in [lo, hi] {
+        c.open(key, a, -90.0, 90.0)?;
+    }
+    if lo >= hi {
+        return Err(doc.error(
+            key,
+            format!("must be [min, max] with min < max, found [{lo}, {hi}]"),
+        ));
+    }
+    c.opt_positive("platform.scanner.scan_frequency_hz", s.scan_frequency_hz)?;
+    c.opt_positive(
+        "platform.scanner.look_angle_step_deg",
+        s.look_angle_step_deg,
+    )?;
+    c.opt_positive("platform.scanner.along_track_step_m", s.along_track_step_m)?;
+    if s.along_track_step_m.is_none() && s.scan_frequency_hz.is_none() {
+        return Err(doc.error(
+            "platform.scanner",
+            "an als scanner needs scan_frequency_hz unless along_track_step_m is given",
+        ));
+    }
+    if s.look_angle_step_deg.is_none() && p.prf_hz.is_none() {
+        return Err(doc.error(
+            "platform",
+            "an als platform needs prf_hz unless scanner.look_angle_step_deg is given",
+        ));
+    }
+    let lines = p.lines.as_deref().unwrap_or(&[]);
+    if lines.is_empty() {
+        return Err(doc.error("platform.lines", "the list of flight lines is empty"));
+    }
+    for (i, l) in lines.iter().enumerate() {
+        c.segment(&format!("platform.lines[{i}]"), l)?;
+    }
+    // Every key is present and sane here, so the planner's derived quantities exist.
+    let a = Als::new(p).map_err(|e| doc.error("platform", e))?;
+    if a.per_line == 0 {
+        let (key, what) = match s.look_angle_step_deg {
+            Some(_) => (
+                "platform.scanner.look_angle_step_deg",
+                "the look angle step is",
+            ),
+            None => (
+                "platform.prf_hz",
+                "prf_hz is too low: the derived look angle step is",
+            ),
+        };
+        let sweep = if pattern == Pattern::Conic {
+            "a turn (360°)".to_string()
+        } else {
+            format!("the scan range ({}°)", hi - lo)
+        };
+        return Err(doc.error(
+            key,
+            format!(
+                "{what} {}°, wider than {sweep}: no pulse fits in a scan line",
+                a.look_step_deg
+            ),
+        ));
+    }
+    for (i, l) in lines.iter().enumerate() {
+        if a.scan_lines(l) == 0 {
+            return Err(doc.error(
+                &format!("platform.lines[{i}]"),
+                format!(
+                    "is {} m long, shorter than one along-track step ({} m): no scan line fits",
+                    super::GroundPath::new(l).length,
+                    a.line_step_m
+                ),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// The plan is neither empty nor over [`MAX_PULSES`].
+pub fn size(doc: &Doc, p: &Platform) -> Result<()> {
+    let n = super::count(p).map_err(|e| doc.error("platform", e))?;
+    if n == 0 {
+        return Err(doc.error("platform", "the platform plans no pulse"));
+    }
+    if n > MAX_PULSES {
+        return Err(doc.error("platform", super::too_many(n)));
+    }
+    Ok(())
+}
+
+struct Check<'a> {
+    doc: &'a Doc,
+}
+
+impl Check<'_> {
+    fn finite(&self, key: &str, v: f64) -> Result<()> {
+        if v.is_finite() {
+            Ok(())
+        } else {
+            Err(self
+                .doc
+                .error(key, format!("must be a finite number, found {v}")))
+        }
+    }
+    fn opt_finite(&self, key: &str, v: Option<f64>) -> Result<()> {
+        v.map_or(Ok(()), |v| self.finite(key, v))
+    }
+    fn opt_positive(&self, key: &str, v: Option<f64>) -> Result<()> {
+        let Some(v) = v else { return Ok(()) };
+        self.finite(key, v)?;
+        if v > 0.0 {
+            Ok(())
+        } else {
+            Err(self.doc.error(key, format!("must be positive, found {v}")))
+        }
+    }
+    /// Strictly between `lo` and `hi`.
+    fn open(&self, key: &str, v: f64, lo: f64, hi: f64) -> Result<()> {
+        self.finite(key, v)?;
+        if v > lo && v < hi {
+            Ok(())
+        } else {
+            Err(self.doc.error(
+                key,
+                format!("must lie strictly between {lo} and {hi} degrees, found {v}"),
+            ))
+        }
+    }
+    fn vec_finite(&self, key: &str, v: &[f64]) -> Result<()> {
+        v.iter().try_for_each(|x| self.finite(key, *x))
+    }
+    fn segment(&self, key: &str, s: &Segment) -> Result<()> {
+        self.vec_finite(&format!("{key}.start"), &s.start)?;
+        self.vec_finite(&format!("{key}.end"), &s.end)?;
+        if s.start == s.end {
+            return Err(self.doc.error(
+                &format!("{key}.end"),
+                format!(
+                    "must differ from start ({:?}): a line needs a direction",
+                    s.start
+                ),
+            ));
+        }
+        Ok(())
+    }
+}

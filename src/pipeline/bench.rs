@@ -309,10 +309,12 @@ pub fn quick_options(dir: &Path) -> BenchOptions {
         seeds: 3,
         max_rays: 50_000,
         dir: dir.to_path_buf(),
-        footprint_diameter_m: 10.0,
+        footprint_diameter_m: 25.0,
+        // few but large leaves: a dense canopy that is quick to build
         canopy: Canopy {
-            trees: 60,
-            leaves: 5000,
+            trees: 700,
+            leaves: 2000,
+            leaf_m: 0.25,
             ..Canopy::default()
         },
         ..BenchOptions::default()

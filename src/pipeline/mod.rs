@@ -197,7 +197,15 @@ fn run_sweep(
     out: &Path,
     opts: &RunOptions,
 ) -> Result<RunSummary> {
-    let keys: Vec<&String> = sweep.keys().collect();
+    // combinations vary the keys in the order the file gives them
+    let mut keys: Vec<&String> = sweep.keys().collect();
+    // (a dotted key is one YAML key here, so look for its text after `sweep:`)
+    let sweep_at = loaded.doc.text.find("sweep:").unwrap_or(0);
+    keys.sort_by_key(|k| {
+        loaded.doc.text[sweep_at..]
+            .find(k.as_str())
+            .unwrap_or(usize::MAX)
+    });
     for k in &keys {
         if sweep[*k].is_empty() {
             return Err(loaded
@@ -337,25 +345,21 @@ fn run_single(
     std::fs::create_dir_all(out)
         .map_err(|e| Error::file(out, format!("cannot create run folder: {e}")))?;
     let manifest_path = out.join("manifest.json");
-    let mut manifest = if opts.resume {
+    // shards share the folder with each other: they keep what is there, like a resume
+    let keep = opts.resume || opts.shard.is_some();
+    let mut manifest = if keep {
         Manifest::read(&manifest_path).unwrap_or_default()
     } else {
         Manifest::default()
     };
-    if opts.resume {
-        // a shard may be running beside us on the same folder: only our own leftovers are
-        // ours to remove, and those can only exist after a crash, so clean before starting
+    if keep {
+        // another shard may be writing beside a shard: only a plain resume, alone on the
+        // folder, removes temporary files (left by a crash or a kill)
         if opts.shard.is_none() {
             clean_temp_files(out);
         }
     } else {
-        for name in [
-            "waveforms",
-            "pulses.parquet",
-            "manifest.json",
-            "report.md",
-            "pulse_stats.csv",
-        ] {
+        for name in ["waveforms", "pulses.parquet", "manifest.json", "report.md"] {
             let p = out.join(name);
             let _ = if p.is_dir() {
                 std::fs::remove_dir_all(&p)
@@ -689,6 +693,19 @@ pub fn simulate(
             )
         })
         .unzip()
+}
+
+/// Rays per second on this machine for this campaign, measured on up to 8 pulses spread
+/// over the plan with at most 1000 rays each: the basis of `lidarsim check`'s time estimate.
+pub fn probe_rays_per_second(loaded: &Loaded, scene: &Scene, pulses: &[Pulse]) -> f64 {
+    let n = pulses.len().min(8);
+    let sample: Vec<Pulse> = (0..n).map(|i| pulses[i * pulses.len() / n]).collect();
+    let mut probe = loaded.clone();
+    probe.campaign.simulation.rays_per_pulse = probe.campaign.simulation.rays_per_pulse.min(1000);
+    let t = Instant::now();
+    let (w, _) = simulate(&probe, scene, &sample, &ProgressBar::hidden());
+    let rays: u64 = w.iter().map(|w| w.rays as u64).sum();
+    rays as f64 / t.elapsed().as_secs_f64().max(1e-9)
 }
 
 /// `report.md`: what ran, on what, how fast, and what came back.

@@ -1,0 +1,250 @@
+//! The staged pipeline: kill and resume, fingerprints, shards, sweeps.
+
+mod common;
+use common::*;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::time::{Duration, Instant};
+
+/// A profiling track over the plane: 4000 pulses, so four parts of 1000.
+fn track_campaign(dir: &Path, rays: u64) -> PathBuf {
+    let scene = write(
+        dir,
+        "plane.yaml",
+        "name: p\nmaterials:\n  soil: { reflectance: { 1064: 0.3 } }\nobjects:\n  - plane: { z: 0, extent: [[0, 0], [100, 100]], material: soil }\n",
+    );
+    write(
+        dir,
+        "campaign.yaml",
+        &format!(
+            "name: track\nscene: {}\nseed: 9\nwavelength_nm: 1064\ninstrument: {{ pulse_energy_j: 0.001, pulse_fwhm_ns: 2, footprint_half_angle_mrad: 0.5, fov_half_angle_mrad: 0.6, receiver_area_m2: 0.1 }}\nplatform: {{ kind: track, altitude_m: 300, track: {{ start: [10, 50], end: [90, 50] }}, along_track_step_m: 0.02 }}\nsimulation: {{ method: bdpt, rays_per_pulse: {rays}, max_order: 5 }}\n",
+            scene.display()
+        ),
+    )
+}
+
+fn run_ok(args: &[&str]) -> String {
+    let (code, out, err) = lidarsim(args);
+    assert_eq!(code, 0, "lidarsim {args:?}: {err}");
+    err + &out
+}
+
+/// The products of a run folder: the planned pulses and every waveform part, by name.
+fn products(dir: &Path) -> Vec<(String, Vec<u8>)> {
+    let mut files = vec![(
+        "pulses.parquet".to_string(),
+        std::fs::read(dir.join("pulses.parquet")).unwrap(),
+    )];
+    let mut parts: Vec<PathBuf> = std::fs::read_dir(dir.join("waveforms"))
+        .unwrap()
+        .flatten()
+        .map(|e| e.path())
+        .filter(|p| p.extension().is_some_and(|e| e == "parquet"))
+        .collect();
+    parts.sort();
+    for p in parts {
+        files.push((
+            p.file_name().unwrap().to_string_lossy().into_owned(),
+            std::fs::read(&p).unwrap(),
+        ));
+    }
+    files
+}
+
+fn no_temp_files(dir: &Path) {
+    for e in std::fs::read_dir(dir).unwrap().flatten() {
+        let p = e.path();
+        if p.is_dir() {
+            no_temp_files(&p);
+        } else {
+            assert!(
+                !p.to_string_lossy().contains(".tmp-"),
+                "temporary file left: {}",
+                p.display()
+            );
+        }
+    }
+}
+
+#[test]
+fn killed_run_resumes_to_the_same_products() {
+    let dir = tmp("pipe_kill");
+    let camp = track_campaign(&dir, 1500);
+    let camp = camp.to_str().unwrap();
+    let reference = dir.join("reference");
+    run_ok(&["run", camp, "--out", reference.to_str().unwrap()]);
+    assert_eq!(products(&reference).len(), 5, "pulses + 4 parts");
+
+    let out = dir.join("killed");
+    // kill twice during simulation: once right after the first part lands, once after the
+    // second; each time the process is in the middle of writing the next one
+    for wait_for in ["part-00000.parquet", "part-00001.parquet"] {
+        let mut args = vec!["run", camp, "--out", out.to_str().unwrap()];
+        if wait_for != "part-00000.parquet" {
+            args.push("--resume");
+        }
+        let mut child = Command::new(env!("CARGO_BIN_EXE_lidarsim"))
+            .args(&args)
+            .spawn()
+            .unwrap();
+        let t = Instant::now();
+        while !out.join("waveforms").join(wait_for).is_file() {
+            assert!(t.elapsed() < Duration::from_secs(120), "no part appeared");
+            assert!(
+                child.try_wait().unwrap().is_none(),
+                "the run ended before it could be killed"
+            );
+            std::thread::sleep(Duration::from_millis(5));
+        }
+        child.kill().unwrap(); // SIGKILL
+        child.wait().unwrap();
+        assert!(
+            !out.join("report.md").exists(),
+            "killed during simulation, the report cannot exist"
+        );
+    }
+    let log = run_ok(&["run", camp, "--out", out.to_str().unwrap(), "--resume"]);
+    assert!(log.contains("plan: up to date"), "{log}");
+    no_temp_files(&out);
+    assert_eq!(
+        products(&out),
+        products(&reference),
+        "resumed products differ from an uninterrupted run"
+    );
+}
+
+fn manifest(dir: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(dir.join("manifest.json")).unwrap()).unwrap()
+}
+
+#[test]
+fn resume_redoes_what_changed_and_nothing_else() {
+    let dir = tmp("pipe_fingerprint");
+    let camp = track_campaign(&dir, 200);
+    let (camp, out) = (camp.to_str().unwrap(), dir.join("run"));
+    let out_s = out.to_str().unwrap();
+    run_ok(&["run", camp, "--out", out_s]);
+    let first = std::fs::read(out.join("manifest.json")).unwrap();
+    let part = std::fs::read(out.join("waveforms/part-00000.parquet")).unwrap();
+
+    // unchanged: nothing is redone, not one byte of the manifest changes
+    let log = run_ok(&["run", camp, "--out", out_s, "--resume"]);
+    assert!(log.contains("nothing to do"), "{log}");
+    assert_eq!(std::fs::read(out.join("manifest.json")).unwrap(), first);
+
+    // the scene changes: simulation and everything after it are redone, the plan is kept
+    let m0 = manifest(&out);
+    let scene = dir.join("plane.yaml");
+    let text = std::fs::read_to_string(&scene)
+        .unwrap()
+        .replace("1064: 0.3", "1064: 0.4");
+    std::fs::write(&scene, text).unwrap();
+    let log = run_ok(&["run", camp, "--out", out_s, "--resume"]);
+    assert!(log.contains("plan: up to date"), "{log}");
+    assert!(log.contains("simulated 4000 pulses"), "{log}");
+    let m1 = manifest(&out);
+    assert_eq!(m1["stages"]["plan"], m0["stages"]["plan"]);
+    for stage in ["simulate", "products", "report"] {
+        assert_ne!(
+            m1["stages"][stage]["fingerprint"], m0["stages"][stage]["fingerprint"],
+            "{stage}"
+        );
+        assert_eq!(m1["stages"][stage]["status"], "done");
+    }
+    assert_ne!(
+        std::fs::read(out.join("waveforms/part-00000.parquet")).unwrap(),
+        part
+    );
+}
+
+#[test]
+fn shards_then_resume_equal_one_run() {
+    let dir = tmp("pipe_shards");
+    let camp = track_campaign(&dir, 200);
+    let camp = camp.to_str().unwrap();
+    let whole = dir.join("whole");
+    run_ok(&["run", camp, "--out", whole.to_str().unwrap()]);
+    let sharded = dir.join("sharded");
+    let s = sharded.to_str().unwrap();
+    for k in 0..3 {
+        let shard = format!("{k}/3");
+        let log = run_ok(&["run", camp, "--out", s, "--shard", &shard]);
+        // each shard simulates only its parts: 4 parts over 3 shards
+        let expect = if k == 0 { 2 } else { 1 };
+        assert!(
+            log.contains(&format!("{expect} parts simulated")),
+            "shard {k}: {log}"
+        );
+    }
+    assert!(
+        !sharded.join("report.md").exists()
+            || manifest(&sharded)["stages"]["simulate"]["status"] == "done"
+    );
+    let log = run_ok(&["run", camp, "--out", s, "--resume"]);
+    assert!(log.contains("0 parts simulated"), "{log}");
+    assert!(sharded.join("report.md").is_file());
+    assert_eq!(products(&sharded), products(&whole));
+}
+
+#[test]
+fn sweep_runs_every_combination_with_one_scene_load() {
+    let dir = tmp("pipe_sweep");
+    let camp = track_campaign(&dir, 100);
+    let text = std::fs::read_to_string(&camp).unwrap()
+        + "sweep:\n  platform.altitude_m: [300, 600]\n  instrument.fov_half_angle_mrad: [0.6, 1.0]\n";
+    let camp = write(&dir, "sweep.yaml", &text);
+    let out = dir.join("runs");
+    let log = run_ok(&[
+        "run",
+        camp.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(
+        log.matches("loaded in").count(),
+        1,
+        "the scene must be loaded once: {log}"
+    );
+    for alt in ["300", "600"] {
+        for fov in ["0.6", "1.0"] {
+            let sub = out.join(format!("altitude_m={alt}_fov_half_angle_mrad={fov}"));
+            assert!(sub.join("report.md").is_file(), "{}", sub.display());
+            let resolved = std::fs::read_to_string(sub.join("campaign.resolved.yaml")).unwrap();
+            assert!(
+                resolved.contains(&format!("altitude_m: {alt}.0"))
+                    && !resolved.contains("\nsweep:"),
+                "{resolved}"
+            );
+        }
+    }
+    // a higher platform: the same energy arrives later and weaker (∝ 1/H²)
+    let w = |alt: &str| {
+        lidarsim::pipeline::parquet::read_waveforms(&out.join(format!(
+            "altitude_m={alt}_fov_half_angle_mrad=1.0/waveforms/part-00000.parquet"
+        )))
+        .unwrap()
+        .remove(0)
+    };
+    let (a, b) = (w("300"), w("600"));
+    assert!(b.t0_ns > a.t0_ns + 1900.0);
+    let ratio = a.received_energy_j / b.received_energy_j;
+    assert!((ratio - 4.0).abs() < 0.2, "{ratio}");
+}
+
+#[test]
+fn bad_shard_and_stage_arguments() {
+    let dir = tmp("pipe_args");
+    let camp = track_campaign(&dir, 10);
+    let camp = camp.to_str().unwrap();
+    for (args, words) in [
+        (vec!["--shard", "3/3"], "--shard 3/3"),
+        (vec!["--shard", "x"], "expected K/N"),
+        (vec!["--stages", "plan,simulat"], "unknown stage `simulat`"),
+    ] {
+        let mut a = vec!["run", camp];
+        a.extend(args);
+        let (code, _, err) = lidarsim(&a);
+        assert_eq!(code, 1, "{err}");
+        assert!(err.contains(words), "{err}");
+    }
+}

@@ -196,9 +196,20 @@ pub struct Scanner {
 #[derive(Clone, Debug, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct Sun {
+    /// Zenith angle of the direction towards the sun; negative puts it at azimuth + 180°.
     pub zenith_deg: f64,
+    /// Azimuth of the direction towards the sun, from +x towards +y.
     pub azimuth_deg: f64,
+    /// Spectral irradiance at the top of the scene, W m⁻² µm⁻¹.
     pub irradiance_w_m2_um: f64,
+    /// Probability that a sample traces its light sub-path from the sun rather than the
+    /// laser (the paper's 0.5).
+    #[serde(default = "half")]
+    pub selection_probability: f64,
+}
+
+fn half() -> f64 {
+    0.5
 }
 
 #[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq, Default)]
@@ -439,6 +450,18 @@ impl Campaign {
             }
         }
         if let Some(s) = &self.sun {
+            if i.bandwidth_nm.is_none() {
+                return Err(doc.error(
+                    "instrument",
+                    "the sun needs `instrument.bandwidth_nm`, the receiver's band, for the solar signal",
+                ));
+            }
+            if !(s.selection_probability > 0.0 && s.selection_probability < 1.0) {
+                return Err(doc.error(
+                    "sun.selection_probability",
+                    "must lie strictly between 0 and 1",
+                ));
+            }
             c.within(
                 "sun.zenith_deg",
                 s.zenith_deg,

@@ -38,6 +38,11 @@ pub enum Command {
     },
     /// Validate a campaign and its scene; print pulses, facets, instances and memory.
     Check { campaign: PathBuf },
+    /// Procedural scenes.
+    Scene {
+        #[command(subcommand)]
+        command: SceneCommand,
+    },
     /// Speed against error on a generated canopy: rays and seconds each method needs for
     /// rRMSE ≤ 5% against a reference waveform. Prints a markdown table.
     Bench {
@@ -58,6 +63,26 @@ pub enum Command {
         /// Crowns in the generated canopy (100 m × 100 m).
         #[arg(long, default_value_t = 700)]
         trees: usize,
+    },
+}
+
+#[derive(Subcommand, Debug)]
+pub enum SceneCommand {
+    /// Write a deterministic procedural scene (OBJ templates, instance tables, scene YAML).
+    Generate {
+        /// forest, orchard or flat
+        kind: String,
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Output folder (the scene file is OUT/scene.yaml or similar, printed at the end).
+        #[arg(long)]
+        out: PathBuf,
+        /// Trees (forest, orchard).
+        #[arg(long)]
+        trees: Option<usize>,
+        /// Leaf area index to aim for (forest, orchard).
+        #[arg(long)]
+        lai: Option<f64>,
     },
 }
 
@@ -123,6 +148,36 @@ fn dispatch(cli: Cli) -> Result<()> {
             Ok(())
         }
         Command::Check { campaign } => check(&campaign),
+        Command::Scene {
+            command:
+                SceneCommand::Generate {
+                    kind,
+                    seed,
+                    out,
+                    trees,
+                    lai,
+                },
+        } => {
+            use crate::scene::generate::{generate_with_summary, GenerateOptions, SceneKind};
+            let kind: SceneKind = kind.parse()?;
+            let opts = GenerateOptions {
+                trees,
+                lai,
+                ..GenerateOptions::default()
+            };
+            let s = generate_with_summary(kind, seed, &out, &opts)?;
+            println!(
+                "wrote {} ({} trees, {} templates, {} facets instanced, {} distinct, LAI {:.2}, {:.1} MB)",
+                s.scene.display(),
+                s.trees,
+                s.templates.len(),
+                s.facets,
+                s.distinct_facets,
+                s.lai,
+                s.bytes as f64 / 1e6
+            );
+            Ok(())
+        }
         Command::Bench {
             out,
             reference_rays,

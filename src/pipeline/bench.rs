@@ -9,7 +9,7 @@ use crate::campaign::{Instrument, Method, MisHeuristic};
 use crate::error::{Error, Result};
 use crate::scene::generate::{canopy, Canopy};
 use crate::scene::Scene;
-use crate::sensor::{pulse_sigma_s, Gate, Laser, Receiver};
+use crate::sensor::{pulse_sigma_s, Gate, Laser, Receiver, SunSource};
 use crate::transport::{simulate_pulse, PulseSetup};
 use crate::waveform::{self, Waveform};
 use glam::DVec3;
@@ -100,7 +100,26 @@ struct Bench<'a> {
 }
 
 impl Bench<'_> {
+    fn radiometry(&self) -> waveform::Radiometry {
+        waveform::Radiometry {
+            pulse_energy_j: self.inst.pulse_energy_j,
+            receiver_area_m2: self.inst.receiver_area_m2,
+            fov_half_angle: self.inst.fov_half_angle_mrad * 1e-3,
+            sun: None,
+        }
+    }
+
     fn run(&self, method: Method, rays: u64, seed: u64) -> (Waveform, f64) {
+        self.run_with_sun(method, rays, seed, None)
+    }
+
+    fn run_with_sun(
+        &self,
+        method: Method,
+        rays: u64,
+        seed: u64,
+        sun: Option<SunSource>,
+    ) -> (Waveform, f64) {
         let axis = -DVec3::Z;
         let setup = PulseSetup {
             scene: self.scene,
@@ -110,6 +129,7 @@ impl Bench<'_> {
             sub_bins: self.sub_bins,
             method,
             heuristic: MisHeuristic::Power,
+            sun,
             max_order: 100,
             seed,
             pulse_id: 0,
@@ -118,7 +138,15 @@ impl Bench<'_> {
         let tally = simulate_pulse(&setup, rays);
         let secs = t.elapsed().as_secs_f64();
         (
-            waveform::waveform(0, &tally, &self.gate, self.sub_bins, self.sigma, self.hv),
+            waveform::waveform(
+                0,
+                &tally,
+                &self.gate,
+                self.sub_bins,
+                self.sigma,
+                self.hv,
+                &self.radiometry(),
+            ),
             secs,
         )
     }
@@ -197,7 +225,31 @@ pub fn run(opts: &BenchOptions) -> Result<String> {
         }
         rows.push(row);
     }
-    Ok(report(opts, &spec, &stats, &reference, ref_secs, &rows))
+    // The sun in the same paths: wall time at the same rays per pulse, sun at 50° zenith.
+    let sun_spec = crate::campaign::Sun {
+        zenith_deg: 50.0,
+        azimuth_deg: 180.0,
+        irradiance_w_m2_um: 640.0,
+        selection_probability: 0.5,
+    };
+    let sun = SunSource::new(&sun_spec, 0.8, scene.bounds());
+    let sun_rays = opts.reference_rays / 50;
+    let (mut off, mut on) = (Vec::new(), Vec::new());
+    let mut photons = 0.0;
+    for seed in 0..opts.seeds {
+        off.push(b.run_with_sun(Method::Bdpt, sun_rays, 40 + seed, None).1);
+        let (w, t) = b.run_with_sun(Method::Bdpt, sun_rays, 40 + seed, Some(sun));
+        on.push(t);
+        photons = w.solar_photons_per_bin as f64;
+    }
+    let (t_off, t_on) = (median(&mut off), median(&mut on));
+    let mut text = report(opts, &spec, &stats, &reference, ref_secs, &rows);
+    let _ = writeln!(
+        text,
+        "\n### Sun on and off (bdpt, {sun_rays} rays, sun at 50° zenith, 0.8 nm band)\n\n| sun | wall s (median) |\n| --- | ---: |\n| off | {t_off:.3} |\n| on | {t_on:.3} |\n\nRatio {:.2}; {photons:.3} solar photons per bin.",
+        t_on / t_off
+    );
+    Ok(text)
 }
 
 fn median(v: &mut [f64]) -> f64 {

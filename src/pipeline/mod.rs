@@ -10,15 +10,16 @@
 
 pub mod bench;
 pub mod parquet;
+pub mod plot;
 
 use crate::campaign::{Campaign, InstrumentKind, Loaded};
 use crate::error::{Error, Result};
 use crate::fsutil::write_text_atomic;
 use crate::plan::{self, Pulse};
 use crate::scene::Scene;
-use crate::sensor::{pulse_sigma_s, Gate, Laser, Receiver};
+use crate::sensor::{pulse_sigma_s, Gate, Laser, Receiver, SunSource};
 use crate::transport::{simulate_pulse, PulseSetup};
-use crate::waveform::{self, Waveform};
+use crate::waveform::{self, Radiometry, Waveform};
 use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -236,6 +237,7 @@ fn run_sweep(
         complete: true,
     };
     let mut runs = Vec::new();
+    let mut rows: Vec<(Vec<serde_yaml::Value>, RunTotals)> = Vec::new();
     for combo in combos {
         let mut tree =
             serde_yaml::to_value(&loaded.campaign).map_err(|e| Error::msg(e.to_string()))?;
@@ -277,14 +279,133 @@ fn run_sweep(
         total.seconds += s.seconds;
         total.parts_done += s.parts_done;
         total.complete &= s.complete;
+        if s.complete {
+            rows.push((
+                combo.iter().map(|v| (*v).clone()).collect(),
+                RunTotals::read(&out.join(&name))?,
+            ));
+        }
         runs.push(name);
     }
+    write_sweep_summary(out, &keys, &rows)?;
     let index = serde_json::json!({ "tool_version": env!("CARGO_PKG_VERSION"), "campaign": loaded.campaign.name, "sweep": runs });
     write_text_atomic(
         &out.join("sweep.json"),
         &serde_json::to_string_pretty(&index).unwrap_or_default(),
     )?;
     Ok(total)
+}
+
+/// Means over a run's pulses of what a sweep compares.
+#[derive(Clone, Debug, Default)]
+pub struct RunTotals {
+    pub pulses: usize,
+    pub received_energy_j: f64,
+    pub solar_photons_per_bin: f64,
+    pub brf_fov_solar: f64,
+    pub brf_footprint_laser: f64,
+}
+
+impl RunTotals {
+    pub fn read(run: &Path) -> Result<RunTotals> {
+        let mut t = RunTotals::default();
+        let dir = run.join("waveforms");
+        let mut files: Vec<PathBuf> = std::fs::read_dir(&dir)
+            .map_err(|e| Error::file(&dir, e))?
+            .flatten()
+            .map(|e| e.path())
+            .filter(|p| p.extension().is_some_and(|e| e == "parquet"))
+            .collect();
+        files.sort();
+        for f in files {
+            for w in parquet::read_waveforms(&f)? {
+                t.pulses += 1;
+                t.received_energy_j += w.received_energy_j;
+                t.solar_photons_per_bin += w.solar_photons_per_bin as f64;
+                t.brf_fov_solar += w.brf_fov_solar as f64;
+                t.brf_footprint_laser += w.brf_footprint_laser as f64;
+            }
+        }
+        let n = t.pulses.max(1) as f64;
+        t.received_energy_j /= n;
+        t.solar_photons_per_bin /= n;
+        t.brf_fov_solar /= n;
+        t.brf_footprint_laser /= n;
+        Ok(t)
+    }
+}
+
+/// `sweep.csv`, one row per combination, and with a single numeric swept key, plots of the
+/// signal and the BRFs against it.
+fn write_sweep_summary(
+    out: &Path,
+    keys: &[&String],
+    rows: &[(Vec<serde_yaml::Value>, RunTotals)],
+) -> Result<()> {
+    let mut csv = keys
+        .iter()
+        .map(|k| k.as_str())
+        .collect::<Vec<_>>()
+        .join(",");
+    csv += ",pulses,received_energy_j,solar_photons_per_bin,brf_fov_solar,brf_footprint_laser\n";
+    for (vals, t) in rows {
+        let v: Vec<String> = vals
+            .iter()
+            .map(|v| {
+                serde_yaml::to_string(v)
+                    .unwrap_or_default()
+                    .trim()
+                    .to_string()
+            })
+            .collect();
+        csv += &format!(
+            "{},{},{:.6e},{:.6e},{:.6},{:.6}\n",
+            v.join(","),
+            t.pulses,
+            t.received_energy_j,
+            t.solar_photons_per_bin,
+            t.brf_fov_solar,
+            t.brf_footprint_laser
+        );
+    }
+    write_text_atomic(&out.join("sweep.csv"), &csv)?;
+    if keys.len() != 1 || rows.len() < 2 {
+        return Ok(());
+    }
+    let xs: Option<Vec<f64>> = rows.iter().map(|(v, _)| v[0].as_f64()).collect();
+    let Some(xs) = xs else { return Ok(()) };
+    let key = keys[0].as_str();
+    let series = |name: &str, f: &dyn Fn(&RunTotals) -> f64| plot::Series {
+        name: name.into(),
+        points: xs.iter().zip(rows).map(|(x, (_, t))| (*x, f(t))).collect(),
+    };
+    let svg = plot::line_plot(
+        "Received laser energy",
+        key,
+        "J per pulse",
+        &[series("laser", &|t| t.received_energy_j)],
+    );
+    write_text_atomic(&out.join("sweep_energy.svg"), &svg)?;
+    if rows.iter().any(|(_, t)| t.solar_photons_per_bin > 0.0) {
+        let svg = plot::line_plot(
+            "Solar background",
+            key,
+            "solar photons per bin",
+            &[series("N_SN", &|t| t.solar_photons_per_bin)],
+        );
+        write_text_atomic(&out.join("sweep_solar.svg"), &svg)?;
+        let svg = plot::line_plot(
+            "Scene BRF",
+            key,
+            "BRF",
+            &[
+                series("field of view, solar (Eq. 20)", &|t| t.brf_fov_solar),
+                series("footprint, laser", &|t| t.brf_footprint_laser),
+            ],
+        );
+        write_text_atomic(&out.join("sweep_brf.svg"), &svg)?;
+    }
+    Ok(())
 }
 
 /// Sets the value at a dotted key path (`platform.altitude_m`) in a YAML tree.
@@ -666,6 +787,16 @@ pub fn simulate(
     let sigma = pulse_sigma_s(inst);
     let hv = crate::photon_energy_j(c.wavelength_nm);
     let bounds = scene.bounds();
+    let sun = c
+        .sun
+        .as_ref()
+        .map(|s| SunSource::new(s, inst.bandwidth_nm.unwrap_or(0.0), bounds));
+    let radiometry = Radiometry {
+        pulse_energy_j: inst.pulse_energy_j,
+        receiver_area_m2: inst.receiver_area_m2,
+        fov_half_angle: inst.fov_half_angle_mrad * 1e-3,
+        sun: sun.map(|s| (s.band_irradiance, s.cos_zenith)),
+    };
     pulses
         .par_iter()
         .map(|p| {
@@ -679,6 +810,7 @@ pub fn simulate(
                 sub_bins,
                 method: c.simulation.method,
                 heuristic: c.simulation.mis,
+                sun,
                 max_order: c.simulation.max_order,
                 seed: c.seed,
                 pulse_id: p.id,
@@ -688,7 +820,7 @@ pub fn simulate(
             let secs = t.elapsed().as_secs_f64();
             bar.inc(1);
             (
-                waveform::waveform(p.id, &tally, &gate, sub_bins, sigma, hv),
+                waveform::waveform(p.id, &tally, &gate, sub_bins, sigma, hv, &radiometry),
                 secs,
             )
         })

@@ -159,6 +159,30 @@ pub fn write_waveforms(path: &Path, w: &[Waveform]) -> Result<()> {
             )),
         ),
         (
+            "solar_power_w",
+            Arc::new(Float64Array::from_iter_values(
+                w.iter().map(|r| r.solar_power_w),
+            )),
+        ),
+        (
+            "solar_power_se_w",
+            Arc::new(Float64Array::from_iter_values(
+                w.iter().map(|r| r.solar_power_se_w),
+            )),
+        ),
+        (
+            "brf_fov_solar",
+            Arc::new(Float32Array::from_iter_values(
+                w.iter().map(|r| r.brf_fov_solar),
+            )),
+        ),
+        (
+            "brf_footprint_laser",
+            Arc::new(Float32Array::from_iter_values(
+                w.iter().map(|r| r.brf_footprint_laser),
+            )),
+        ),
+        (
             "rays",
             Arc::new(UInt32Array::from_iter_values(w.iter().map(|r| r.rays))),
         ),
@@ -210,6 +234,14 @@ pub fn read_waveforms(path: &Path) -> Result<Vec<Waveform>> {
         let sol = col("solar_photons_per_bin")?
             .as_primitive::<Float32Type>()
             .clone();
+        let spw = col("solar_power_w")?.as_primitive::<Float64Type>().clone();
+        let sps = col("solar_power_se_w")?
+            .as_primitive::<Float64Type>()
+            .clone();
+        let bfs = col("brf_fov_solar")?.as_primitive::<Float32Type>().clone();
+        let bfl = col("brf_footprint_laser")?
+            .as_primitive::<Float32Type>()
+            .clone();
         let rays = col("rays")?.as_primitive::<UInt32Type>().clone();
         let ppr = col("paths_per_ray")?.as_primitive::<Float32Type>().clone();
         let f32s = |l: &arrow_array::ListArray, i: usize| {
@@ -232,6 +264,10 @@ pub fn read_waveforms(path: &Path) -> Result<Vec<Waveform>> {
                 order_energy_se_j: f64s(&ose, i),
                 received_energy_se_j: rse.value(i),
                 solar_photons_per_bin: sol.value(i),
+                solar_power_w: spw.value(i),
+                solar_power_se_w: sps.value(i),
+                brf_fov_solar: bfs.value(i),
+                brf_footprint_laser: bfl.value(i),
                 rays: rays.value(i),
                 paths_per_ray: ppr.value(i),
             });

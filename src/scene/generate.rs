@@ -1,10 +1,324 @@
-//! Procedural scenes, deterministic from a seed: written as OBJ templates, an instance table
+//! Procedural scenes, deterministic from a seed: written as OBJ templates, instance tables
 //! and a scene YAML in the spec's format, so they load like any user scene.
+//!
+//! - [`generate`] / [`generate_with_summary`] write a [`SceneKind`]: a forest after the RAMI-IV
+//!   Järvselja birch stand (1029 trees of 7 species on a sloping hectare, over 10^8 facets
+//!   once instanced), an orchard after the RAMI-V Wellington Citrus Orchard, or flat soil.
+//! - [`leaf_area_index`] measures the leaf area index of any loaded scene from its geometry.
+//! - [`canopy`] is the older, simpler crown generator the benchmark uses.
+//!
+//! The same kind, seed and options give byte-identical files: every random number comes from
+//! seeded xorshift streams, templates are built in parallel but each from its own stream, and
+//! nothing depends on time, hashing order or scheduling.
 
 use crate::error::{Error, Result};
 use std::f64::consts::PI;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
+
+mod stand;
+#[cfg(test)]
+mod tests;
+mod tree;
+
+pub use tree::LeafAngle;
+
+use super::{Scene, SurfaceClass};
+use std::collections::BTreeMap;
+
+/// Which procedural scene to write.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum SceneKind {
+    /// Mixed broadleaf stand after the RAMI-IV Järvselja birch stand: trees of up to 7
+    /// species templates (birch, alder, ash, aspen, linden, spruce, maple) on gently sloping
+    /// terrain (a heightfield), leaves and bark as separate materials.
+    Forest,
+    /// Citrus trees in rows on flat ground, after the RAMI-V Wellington Citrus Orchard.
+    Orchard,
+    /// One soil plane, for DSM and calibration tests.
+    Flat,
+}
+
+impl SceneKind {
+    pub const ALL: [SceneKind; 3] = [SceneKind::Forest, SceneKind::Orchard, SceneKind::Flat];
+
+    /// The lowercase name used on the command line and in file names.
+    pub fn name(self) -> &'static str {
+        match self {
+            SceneKind::Forest => "forest",
+            SceneKind::Orchard => "orchard",
+            SceneKind::Flat => "flat",
+        }
+    }
+}
+
+impl std::fmt::Display for SceneKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl std::str::FromStr for SceneKind {
+    type Err = Error;
+    fn from_str(s: &str) -> Result<SceneKind> {
+        SceneKind::ALL
+            .into_iter()
+            .find(|k| k.name().eq_ignore_ascii_case(s.trim()))
+            .ok_or_else(|| {
+                Error::msg(format!(
+                    "unknown scene kind \"{s}\": expected forest, orchard or flat"
+                ))
+            })
+    }
+}
+
+/// Options of [`generate`]. `None` takes the kind's default (see [`GenerateOptions::defaults`]);
+/// an option that does not apply to the kind (e.g. `slope` for an orchard) is an error rather
+/// than silently ignored.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct GenerateOptions {
+    /// Extent of the scene in x and y, m, from (0, 0). Forest 100 × 100, orchard 108 × 104
+    /// (the WCO), flat 100 × 100.
+    pub size_m: Option<[f64; 2]>,
+    /// Number of trees. Forest 1029 (the Järvselja stand), orchard 1105 (the WCO).
+    pub trees: Option<usize>,
+    /// Distinct tree templates, each written once and instanced. Forest 7 (one per species;
+    /// beyond 7, further templates are size variants of the species in turn), orchard 3.
+    pub templates: Option<usize>,
+    /// Leaves per template, each a flat hexagon of 6 triangles. Forest 17 000 (102 000 leaf
+    /// triangles per template, so that 1029 trees exceed 10^8 facets), orchard 8 000.
+    pub leaves: Option<usize>,
+    /// Target leaf area index (one-sided leaf area over ground area); leaf size is set from
+    /// it. Forest 4.0, orchard 2.0. Met to within the rounding of the written coordinates.
+    pub lai: Option<f64>,
+    /// Forest only: terrain slope, rise over run, in a random direction. Default 0.03.
+    pub slope: Option<f64>,
+    /// Forest only: least distance between two trunks, m. Default 1.5.
+    pub min_spacing_m: Option<f64>,
+}
+
+impl GenerateOptions {
+    /// Every option that applies to `kind` set to its default, the others `None`.
+    pub fn defaults(kind: SceneKind) -> GenerateOptions {
+        match kind {
+            SceneKind::Forest => GenerateOptions {
+                size_m: Some([100.0, 100.0]),
+                trees: Some(1029),
+                templates: Some(7),
+                leaves: Some(17_000),
+                lai: Some(4.0),
+                slope: Some(0.03),
+                min_spacing_m: Some(1.5),
+            },
+            SceneKind::Orchard => GenerateOptions {
+                size_m: Some([108.0, 104.0]),
+                trees: Some(1105),
+                templates: Some(3),
+                leaves: Some(8_000),
+                lai: Some(2.0),
+                slope: None,
+                min_spacing_m: None,
+            },
+            SceneKind::Flat => GenerateOptions {
+                size_m: Some([100.0, 100.0]),
+                ..GenerateOptions::default()
+            },
+        }
+    }
+
+    /// Fills defaults and checks ranges, with messages naming the option.
+    fn resolve(&self, kind: SceneKind) -> Result<stand::Resolved> {
+        let d = GenerateOptions::defaults(kind);
+        let bad =
+            |what: &str, why: String| Err(Error::msg(format!("generate {kind}: {what}: {why}")));
+        let fields: [(&str, bool, bool); 6] = [
+            ("trees", self.trees.is_some(), d.trees.is_some()),
+            ("templates", self.templates.is_some(), d.templates.is_some()),
+            ("leaves", self.leaves.is_some(), d.leaves.is_some()),
+            ("lai", self.lai.is_some(), d.lai.is_some()),
+            ("slope", self.slope.is_some(), d.slope.is_some()),
+            (
+                "min_spacing_m",
+                self.min_spacing_m.is_some(),
+                d.min_spacing_m.is_some(),
+            ),
+        ];
+        for (name, given, applies) in fields {
+            if given && !applies {
+                return bad(name, format!("does not apply to {kind} scenes"));
+            }
+        }
+        let size = self.size_m.or(d.size_m).unwrap_or([100.0, 100.0]);
+        if !size
+            .iter()
+            .all(|v| v.is_finite() && *v > 0.0 && *v <= 100_000.0)
+        {
+            return bad(
+                "size_m",
+                format!(
+                    "expected two positive sizes up to 100 km, found {} × {}",
+                    size[0], size[1]
+                ),
+            );
+        }
+        let r = stand::Resolved {
+            size,
+            trees: self.trees.or(d.trees).unwrap_or(0),
+            templates: self.templates.or(d.templates).unwrap_or(0),
+            leaves: self.leaves.or(d.leaves).unwrap_or(0),
+            lai: self.lai.or(d.lai).unwrap_or(0.0),
+            slope: self.slope.or(d.slope).unwrap_or(0.0),
+            min_spacing_m: self.min_spacing_m.or(d.min_spacing_m).unwrap_or(0.0),
+        };
+        if kind == SceneKind::Flat {
+            return Ok(r);
+        }
+        if !(1..=10_000_000).contains(&r.trees) {
+            return bad("trees", format!("expected 1 to 10^7, found {}", r.trees));
+        }
+        if !(1..=1000).contains(&r.templates) {
+            return bad(
+                "templates",
+                format!("expected 1 to 1000, found {}", r.templates),
+            );
+        }
+        if !(1..=10_000_000).contains(&r.leaves) {
+            return bad("leaves", format!("expected 1 to 10^7, found {}", r.leaves));
+        }
+        if !(r.lai.is_finite() && r.lai > 0.0 && r.lai <= 20.0) {
+            return bad(
+                "lai",
+                format!("expected a value in (0, 20], found {}", r.lai),
+            );
+        }
+        if !(r.slope.is_finite() && (0.0..=1.0).contains(&r.slope)) {
+            return bad(
+                "slope",
+                format!("expected 0 to 1 (rise over run), found {}", r.slope),
+            );
+        }
+        if !(r.min_spacing_m.is_finite() && r.min_spacing_m >= 0.0) {
+            return bad(
+                "min_spacing_m",
+                format!("expected a distance ≥ 0, found {}", r.min_spacing_m),
+            );
+        }
+        Ok(r)
+    }
+}
+
+/// One tree template of a generated scene.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TemplateSummary {
+    /// File stem of the template's OBJ and instance table (`birch` for birch.obj, birch.csv).
+    pub name: String,
+    /// Species, with its Latin name.
+    pub species: String,
+    /// Instances of the template.
+    pub trees: usize,
+    /// Triangles of the template (bark and leaves).
+    pub facets: u64,
+    /// One-sided leaf area of all its instances together, m².
+    pub leaf_area_m2: f64,
+}
+
+/// What [`generate_with_summary`] wrote. Facet counts include the ground and equal
+/// `Scene::stats()` of the loaded scene (`instanced_triangles`, `distinct_triangles`); areas
+/// are computed from the coordinates as written.
+#[derive(Clone, Debug, PartialEq)]
+pub struct GeneratedSummary {
+    pub kind: SceneKind,
+    pub seed: u64,
+    /// The scene file (also the last entry of `files`).
+    pub scene: PathBuf,
+    /// Every file written, the scene file last.
+    pub files: Vec<PathBuf>,
+    /// Total size of the files written, bytes.
+    pub bytes: u64,
+    pub trees: usize,
+    /// The templates (species) in the scene file's order; empty for a flat scene.
+    pub templates: Vec<TemplateSummary>,
+    /// Facets once instanced.
+    pub facets: u64,
+    /// Facets stored once (sum over templates, plus the ground).
+    pub distinct_facets: u64,
+    /// One-sided leaf area, instance scales included, m².
+    pub leaf_area_m2: f64,
+    /// Horizontal area of the ground, m².
+    pub ground_area_m2: f64,
+    /// `leaf_area_m2 / ground_area_m2`.
+    pub lai: f64,
+}
+
+/// Writes a procedural scene into `out_dir` (created if needed; files of the same names are
+/// replaced atomically) and returns the path of its scene file (`forest.yaml`, `orchard.yaml`
+/// or `flat.yaml`). See [`generate_with_summary`] for the figures.
+pub fn generate(
+    kind: SceneKind,
+    seed: u64,
+    out_dir: &Path,
+    opts: &GenerateOptions,
+) -> Result<PathBuf> {
+    generate_with_summary(kind, seed, out_dir, opts).map(|s| s.scene)
+}
+
+/// As [`generate`], returning what was written: files, trees, templates, facets and the
+/// leaf area index.
+pub fn generate_with_summary(
+    kind: SceneKind,
+    seed: u64,
+    out_dir: &Path,
+    opts: &GenerateOptions,
+) -> Result<GeneratedSummary> {
+    let o = opts.resolve(kind)?;
+    std::fs::create_dir_all(out_dir)
+        .map_err(|e| Error::file(out_dir, format!("cannot create folder: {e}")))?;
+    match kind {
+        SceneKind::Forest => stand::forest(seed, out_dir, &o),
+        SceneKind::Orchard => stand::orchard(seed, out_dir, &o),
+        SceneKind::Flat => stand::flat(seed, out_dir, &o),
+    }
+}
+
+/// Leaf area index of a loaded scene, from its geometry: the one-sided area of leaf facets
+/// (vegetation facets whose material transmits at the wavelength the scene was loaded at),
+/// each instance's scale² included, over the horizontal (projected) area of the ground
+/// facets. `None` when the scene has no ground. Overlapping ground objects would be counted
+/// twice.
+pub fn leaf_area_index(scene: &Scene) -> Option<f64> {
+    // (mesh, first material slot) -> (leaf area, projected ground area) at scale 1
+    let mut per_object: BTreeMap<(u32, u32), (f64, f64)> = BTreeMap::new();
+    let (mut leaf, mut ground) = (0.0f64, 0.0f64);
+    for inst in &scene.instances {
+        let (l, g) = *per_object
+            .entry((inst.mesh, inst.surfaces))
+            .or_insert_with(|| {
+                let blas = &scene.meshes[inst.mesh as usize];
+                let (mut l, mut g) = (0.0f64, 0.0f64);
+                for (t, &slot) in blas.tris.iter().zip(&blas.slots) {
+                    let s = &scene.surfaces
+                        [scene.slot_surfaces[(inst.surfaces + slot) as usize] as usize];
+                    let is_leaf = s.class == SurfaceClass::Vegetation && s.transmittance > 0.0;
+                    let is_ground = s.class == SurfaceClass::Ground;
+                    if !(is_leaf || is_ground) {
+                        continue;
+                    }
+                    let (a, b, c) = (t[0].as_dvec3(), t[1].as_dvec3(), t[2].as_dvec3());
+                    let n = (b - a).cross(c - a);
+                    if is_leaf {
+                        l += 0.5 * n.length();
+                    } else {
+                        g += 0.5 * n.z.abs();
+                    }
+                }
+                (l, g)
+            });
+        let s2 = 1.0 / (inst.inv_scale as f64 * inst.inv_scale as f64);
+        leaf += l * s2;
+        ground += g * s2;
+    }
+    (ground > 0.0).then(|| leaf / ground)
+}
 
 /// xorshift64*: a tiny deterministic generator, so that the files do not depend on any
 /// random-number crate's version.

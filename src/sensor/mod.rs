@@ -282,3 +282,52 @@ impl Gate {
 pub fn pulse_sigma_s(inst: &Instrument) -> f64 {
     inst.pulse_fwhm_ns * 1e-9 / (8.0 * std::f64::consts::LN_2).sqrt()
 }
+
+/// The sun: a directional source of irradiance E Δλ over the receiver's band, sampled from a
+/// disk perpendicular to its direction that covers the scene's bounding sphere (paper 2.4).
+#[derive(Clone, Copy, Debug)]
+pub struct SunSource {
+    /// Direction the sunlight travels (unit, pointing down into the scene).
+    pub dir: DVec3,
+    pub frame: Frame,
+    /// Irradiance on a surface facing the sun, over the receiver band, W m⁻².
+    pub band_irradiance: f64,
+    /// Centre and radius of the scene's bounding sphere.
+    pub center: DVec3,
+    pub radius: f64,
+    /// Cosine of the sun's zenith angle, for BRFs.
+    pub cos_zenith: f64,
+    /// Probability that a sample's light sub-path starts at the sun.
+    pub probability: f64,
+}
+
+impl SunSource {
+    pub fn new(sun: &crate::campaign::Sun, bandwidth_nm: f64, bounds: (DVec3, DVec3)) -> SunSource {
+        let (t, p) = (sun.zenith_deg.to_radians(), sun.azimuth_deg.to_radians());
+        let towards_sun = DVec3::new(t.sin() * p.cos(), t.sin() * p.sin(), t.cos());
+        let dir = -towards_sun;
+        let center = (bounds.0 + bounds.1) * 0.5;
+        SunSource {
+            dir,
+            frame: Frame::from_axis(dir),
+            band_irradiance: sun.irradiance_w_m2_um * bandwidth_nm * 1e-3,
+            center,
+            radius: ((bounds.1 - bounds.0).length() * 0.5).max(1e-3),
+            cos_zenith: t.cos(),
+            probability: sun.selection_probability,
+        }
+    }
+
+    /// Uniform point on the disk (pdf 1 / πR²), outside the bounding sphere, up-sun.
+    pub fn sample_origin(&self, u1: f64, u2: f64) -> DVec3 {
+        let r = self.radius * u1.sqrt();
+        let phi = 2.0 * PI * u2;
+        self.center - self.dir * (2.0 * self.radius)
+            + self.frame.u * (r * phi.cos())
+            + self.frame.v * (r * phi.sin())
+    }
+
+    pub fn disk_area(&self) -> f64 {
+        PI * self.radius * self.radius
+    }
+}

@@ -31,7 +31,7 @@ pub mod rng;
 
 use crate::campaign::{Method, MisHeuristic};
 use crate::scene::{FacetId, Scene, Surface};
-use crate::sensor::{Frame, Gate, Laser, Receiver};
+use crate::sensor::{Frame, Gate, Laser, Receiver, SunSource};
 use glam::DVec3;
 use rayon::prelude::*;
 use rng::Rng;
@@ -54,6 +54,8 @@ pub struct PulseSetup<'a> {
     pub sub_bins: usize,
     pub method: Method,
     pub heuristic: MisHeuristic,
+    /// The sun, when the campaign has one: its paths share the receiver sub-paths.
+    pub sun: Option<SunSource>,
     pub max_order: u32,
     pub seed: u64,
     pub pulse_id: u64,
@@ -74,6 +76,9 @@ impl PulseSetup<'_> {
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Kind {
     Laser,
+    /// A point of the sun's disk: a delta direction, so its position is fixed by the next
+    /// vertex and the density that matters is that of the first surface point.
+    Sun,
     Aperture,
     Surface,
 }
@@ -133,6 +138,9 @@ pub struct Tally {
     pub rays: u64,
     /// Connections that carried energy (paths found), over all rays.
     pub paths: u64,
+    /// Σ over rays of each ray's received solar power, W, and of its square.
+    pub solar_sum: f64,
+    pub solar_sq: f64,
 }
 
 impl Tally {
@@ -146,6 +154,8 @@ impl Tally {
             total_sq: 0.0,
             rays: 0,
             paths: 0,
+            solar_sum: 0.0,
+            solar_sq: 0.0,
         }
     }
 
@@ -159,6 +169,16 @@ impl Tally {
         self.total_sq += o.total_sq;
         self.rays += o.rays;
         self.paths += o.paths;
+        self.solar_sum += o.solar_sum;
+        self.solar_sq += o.solar_sq;
+    }
+
+    /// Mean received solar power over the receiver band, W, and its standard error.
+    pub fn solar_power(&self) -> (f64, f64) {
+        (
+            self.solar_sum / self.rays.max(1) as f64,
+            se(self.solar_sum, self.solar_sq, self.rays),
+        )
     }
 
     /// Mean received energy per order over the rays, J (the estimate of Q_k).
@@ -215,6 +235,7 @@ struct Accum {
     ray_bin: Vec<f64>,
     touched_orders: Vec<u32>,
     touched_bins: Vec<u32>,
+    ray_solar: f64,
 }
 
 impl Accum {
@@ -228,6 +249,15 @@ impl Accum {
             ray_bin: vec![0.0; setup.gate.bins],
             touched_orders: Vec::with_capacity(16),
             touched_bins: Vec::with_capacity(16),
+            ray_solar: 0.0,
+        }
+    }
+
+    /// A solar path carrying `power` watts (the sun is continuous: no time, no bin).
+    fn add_solar(&mut self, power: f64) {
+        if power > 0.0 && power.is_finite() {
+            self.ray_solar += power;
+            self.tally.paths += 1;
         }
     }
 
@@ -270,6 +300,9 @@ impl Accum {
         }
         self.touched_orders.clear();
         self.touched_bins.clear();
+        let x = std::mem::take(&mut self.ray_solar);
+        self.tally.solar_sum += x;
+        self.tally.solar_sq += x * x;
         self.tally.total_sq += total * total;
         self.tally.rays += 1;
     }
@@ -349,6 +382,12 @@ fn pdf_area(setup: &PulseSetup, prev: Option<&Vertex>, from: &Vertex, to: &Verte
     }
     let w = d / r2.sqrt();
     let pdf_dir = match from.kind {
+        // the disk's uniform density, projected onto the surface: no 1/r² for a direction
+        Kind::Sun => {
+            return setup
+                .sun
+                .map_or(0.0, |sun| to.n.dot(sun.dir).abs() / sun.disk_area());
+        }
         Kind::Laser => setup.laser.pdf(w),
         Kind::Aperture => setup.receiver.pdf_dir(w),
         Kind::Surface => match prev {
@@ -444,15 +483,24 @@ pub fn mis_weight(
         MisHeuristic::Power => r * r,
         MisHeuristic::Balance => r,
     };
+    // Strategies with a light sub-path (s' ≥ 2, and t = 0) chose its light with probability
+    // q, kept as the light end point's pdf_fwd; connecting to a light (s' = 1) chooses none.
+    let q = light[0].pdf_fwd;
     let mut sum = 1.0;
     let mut r = 1.0;
     for k in s..hi {
         r *= pl[k] / pc[k];
+        if k == 1 {
+            r *= q;
+        }
         sum += h(r);
     }
     r = 1.0;
     for k in (lo..s).rev() {
         r *= pc[k] / pl[k];
+        if k == 1 {
+            r /= q;
+        }
         sum += h(r);
     }
     if sum.is_finite() {
@@ -529,7 +577,11 @@ fn walk(
                     path.push(q);
                     link(setup, path);
                     let w = mis_weight(setup, path, &[], scratch);
-                    acc.add(q.len, beta * w, surfaces);
+                    if path[0].kind == Kind::Sun {
+                        acc.add_solar(beta * w);
+                    } else {
+                        acc.add(q.len, beta * w, surfaces);
+                    }
                     path.pop();
                 }
             }
@@ -566,6 +618,15 @@ fn contribution(setup: &PulseSetup, light: &[Vertex], cam: &[Vertex]) -> Option<
     }
     let r = r2.sqrt();
     let w = d / r; // from the light side towards the receiver side
+    if s == 1 && x.kind == Kind::Sun {
+        // irradiance E Δλ from a fixed direction: no distance, no falloff
+        let sun = setup.sun?;
+        let towards_prev = (cam[t - 2].p - y.p).normalize();
+        let f_y = bsdf(&surfaces[y.surface as usize], y.n, -sun.dir, towards_prev)
+            * y.n.dot(sun.dir).abs();
+        let c = x.beta * sun.band_irradiance * f_y * y.beta;
+        return (c > 0.0).then_some((c, 0.0));
+    }
     let f_x = if s == 1 {
         // the laser: radiant intensity Q_e p_L(ω) per unit solid angle
         setup.laser.energy * setup.laser.pdf(w)
@@ -592,28 +653,54 @@ fn trace_ray(setup: &PulseSetup, rng: &mut Rng, acc: &mut Accum, b: &mut Buffers
     let (laser, recv) = (&setup.laser, &setup.receiver);
     let scene = setup.scene;
 
+    // The light sub-path starts at one light, the sun with its selection probability q, else
+    // the laser; its contributions are divided by q, which the light end point keeps as its
+    // pdf_fwd for the MIS weights. A receiver vertex, by contrast, is connected to every light
+    // (s = 1 strategies need no choice), which keeps the laser's variance what it is without
+    // the sun.
     b.light.clear();
-    // The laser's energy enters through f_x in `contribution` (s = 1) or as the throughput of
-    // the first surface vertex (s ≥ 2), so the end point itself carries 1.
-    b.light.push(Vertex::endpoint(
-        Kind::Laser,
-        laser.position,
-        laser.frame.w,
-        1.0,
-    ));
-    if s_cap > 1 {
-        let (dir, _) = laser.sample(rng.uniform(), rng.uniform());
-        walk(
-            setup,
-            &mut b.light,
-            dir,
-            laser.energy,
-            s_cap,
-            true,
-            rng,
-            acc,
-            &mut b.scratch,
-        );
+    let q_sun = setup.sun.map_or(0.0, |s| s.probability);
+    let sun = setup.sun.filter(|_| rng.uniform() < q_sun);
+    if let Some(sun) = sun {
+        let x0 = sun.sample_origin(rng.uniform(), rng.uniform());
+        b.light
+            .push(Vertex::endpoint(Kind::Sun, x0, sun.dir, q_sun));
+        if s_cap > 1 {
+            let beta = sun.band_irradiance * sun.disk_area() / q_sun;
+            walk(
+                setup,
+                &mut b.light,
+                sun.dir,
+                beta,
+                s_cap,
+                true,
+                rng,
+                acc,
+                &mut b.scratch,
+            );
+        }
+    } else {
+        let q_laser = 1.0 - q_sun;
+        b.light.push(Vertex::endpoint(
+            Kind::Laser,
+            laser.position,
+            laser.frame.w,
+            q_laser,
+        ));
+        if s_cap > 1 {
+            let (dir, _) = laser.sample(rng.uniform(), rng.uniform());
+            walk(
+                setup,
+                &mut b.light,
+                dir,
+                laser.energy / q_laser,
+                s_cap,
+                true,
+                rng,
+                acc,
+                &mut b.scratch,
+            );
+        }
     }
 
     b.cam.clear();
@@ -646,12 +733,45 @@ fn trace_ray(setup: &PulseSetup, rng: &mut Rng, acc: &mut Accum, b: &mut Buffers
         recv.frame.w,
         1.0 / recv.area,
     )];
-    for s in 1..=b.light.len() {
-        // t = 1 needs its own point on the aperture; t ≥ 2 uses the receiver sub-path
-        let t_max = if t_cap > 1 { b.cam.len() } else { 1 };
+    // s = 1: every receiver vertex to the laser, and to the sun when there is one
+    let laser_end = Vertex::endpoint(Kind::Laser, laser.position, laser.frame.w, 1.0 - q_sun);
+    for t in 2..=b.cam.len().min(max_order + 1) {
+        let cam = &b.cam[..t];
+        let y = &cam[t - 1];
+        let laser_light = [laser_end];
+        if let Some((c, length)) = contribution(setup, &laser_light, cam) {
+            if !scene.occluded(laser_end.p, y.p, FacetId::NONE, y.facet) {
+                let w = mis_weight(setup, &laser_light, cam, &mut b.scratch);
+                acc.add(length, c * w, t - 1);
+            }
+        }
+        if let Some(sun) = setup.sun {
+            // the sun's point for this connection is the one up-sun of the vertex
+            let sun_light = [Vertex::endpoint(
+                Kind::Sun,
+                y.p - sun.dir * (4.0 * sun.radius),
+                sun.dir,
+                q_sun,
+            )];
+            if let Some((c, _)) = contribution(setup, &sun_light, cam) {
+                if scene
+                    .intersect(y.p, -sun.dir, f64::INFINITY, y.facet)
+                    .is_none()
+                {
+                    let w = mis_weight(setup, &sun_light, cam, &mut b.scratch);
+                    acc.add_solar(c * w);
+                }
+            }
+        }
+    }
+    // s ≥ 2: the light sub-path's vertices to a point drawn on the aperture (t = 1) and to the
+    // receiver sub-path's vertices (t ≥ 2)
+    let is_sun = sun.is_some();
+    let t_max = if t_cap > 1 { b.cam.len() } else { 1 };
+    for s in 2..=b.light.len() {
         for t in 1..=t_max {
             let order = s + t - 2;
-            if order == 0 || order > max_order {
+            if order > max_order {
                 continue;
             }
             let light = &b.light[..s];
@@ -669,7 +789,11 @@ fn trace_ray(setup: &PulseSetup, rng: &mut Rng, acc: &mut Accum, b: &mut Buffers
                 continue;
             }
             let w = mis_weight(setup, light, cam, &mut b.scratch);
-            acc.add(length, c * w, order);
+            if is_sun {
+                acc.add_solar(c * w);
+            } else {
+                acc.add(length, c * w, order);
+            }
         }
     }
 }
@@ -742,6 +866,7 @@ mod tests {
             sub_bins: 1,
             method,
             heuristic,
+            sun: None,
             max_order: 12,
             seed: 1,
             pulse_id: 0,
@@ -811,7 +936,11 @@ mod tests {
             let (s_cap, t_cap) = st.caps();
             for trial in 0..400 {
                 let order = 1 + trial % 8;
-                let x = random_path(&st, &mut rng, order);
+                let mut x = random_path(&st, &mut rng, order);
+                // half the paths belong to a light chosen for sub-paths with probability 0.3
+                if trial % 2 == 1 {
+                    x[0].pdf_fwd = 0.3;
+                }
                 let nv = x.len();
                 let mut sum = 0.0;
                 let mut strategies = 0;

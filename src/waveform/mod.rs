@@ -7,6 +7,7 @@
 
 use crate::sensor::Gate;
 use crate::transport::Tally;
+use std::f64::consts::PI;
 
 /// One pulse's waveform record (outputs.md, `waveforms/part-*.parquet`).
 #[derive(Clone, Debug, PartialEq)]
@@ -28,6 +29,13 @@ pub struct Waveform {
     pub order_energy_se_j: Vec<f64>,
     pub received_energy_se_j: f64,
     pub solar_photons_per_bin: f32,
+    /// Received solar power over the band, W, and its standard error.
+    pub solar_power_w: f64,
+    pub solar_power_se_w: f64,
+    /// Scene BRF within the field of view from the solar signal (Eq. 20); NaN without sun.
+    pub brf_fov_solar: f32,
+    /// Scene BRF within the footprint from the laser signal, (π/ΔΩ)(Q_r/Q_e).
+    pub brf_footprint_laser: f32,
     pub rays: u32,
     /// Paths that carried energy, per ray.
     pub paths_per_ray: f32,
@@ -102,6 +110,36 @@ pub fn convolve(sub: &[f64], sub_bins: usize, gate: &Gate, sigma: f64) -> Vec<f6
 }
 
 /// Builds a pulse's waveform record from its tally.
+/// What turns received energy and power into reflectance factors.
+#[derive(Clone, Copy, Debug)]
+pub struct Radiometry {
+    pub pulse_energy_j: f64,
+    pub receiver_area_m2: f64,
+    /// Field-of-view half angle, rad.
+    pub fov_half_angle: f64,
+    /// With a sun: its irradiance over the band (W m⁻²) and the cosine of its zenith angle.
+    pub sun: Option<(f64, f64)>,
+}
+
+impl Radiometry {
+    /// BRF of the scene within the field of view from the solar power (Eq. 20), with the
+    /// receiver's étendue A_tel · π sin²θ_fov for A_fov ΔΩ.
+    pub fn brf_fov(&self, solar_power_w: f64) -> f64 {
+        match self.sun {
+            Some((e, cos)) => {
+                let etendue = self.receiver_area_m2 * PI * self.fov_half_angle.sin().powi(2);
+                PI * solar_power_w / (e * cos * etendue)
+            }
+            None => f64::NAN,
+        }
+    }
+
+    /// BRF within the footprint from the laser energy: ρ = (π/ΔΩ)(Q_r/Q_e), ΔΩ = A_tel/R².
+    pub fn brf_footprint(&self, received_j: f64, range_m: f64) -> f64 {
+        PI * range_m * range_m / self.receiver_area_m2 * received_j / self.pulse_energy_j
+    }
+}
+
 pub fn waveform(
     pulse_id: u64,
     tally: &Tally,
@@ -109,10 +147,22 @@ pub fn waveform(
     sub_bins: usize,
     pulse_sigma_s: f64,
     photon_energy_j: f64,
+    radiometry: &Radiometry,
 ) -> Waveform {
     let impulse = impulse_bins(&tally.sub, sub_bins);
     let convolved = convolve(&tally.sub, sub_bins, gate, pulse_sigma_s);
     let n = tally.rays.max(1) as f64;
+    let (solar_w, solar_se) = tally.solar_power();
+    // range of the return's energy centroid, for the footprint's solid angle
+    let in_gate: f64 = impulse.iter().sum();
+    let t_mean = impulse
+        .iter()
+        .enumerate()
+        .map(|(i, e)| e * (gate.t0 + (i as f64 + 0.5) * gate.dt))
+        .sum::<f64>()
+        / in_gate.max(f64::MIN_POSITIVE);
+    let range = crate::C * t_mean / 2.0;
+    let received = tally.total_energy();
     Waveform {
         pulse_id,
         t0_ns: gate.t0 * 1e9,
@@ -128,7 +178,15 @@ pub fn waveform(
         order_energy_j: tally.order_energy(),
         order_energy_se_j: tally.order_se(),
         received_energy_se_j: tally.total_se(),
-        solar_photons_per_bin: 0.0,
+        solar_photons_per_bin: (solar_w * gate.dt / photon_energy_j) as f32,
+        solar_power_w: solar_w,
+        solar_power_se_w: solar_se,
+        brf_fov_solar: radiometry.brf_fov(solar_w) as f32,
+        brf_footprint_laser: if in_gate > 0.0 {
+            radiometry.brf_footprint(received, range) as f32
+        } else {
+            f32::NAN
+        },
         rays: tally.rays as u32,
         paths_per_ray: (tally.paths as f64 / n) as f32,
     }

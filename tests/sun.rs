@@ -1,0 +1,127 @@
+//! The sun in the same paths as the laser (physics.md, closed form 4; paper section 2.4).
+
+mod common;
+use common::*;
+use std::f64::consts::PI;
+
+const E: f64 = 640.0; // W m⁻² µm⁻¹
+const BAND_NM: f64 = 0.8;
+
+fn with_sun(campaign: &str, zenith: f64, azimuth: f64) -> String {
+    campaign.replace("instrument:\n", "instrument:\n  bandwidth_nm: 0.8\n")
+        + &format!(
+            "sun: {{ zenith_deg: {zenith}, azimuth_deg: {azimuth}, irradiance_w_m2_um: {E} }}\n"
+        )
+}
+
+/// Closed form 4: a Lambertian plane filling the field of view, nadir view:
+/// P_sun = ρ E Δλ cos θ_s A_tel sin²θ_fov, N_SN = P_sun Δt / hν; and both BRFs equal ρ.
+#[test]
+fn solar_photons_and_brfs_on_a_plane() {
+    let rho = 0.3;
+    let inst = Inst {
+        fp_mrad: 1.0,
+        fov_mrad: 5.0,
+        area: 0.1,
+        energy: 0.001,
+        fwhm_ns: 2.0,
+        ..Inst::default()
+    };
+    for zenith in [0.0, 50.0, 80.0] {
+        let dir = tmp(&format!("sun_plane_{zenith}"));
+        let scene = plane_scene(&dir, rho, 600.0);
+        let c = with_sun(
+            &campaign(
+                &scene,
+                &inst,
+                [10.0, -20.0, 1000.0],
+                [0.0, 0.0, -1.0],
+                "bdpt",
+                40_000,
+                5,
+            ),
+            zenith,
+            180.0,
+        );
+        let w = run(&dir, &c, None).remove(0);
+        let hv = 6.626_070_15e-34 * C / 1064e-9;
+        let s2 = (inst.fov_mrad * 1e-3).sin().powi(2);
+        let p_sun = rho * E * BAND_NM * 1e-3 * zenith.to_radians().cos() * inst.area * s2;
+        let expect = p_sun * 1e-9 / hv;
+        let got = w.solar_photons_per_bin as f64;
+        let se = w.solar_power_se_w / p_sun;
+        println!(
+            "sun {zenith}°: {got:.5} photons/bin, expect {expect:.5}, rel {:+.5}, se {se:.5}",
+            got / expect - 1.0
+        );
+        assert!(
+            3.0 * se < 0.01,
+            "standard error {se} too large for a 1% test"
+        );
+        assert!((got / expect - 1.0).abs() < 0.01);
+        let (brf_s, brf_l) = (w.brf_fov_solar as f64, w.brf_footprint_laser as f64);
+        println!("  BRF solar {brf_s:.5} laser {brf_l:.5} (ρ = {rho})");
+        assert!((brf_s / rho - 1.0).abs() < 0.01, "solar BRF {brf_s}");
+        assert!((brf_l / rho - 1.0).abs() < 0.01, "laser BRF {brf_l}");
+    }
+}
+
+#[test]
+fn no_sun_means_no_solar_signal() {
+    let dir = tmp("sun_none");
+    let scene = plane_scene(&dir, 0.3, 100.0);
+    let inst = Inst::default();
+    let w = run(
+        &dir,
+        &campaign(
+            &scene,
+            &inst,
+            [0.0, 0.0, 100.0],
+            [0.0, 0.0, -1.0],
+            "bdpt",
+            1000,
+            3,
+        ),
+        None,
+    )
+    .remove(0);
+    assert_eq!(w.solar_photons_per_bin, 0.0);
+    assert_eq!(w.solar_power_w, 0.0);
+    assert!(w.brf_fov_solar.is_nan());
+}
+
+/// The laser waveform does not change when the sun joins the paths.
+#[test]
+fn laser_waveform_is_the_same_with_the_sun_on() {
+    let dir = tmp("sun_canopy");
+    let scene = leaf_layer(&dir);
+    let inst = Inst {
+        fp_mrad: 20.0,
+        fov_mrad: 25.0,
+        area: 0.1,
+        energy: 0.001,
+        fwhm_ns: 2.0,
+        ..Inst::default()
+    };
+    let base = campaign(
+        &scene,
+        &inst,
+        [0.0, 0.0, 100.0],
+        [0.0, 0.0, -1.0],
+        "bdpt",
+        400_000,
+        100,
+    );
+    let off = run(&tmp("sun_canopy_off"), &base, None).remove(0);
+    let on = run(&tmp("sun_canopy_on"), &with_sun(&base, 30.0, 45.0), None).remove(0);
+    assert!(on.solar_photons_per_bin > 0.0);
+    compare_orders("sun on/off", &on, &off, 4);
+    compare_bins("sun on/off", &on, &off);
+    // the canopy's solar BRF lies between its leaves' and its soil's reflectance ranges
+    assert!(
+        on.brf_fov_solar > 0.05 && on.brf_fov_solar < 1.0,
+        "{}",
+        on.brf_fov_solar
+    );
+    let _ = PI;
+}

@@ -24,7 +24,7 @@ fn quick_bench_reports_falling_error() {
         .lines()
         .skip_while(|l| !l.starts_with("| rays |"))
         .skip(2)
-        .filter(|l| l.starts_with('|'))
+        .take_while(|l| l.starts_with('|'))
         .map(|l| {
             l.split('|')
                 .skip(2)

@@ -38,6 +38,17 @@ pub enum Command {
     },
     /// Validate a campaign and its scene; print pulses, facets, instances and memory.
     Check { campaign: PathBuf },
+    /// One table of products across runs (a sweep folder stands for its sub-runs).
+    Compare {
+        #[arg(required = true)]
+        runs: Vec<PathBuf>,
+        /// Also write the table as CSV.
+        #[arg(long)]
+        csv: Option<PathBuf>,
+        /// Write plots of DSM error against altitude and pulse rate into this folder.
+        #[arg(long)]
+        plots: Option<PathBuf>,
+    },
     /// Procedural scenes.
     Scene {
         #[command(subcommand)]
@@ -83,6 +94,15 @@ pub enum SceneCommand {
         /// Leaf area index to aim for (forest, orchard).
         #[arg(long)]
         lai: Option<f64>,
+        /// Scene size in metres, `X` or `X,Y`.
+        #[arg(long, value_delimiter = ',')]
+        size: Option<Vec<f64>>,
+        /// Distinct tree templates.
+        #[arg(long)]
+        templates: Option<usize>,
+        /// Leaves per template.
+        #[arg(long)]
+        leaves: Option<usize>,
     },
 }
 
@@ -148,6 +168,25 @@ fn dispatch(cli: Cli) -> Result<()> {
             Ok(())
         }
         Command::Check { campaign } => check(&campaign),
+        Command::Compare { runs, csv, plots } => {
+            use crate::pipeline::compare;
+            let mut rows = Vec::new();
+            for r in &runs {
+                for dir in compare::expand(r)? {
+                    rows.push(compare::read_row(&dir)?);
+                }
+            }
+            print!("{}", compare::markdown(&rows));
+            if let Some(path) = csv {
+                crate::fsutil::write_text_atomic(&path, &compare::csv(&rows))?;
+            }
+            if let Some(dir) = plots {
+                for p in compare::plots(&rows, &dir)? {
+                    eprintln!("wrote {}", p.display());
+                }
+            }
+            Ok(())
+        }
         Command::Scene {
             command:
                 SceneCommand::Generate {
@@ -156,13 +195,25 @@ fn dispatch(cli: Cli) -> Result<()> {
                     out,
                     trees,
                     lai,
+                    size,
+                    templates,
+                    leaves,
                 },
         } => {
             use crate::scene::generate::{generate_with_summary, GenerateOptions, SceneKind};
             let kind: SceneKind = kind.parse()?;
+            let size_m = match size.as_deref() {
+                None => None,
+                Some([x]) => Some([*x, *x]),
+                Some([x, y]) => Some([*x, *y]),
+                Some(_) => return Err(Error::msg("--size: give X or X,Y in metres")),
+            };
             let opts = GenerateOptions {
                 trees,
                 lai,
+                size_m,
+                templates,
+                leaves,
                 ..GenerateOptions::default()
             };
             let s = generate_with_summary(kind, seed, &out, &opts)?;
@@ -261,7 +312,10 @@ fn check(path: &std::path::Path) -> Result<()> {
     let bins = pulses
         .iter()
         .take(1)
-        .map(|p| crate::sensor::Gate::for_pulse(&c.instrument, p.origin, scene.bounds()).bins)
+        .map(|p| {
+            crate::sensor::Gate::for_pulse(&c.instrument, p.origin, p.direction, scene.bounds())
+                .bins
+        })
         .next()
         .unwrap_or(0) as f64;
     let run_bytes = pulses.len() as f64 * 80.0

@@ -163,7 +163,7 @@ pub fn run(opts: &BenchOptions) -> Result<String> {
     let inst = gedi(opts.footprint_diameter_m, opts.fov_mrad, altitude);
     let origin = DVec3::new(spec.size / 2.0, spec.size / 2.0, altitude);
     let sigma = pulse_sigma_s(&inst);
-    let gate = Gate::for_pulse(&inst, origin, scene.bounds());
+    let gate = Gate::for_pulse(&inst, origin, -DVec3::Z, scene.bounds());
     let b = Bench {
         scene: &scene,
         sub_bins: waveform::sub_bins_per_bin(gate.dt, sigma),

@@ -9,10 +9,12 @@
 //! uninterrupted one, since every random draw derives from (seed, pulse, chunk).
 
 pub mod bench;
+pub mod compare;
 pub mod parquet;
 pub mod plot;
+pub mod products;
 
-use crate::campaign::{Campaign, InstrumentKind, Loaded};
+use crate::campaign::{Campaign, Loaded};
 use crate::error::{Error, Result};
 use crate::fsutil::write_text_atomic;
 use crate::plan::{self, Pulse};
@@ -294,6 +296,62 @@ fn run_sweep(
         &serde_json::to_string_pretty(&index).unwrap_or_default(),
     )?;
     Ok(total)
+}
+
+/// The DSM error product: reference DSM from the scene's own surfaces, first-return DSM from
+/// the points, on one grid; `dsm/report.json` and plots.
+fn dsm_stage(
+    loaded: &Loaded,
+    out: &Path,
+    points: &[crate::products::points::Point],
+    res: f64,
+) -> Result<Vec<String>> {
+    use crate::products::dsm::{compare, first_return_dsm_with_angle, write_report, DsmPoint};
+    use crate::scene::dsm::Grid;
+    let firsts: Vec<DsmPoint> = points
+        .iter()
+        .map(|p| DsmPoint {
+            x: p.x,
+            y: p.y,
+            z: p.z,
+            scan_angle_deg: p.scan_angle_deg as f64,
+            first: p.return_number == 1,
+        })
+        .collect();
+    if !firsts.iter().any(|p| p.first) {
+        log("dsm: no first returns, no DSM");
+        return Ok(Vec::new());
+    }
+    // the grid covers the scanned area (the first returns) within the scene
+    let scene = Scene::load(&loaded.scene_path, loaded.campaign.wavelength_nm)?;
+    let (slo, shi) = scene.bounds();
+    let (mut lo, mut hi) = (glam::DVec3::splat(f64::MAX), glam::DVec3::splat(f64::MIN));
+    for p in firsts.iter().filter(|p| p.first) {
+        lo = lo.min(glam::DVec3::new(p.x, p.y, p.z));
+        hi = hi.max(glam::DVec3::new(p.x, p.y, p.z));
+    }
+    let (lo, hi) = (lo.max(slo), hi.min(shi));
+    let grid = Grid::covering(
+        glam::DVec3::new(lo.x, lo.y, slo.z),
+        glam::DVec3::new(hi.x, hi.y, shi.z),
+        res,
+    );
+    let reference = scene.top_surface_grid(&grid);
+    let (measured, angles) = first_return_dsm_with_angle(&firsts, &grid);
+    let report = compare(&reference, &measured, &angles, &grid);
+    write_report(&out.join("dsm"), &report, &reference, &measured, &grid)?;
+    log(&format!(
+        "dsm: bias {:+.3} m, RMSE {:.3} m, coverage {:.1}% over {} cells of {res} m",
+        report.bias_m,
+        report.rmse_m,
+        100.0 * report.coverage,
+        report.cells
+    ));
+    Ok(vec![
+        "dsm/report.json".into(),
+        "dsm/error_vs_scan_angle.svg".into(),
+        "dsm/error_map.png".into(),
+    ])
 }
 
 /// Means over a run's pulses of what a sweep compares.
@@ -613,21 +671,23 @@ fn run_single(
         return Ok(summary);
     }
 
-    // products: from the waveforms; the discrete-return, photon and DSM products come later
+    // products: discrete returns, photon counts and the DSM error, from the waveforms
     let fp_products = fingerprint(&[fp_sim.as_bytes(), b"products"]);
     if wanted(Stage::Products) && !manifest.done(Stage::Products, &fp_products) {
         let t = Instant::now();
-        let note = match c.instrument.kind {
-            InstrumentKind::Waveform => "waveform instrument: the waveforms are the product",
-            _ => "discrete returns and photon counts are not produced yet: waveforms only",
-        };
+        let (outputs, note) = products::run(loaded, out, &pulses, parts)?;
+        log(&format!(
+            "products: {} in {:.2} s",
+            outputs.join(", "),
+            t.elapsed().as_secs_f64()
+        ));
         record(
             &mut manifest,
             Stage::Products,
             &fp_products,
-            part_files.clone(),
+            outputs,
             t,
-            Some(note.into()),
+            (!note.is_empty()).then_some(note),
         );
         invalidate_after(&mut manifest, Stage::Products);
         save(&manifest_path, &manifest)?;
@@ -800,7 +860,7 @@ pub fn simulate(
     pulses
         .par_iter()
         .map(|p| {
-            let gate = Gate::for_pulse(inst, p.origin, bounds);
+            let gate = Gate::for_pulse(inst, p.origin, p.direction, bounds);
             let sub_bins = waveform::sub_bins_per_bin(gate.dt, sigma);
             let setup = PulseSetup {
                 scene,

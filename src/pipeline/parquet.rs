@@ -127,6 +127,22 @@ pub fn write_waveforms(path: &Path, w: &[Waveform]) -> Result<()> {
             list_f32(w.iter().map(|r| r.impulse_energy_se_j.clone())),
         ),
         (
+            "ground_energy_j",
+            list_f32(w.iter().map(|r| r.class_energy_j[0].clone())),
+        ),
+        (
+            "vegetation_energy_j",
+            list_f32(w.iter().map(|r| r.class_energy_j[1].clone())),
+        ),
+        (
+            "building_energy_j",
+            list_f32(w.iter().map(|r| r.class_energy_j[2].clone())),
+        ),
+        (
+            "other_energy_j",
+            list_f32(w.iter().map(|r| r.class_energy_j[3].clone())),
+        ),
+        (
             "received_energy_j",
             Arc::new(Float64Array::from_iter_values(
                 w.iter().map(|r| r.received_energy_j),
@@ -234,6 +250,15 @@ pub fn read_waveforms(path: &Path) -> Result<Vec<Waveform>> {
         let sol = col("solar_photons_per_bin")?
             .as_primitive::<Float32Type>()
             .clone();
+        let cls: Vec<arrow_array::ListArray> = [
+            "ground_energy_j",
+            "vegetation_energy_j",
+            "building_energy_j",
+            "other_energy_j",
+        ]
+        .iter()
+        .map(|n| col(n).map(|c| c.as_list::<i32>().clone()))
+        .collect::<Result<_>>()?;
         let spw = col("solar_power_w")?.as_primitive::<Float64Type>().clone();
         let sps = col("solar_power_se_w")?
             .as_primitive::<Float64Type>()
@@ -268,6 +293,12 @@ pub fn read_waveforms(path: &Path) -> Result<Vec<Waveform>> {
                 solar_power_se_w: sps.value(i),
                 brf_fov_solar: bfs.value(i),
                 brf_footprint_laser: bfl.value(i),
+                class_energy_j: [
+                    f32s(&cls[0], i),
+                    f32s(&cls[1], i),
+                    f32s(&cls[2], i),
+                    f32s(&cls[3], i),
+                ],
                 rays: rays.value(i),
                 paths_per_ray: ppr.value(i),
             });

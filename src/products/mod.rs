@@ -1,2 +1,9 @@
-//! Products derived from waveforms: discrete returns, LAS, photon counts, DSM error.
-//! (Nothing yet: the single-pulse foundation writes waveforms only.)
+//! Products derived from waveforms (section 2.5): discrete returns and their points, the
+//! LAS file, and photon-counting events.
+
+pub mod dsm;
+pub mod las;
+pub mod photons;
+pub mod points;
+pub mod returns;
+pub mod rng;

@@ -10,6 +10,7 @@
 
 mod bvh;
 mod config;
+pub mod dsm;
 pub mod generate;
 mod load;
 mod mesh;

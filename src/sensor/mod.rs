@@ -237,11 +237,16 @@ pub struct Gate {
 }
 
 impl Gate {
-    /// The gate a campaign asks for, or one that covers every range from the sensor to the
-    /// scene's bounding box, with room for the pulse's tails. The nearest range of the box
-    /// falls in the middle of a bin, so that a flat target at the top of the scene returns
-    /// into one bin rather than straddling two.
-    pub fn for_pulse(inst: &Instrument, origin: DVec3, bounds: (DVec3, DVec3)) -> Gate {
+    /// The gate a campaign asks for, or one that covers every range at which the beam's cone
+    /// (the wider of footprint and field of view) meets the scene's bounding box, with room
+    /// for the pulse's tails. The nearest range falls in the middle of a bin, so that a flat
+    /// target at the top of the scene returns into one bin rather than straddling two.
+    pub fn for_pulse(
+        inst: &Instrument,
+        origin: DVec3,
+        direction: DVec3,
+        bounds: (DVec3, DVec3),
+    ) -> Gate {
         let dt = inst.bin_ns * 1e-9;
         if let Some(g) = &inst.range_gate {
             return Gate {
@@ -251,17 +256,7 @@ impl Gate {
             };
         }
         let (lo, hi) = bounds;
-        let nearest = origin.clamp(lo, hi);
-        let r_min = (nearest - origin).length();
-        let mut r_max: f64 = 0.0;
-        for i in 0..8 {
-            let corner = DVec3::new(
-                if i & 1 == 0 { lo.x } else { hi.x },
-                if i & 2 == 0 { lo.y } else { hi.y },
-                if i & 4 == 0 { lo.z } else { hi.z },
-            );
-            r_max = r_max.max((corner - origin).length());
-        }
+        let (r_min, r_max) = cone_range(origin, direction.normalize(), lo, hi, inst);
         let sigma = pulse_sigma_s(inst);
         let margin = (4.0 * sigma / dt).ceil() + 2.0;
         let t0 = 2.0 * r_min / crate::C - (margin + 0.5) * dt;
@@ -276,6 +271,49 @@ impl Gate {
     pub fn end(&self) -> f64 {
         self.t0 + self.dt * self.bins as f64
     }
+}
+
+/// Range interval [r_min, r_max] over which the beam's cone can meet the box: the axis is
+/// clipped against the box grown by the cone's radius at the box's far side (so a cone that
+/// only grazes the box still gets its ranges). Every range of the box when the sensor is
+/// inside it or the axis misses the grown box.
+fn cone_range(origin: DVec3, dir: DVec3, lo: DVec3, hi: DVec3, inst: &Instrument) -> (f64, f64) {
+    let nearest = origin.clamp(lo, hi);
+    let mut far: f64 = 0.0;
+    for i in 0..8 {
+        let corner = DVec3::new(
+            if i & 1 == 0 { lo.x } else { hi.x },
+            if i & 2 == 0 { lo.y } else { hi.y },
+            if i & 4 == 0 { lo.z } else { hi.z },
+        );
+        far = far.max((corner - origin).length());
+    }
+    let whole = ((nearest - origin).length(), far);
+    if nearest == origin {
+        return whole;
+    }
+    let half = inst.footprint_half_angle_mrad.max(inst.fov_half_angle_mrad) * 1e-3;
+    let grow = DVec3::splat(far * half.tan() + 1e-6 * far + 1e-3);
+    let (glo, ghi) = (lo - grow, hi + grow);
+    let (mut t0, mut t1) = (0.0f64, f64::INFINITY);
+    for k in 0..3 {
+        if dir[k] == 0.0 {
+            if origin[k] < glo[k] || origin[k] > ghi[k] {
+                return whole;
+            }
+        } else {
+            let a = (glo[k] - origin[k]) / dir[k];
+            let b = (ghi[k] - origin[k]) / dir[k];
+            t0 = t0.max(a.min(b));
+            t1 = t1.min(a.max(b));
+        }
+    }
+    if t0 > t1 {
+        return whole;
+    }
+    // ranges along off-axis rays of the cone reach a little further than along the axis
+    let stretch = 1.0 / half.cos();
+    (t0.max(whole.0), (t1 * stretch).min(far))
 }
 
 /// Standard deviation of the pulse's Gaussian time profile, s.

@@ -127,6 +127,9 @@ pub struct Tally {
     pub sub: Vec<f64>,
     /// Σ over rays of the square of each ray's energy per bin.
     pub bin_sq: Vec<f64>,
+    /// Energy per bin by the class of the surface the laser lit first (ground, vegetation,
+    /// building, other): the truth a real scanner never knows, for labelling returns.
+    pub class_bins: [Vec<f64>; 4],
     /// Energy whose time fell outside the gate, J.
     pub outside: f64,
     /// Σ over rays of each ray's energy per order (index 0 = order 1).
@@ -148,6 +151,7 @@ impl Tally {
         Tally {
             sub: vec![0.0; bins * sub_bins],
             bin_sq: vec![0.0; bins],
+            class_bins: std::array::from_fn(|_| vec![0.0; bins]),
             outside: 0.0,
             order_sum: vec![0.0; max_order as usize],
             order_sq: vec![0.0; max_order as usize],
@@ -163,6 +167,9 @@ impl Tally {
         let add = |a: &mut [f64], b: &[f64]| a.iter_mut().zip(b).for_each(|(x, y)| *x += y);
         add(&mut self.sub, &o.sub);
         add(&mut self.bin_sq, &o.bin_sq);
+        for (a, b) in self.class_bins.iter_mut().zip(&o.class_bins) {
+            add(a, b);
+        }
         add(&mut self.order_sum, &o.order_sum);
         add(&mut self.order_sq, &o.order_sq);
         self.outside += o.outside;
@@ -262,7 +269,7 @@ impl Accum {
     }
 
     /// A path of `length` metres and `order` surface interactions carrying `energy` joules.
-    fn add(&mut self, length: f64, energy: f64, order: usize) {
+    fn add(&mut self, length: f64, energy: f64, order: usize, class: usize) {
         if !(energy > 0.0 && energy.is_finite()) || order == 0 {
             return;
         }
@@ -271,6 +278,7 @@ impl Accum {
             let i = x as usize;
             self.tally.sub[i] += energy;
             let b = i / self.sub_bins;
+            self.tally.class_bins[class][b] += energy;
             if self.ray_bin[b] == 0.0 {
                 self.touched_bins.push(b as u32);
             }
@@ -510,6 +518,24 @@ pub fn mis_weight(
     }
 }
 
+/// Index of the surface class (ground, vegetation, building, other) of the path's first
+/// surface: the one the laser lit, which a return's range points at.
+#[inline]
+fn class_of(setup: &PulseSetup, v: &Vertex) -> usize {
+    use crate::scene::SurfaceClass;
+    match setup
+        .scene
+        .surfaces
+        .get(v.surface as usize)
+        .map(|s| s.class)
+    {
+        Some(SurfaceClass::Ground) => 0,
+        Some(SurfaceClass::Vegetation) => 1,
+        Some(SurfaceClass::Building) => 2,
+        _ => 3,
+    }
+}
+
 /// Reusable per-thread buffers.
 struct Buffers {
     light: Vec<Vertex>,
@@ -580,7 +606,7 @@ fn walk(
                     if path[0].kind == Kind::Sun {
                         acc.add_solar(beta * w);
                     } else {
-                        acc.add(q.len, beta * w, surfaces);
+                        acc.add(q.len, beta * w, surfaces, class_of(setup, &path[1]));
                     }
                     path.pop();
                 }
@@ -742,7 +768,7 @@ fn trace_ray(setup: &PulseSetup, rng: &mut Rng, acc: &mut Accum, b: &mut Buffers
         if let Some((c, length)) = contribution(setup, &laser_light, cam) {
             if !scene.occluded(laser_end.p, y.p, FacetId::NONE, y.facet) {
                 let w = mis_weight(setup, &laser_light, cam, &mut b.scratch);
-                acc.add(length, c * w, t - 1);
+                acc.add(length, c * w, t - 1, class_of(setup, y));
             }
         }
         if let Some(sun) = setup.sun {
@@ -792,7 +818,7 @@ fn trace_ray(setup: &PulseSetup, rng: &mut Rng, acc: &mut Accum, b: &mut Buffers
             if is_sun {
                 acc.add_solar(c * w);
             } else {
-                acc.add(length, c * w, order);
+                acc.add(length, c * w, order, class_of(setup, &light[1]));
             }
         }
     }

@@ -36,6 +36,9 @@ pub struct Waveform {
     pub brf_fov_solar: f32,
     /// Scene BRF within the footprint from the laser signal, (π/ΔΩ)(Q_r/Q_e).
     pub brf_footprint_laser: f32,
+    /// Impulse energy per bin by class of the lit surface: ground, vegetation, building,
+    /// other (J); columns `ground_energy_j` … `other_energy_j` of the waveform files.
+    pub class_energy_j: [Vec<f32>; 4],
     pub rays: u32,
     /// Paths that carried energy, per ray.
     pub paths_per_ray: f32,
@@ -187,6 +190,9 @@ pub fn waveform(
         } else {
             f32::NAN
         },
+        class_energy_j: std::array::from_fn(|k| {
+            tally.class_bins[k].iter().map(|e| (e / n) as f32).collect()
+        }),
         rays: tally.rays as u32,
         paths_per_ray: (tally.paths as f64 / n) as f32,
     }

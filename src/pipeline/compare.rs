@@ -1,0 +1,185 @@
+//! `lidarsim compare RUN_DIR...`: one table of products across runs (a sweep's folder stands
+//! for all its sub-runs), as markdown, CSV, and plots of DSM error against altitude and pulse
+//! rate (the paper's Fig. 6 f and h).
+
+use crate::error::{Error, Result};
+use crate::fsutil::write_text_atomic;
+use crate::pipeline::plot::{line_plot, Series};
+use std::path::{Path, PathBuf};
+
+/// One run's row.
+#[derive(Clone, Debug, Default)]
+pub struct Row {
+    pub run: String,
+    pub altitude_m: Option<f64>,
+    pub prf_hz: Option<f64>,
+    pub pulses: u64,
+    pub points: Option<u64>,
+    pub points_per_pulse: Option<f64>,
+    pub pulse_density_m2: Option<f64>,
+    pub dsm_bias_m: Option<f64>,
+    pub dsm_rmse_m: Option<f64>,
+    pub dsm_coverage: Option<f64>,
+    pub run_time_s: f64,
+}
+
+fn json(path: &Path) -> Option<serde_json::Value> {
+    serde_json::from_str(&std::fs::read_to_string(path).ok()?).ok()
+}
+
+/// The run folders a path stands for: itself, or a sweep's sub-runs in order.
+pub fn expand(dir: &Path) -> Result<Vec<PathBuf>> {
+    if let Some(sweep) = json(&dir.join("sweep.json")) {
+        let runs = sweep["sweep"].as_array().cloned().unwrap_or_default();
+        return Ok(runs
+            .iter()
+            .filter_map(|r| r.as_str())
+            .map(|r| dir.join(r))
+            .collect());
+    }
+    if dir.join("manifest.json").is_file() {
+        return Ok(vec![dir.to_path_buf()]);
+    }
+    Err(Error::file(
+        dir,
+        "not a run folder: it has no manifest.json (nor sweep.json); run `lidarsim run` first",
+    ))
+}
+
+pub fn read_row(dir: &Path) -> Result<Row> {
+    let manifest = json(&dir.join("manifest.json"))
+        .ok_or_else(|| Error::file(&dir.join("manifest.json"), "missing or not valid JSON"))?;
+    let resolved: serde_yaml::Value = std::fs::read_to_string(dir.join("campaign.resolved.yaml"))
+        .ok()
+        .and_then(|t| serde_yaml::from_str(&t).ok())
+        .unwrap_or(serde_yaml::Value::Null);
+    let f = |v: &serde_json::Value| v.as_f64();
+    let mut row = Row {
+        run: dir
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default(),
+        altitude_m: resolved["platform"]["altitude_m"].as_f64(),
+        prf_hz: resolved["platform"]["prf_hz"].as_f64(),
+        run_time_s: manifest["stages"]
+            .as_object()
+            .map(|m| m.values().filter_map(|s| s["wall_time_s"].as_f64()).sum())
+            .unwrap_or(0.0),
+        ..Row::default()
+    };
+    if let Some(p) = json(&dir.join("products.json")) {
+        row.pulses = p["pulses"].as_u64().unwrap_or(0);
+        row.points = p["points"].as_u64();
+        row.points_per_pulse = f(&p["points_per_pulse"]);
+        row.pulse_density_m2 = f(&p["pulse_density_per_m2"]);
+    }
+    if let Some(d) = json(&dir.join("dsm/report.json")) {
+        row.dsm_bias_m = f(&d["bias_m"]);
+        row.dsm_rmse_m = f(&d["rmse_m"]);
+        row.dsm_coverage = f(&d["coverage"]);
+    }
+    Ok(row)
+}
+
+fn cell(v: Option<f64>, digits: usize) -> String {
+    v.filter(|x| x.is_finite())
+        .map(|x| format!("{x:.digits$}"))
+        .unwrap_or_else(|| "–".into())
+}
+
+pub fn markdown(rows: &[Row]) -> String {
+    let mut s = String::from(
+        "| run | altitude m | PRF Hz | pulses | points/pulse | pulses/m² | DSM bias m | DSM RMSE m | coverage | run s |\n| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n",
+    );
+    for r in rows {
+        s += &format!(
+            "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {:.1} |\n",
+            r.run,
+            cell(r.altitude_m, 0),
+            cell(r.prf_hz, 0),
+            r.pulses,
+            cell(r.points_per_pulse, 2),
+            cell(r.pulse_density_m2, 1),
+            cell(r.dsm_bias_m, 3),
+            cell(r.dsm_rmse_m, 3),
+            cell(r.dsm_coverage, 3),
+            r.run_time_s
+        );
+    }
+    s
+}
+
+pub fn csv(rows: &[Row]) -> String {
+    let o = |v: Option<f64>| v.map(|x| x.to_string()).unwrap_or_default();
+    let mut s = String::from(
+        "run,altitude_m,prf_hz,pulses,points,points_per_pulse,pulse_density_per_m2,dsm_bias_m,dsm_rmse_m,dsm_coverage,run_time_s\n",
+    );
+    for r in rows {
+        s += &format!(
+            "{},{},{},{},{},{},{},{},{},{},{}\n",
+            r.run,
+            o(r.altitude_m),
+            o(r.prf_hz),
+            r.pulses,
+            r.points.map(|x| x.to_string()).unwrap_or_default(),
+            o(r.points_per_pulse),
+            o(r.pulse_density_m2),
+            o(r.dsm_bias_m),
+            o(r.dsm_rmse_m),
+            o(r.dsm_coverage),
+            r.run_time_s
+        );
+    }
+    s
+}
+
+/// DSM bias and RMSE against altitude (one line per pulse rate) and against pulse rate (one
+/// line per altitude).
+pub fn plots(rows: &[Row], dir: &Path) -> Result<Vec<PathBuf>> {
+    let mut written = Vec::new();
+    for (name, x_of, group_of, x_label, group_label) in [
+        (
+            "dsm_error_vs_altitude.svg",
+            0usize,
+            1usize,
+            "altitude (m)",
+            "PRF",
+        ),
+        ("dsm_error_vs_prf.svg", 1, 0, "pulse rate (Hz)", "H"),
+    ] {
+        let key = |r: &Row, i: usize| if i == 0 { r.altitude_m } else { r.prf_hz };
+        let mut groups: Vec<f64> = rows.iter().filter_map(|r| key(r, group_of)).collect();
+        groups.sort_by(|a, b| a.total_cmp(b));
+        groups.dedup();
+        if groups.is_empty() {
+            groups.push(f64::NAN);
+        }
+        let mut series = Vec::new();
+        for g in &groups {
+            let mut pts: Vec<(f64, f64)> = rows
+                .iter()
+                .filter(|r| key(r, group_of).is_none_or(|v| v == *g || g.is_nan()))
+                .filter_map(|r| Some((key(r, x_of)?, r.dsm_rmse_m?)))
+                .collect();
+            pts.sort_by(|a, b| a.0.total_cmp(&b.0));
+            if pts.len() >= 2 {
+                let label = if g.is_nan() {
+                    "RMSE".to_string()
+                } else {
+                    format!("RMSE, {group_label} {g}")
+                };
+                series.push(Series {
+                    name: label,
+                    points: pts,
+                });
+            }
+        }
+        if series.is_empty() {
+            continue;
+        }
+        let path = dir.join(name);
+        write_text_atomic(&path, &line_plot("DSM error", x_label, "RMSE (m)", &series))?;
+        written.push(path);
+    }
+    Ok(written)
+}

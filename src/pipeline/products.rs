@@ -1,0 +1,199 @@
+//! The products stage: discrete returns (points.las), photon counts (photons.parquet) and the
+//! summary `products.json`, from the simulated waveforms.
+
+use crate::campaign::{InstrumentKind, Loaded};
+use crate::error::{Error, Result};
+use crate::fsutil::write_text_atomic;
+use crate::pipeline::parquet;
+use crate::plan::Pulse;
+use crate::products::las::write_las;
+use crate::products::photons::{count_photons, photon_rows, write_photons, PhotonRow};
+use crate::products::points::{points_on_axis, Point, PointConfig};
+use crate::products::returns::{decompose, Decomposition};
+use crate::sensor::pulse_sigma_s;
+use crate::waveform::Waveform;
+use rayon::prelude::*;
+use std::path::Path;
+
+/// Which products a campaign asks for: its `products:` section, or by instrument kind.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Wanted {
+    pub points: bool,
+    pub photons: bool,
+    pub dsm: Option<f64>,
+}
+
+pub fn wanted(loaded: &Loaded) -> Wanted {
+    let c = &loaded.campaign;
+    let kind = c.instrument.kind;
+    match &c.products {
+        Some(p) => Wanted {
+            points: p.points,
+            photons: p.photons,
+            dsm: p.dsm.as_ref().map(|d| d.resolution_m),
+        },
+        None => Wanted {
+            points: kind == InstrumentKind::DiscreteReturn,
+            photons: kind == InstrumentKind::PhotonCounting,
+            dsm: (kind == InstrumentKind::DiscreteReturn).then_some(2.0),
+        },
+    }
+}
+
+/// Reads every waveform part of a run, in pulse order.
+pub fn read_all(out: &Path, parts: usize) -> Result<Vec<Waveform>> {
+    let mut all = Vec::new();
+    for k in 0..parts {
+        all.extend(parquet::read_waveforms(&out.join(super::part_name(k)))?);
+    }
+    Ok(all)
+}
+
+/// LAS class of a component: the surface class with the most impulse energy within two
+/// sigmas of its centre.
+fn class_of(w: &Waveform, centre: f64, sigma: f64) -> u8 {
+    let lo = (centre - 2.0 * sigma).floor().max(0.0) as usize;
+    let hi = ((centre + 2.0 * sigma).ceil() as usize).min(w.impulse_energy_j.len());
+    let mut best = (0.0f64, 1u8);
+    for (k, code) in [(0usize, 2u8), (1, 5), (2, 6), (3, 1)] {
+        let e: f64 = w.class_energy_j[k]
+            .get(lo..hi)
+            .map_or(0.0, |s| s.iter().map(|&x| x as f64).sum());
+        if e > best.0 {
+            best = (e, code);
+        }
+    }
+    best.1
+}
+
+/// Discrete returns of every pulse, in pulse order then time.
+pub fn discrete_returns(loaded: &Loaded, pulses: &[Pulse], waveforms: &[Waveform]) -> Vec<Point> {
+    let c = &loaded.campaign;
+    let inst = &c.instrument;
+    let reference_range = pulses.first().map_or(1.0, |p| p.origin.z.abs().max(1.0));
+    let config = PointConfig {
+        emitted_energy_j: inst.pulse_energy_j,
+        photon_energy_j: crate::photon_energy_j(c.wavelength_nm),
+        telescope_area_m2: inst.receiver_area_m2,
+        reference_range_m: reference_range,
+    };
+    let sigma_bins = pulse_sigma_s(inst) / (inst.bin_ns * 1e-9);
+    let by_pulse: Vec<Vec<Point>> = waveforms
+        .par_iter()
+        .map(|w| {
+            let pulse = &pulses[w.pulse_id as usize];
+            let comps = decompose(
+                &w.laser_photons,
+                inst.detection_threshold_photons,
+                inst.max_returns as usize,
+                Decomposition::Gaussian,
+                sigma_bins,
+            );
+            let classes: Vec<u8> = comps
+                .iter()
+                .map(|k| class_of(w, k.centre_bin, k.sigma_bins))
+                .collect();
+            points_on_axis(pulse, w.t0_ns, w.bin_ns as f64, &comps, &classes, &config)
+        })
+        .collect();
+    by_pulse.into_iter().flatten().collect()
+}
+
+/// Photon events of every pulse (photon counting), deterministic per (seed, pulse).
+pub fn photon_events(loaded: &Loaded, pulses: &[Pulse], waveforms: &[Waveform]) -> Vec<PhotonRow> {
+    let c = &loaded.campaign;
+    let inst = &c.instrument;
+    let first = pulses.first().map(|p| p.origin).unwrap_or_default();
+    let by_pulse: Vec<Vec<PhotonRow>> = waveforms
+        .par_iter()
+        .map(|w| {
+            let pulse = &pulses[w.pulse_id as usize];
+            let events = count_photons(
+                &w.laser_photons,
+                w.solar_photons_per_bin as f64,
+                w.bin_ns as f64 * 1e-9,
+                inst.quantum_efficiency.unwrap_or(1.0),
+                inst.dark_count_hz.unwrap_or(0.0),
+                inst.dead_time_ns.unwrap_or(0.0) * 1e-9,
+                c.seed,
+                w.pulse_id,
+            );
+            let along = (pulse.origin - first).truncate().length();
+            photon_rows(pulse, w.t0_ns, &events, along)
+        })
+        .collect();
+    by_pulse.into_iter().flatten().collect()
+}
+
+/// Runs the products stage; returns the files written (relative to `out`) and a note.
+pub fn run(
+    loaded: &Loaded,
+    out: &Path,
+    pulses: &[Pulse],
+    parts: usize,
+) -> Result<(Vec<String>, String)> {
+    let want = wanted(loaded);
+    let waveforms = read_all(out, parts)?;
+    if waveforms.len() != pulses.len() {
+        return Err(Error::msg(format!(
+            "{}: {} waveforms for {} planned pulses: run again with --resume",
+            out.display(),
+            waveforms.len(),
+            pulses.len()
+        )));
+    }
+    let mut outputs = Vec::new();
+    let mut summary = serde_json::json!({ "pulses": pulses.len() });
+    if want.points {
+        let points = discrete_returns(loaded, pulses, &waveforms);
+        write_las(&out.join("points.las"), &points)?;
+        outputs.push("points.las".to_string());
+        // pulse density over the area the first returns cover
+        let (mut lo, mut hi) = ([f64::MAX; 2], [f64::MIN; 2]);
+        for p in points.iter().filter(|p| p.return_number == 1) {
+            lo = [lo[0].min(p.x), lo[1].min(p.y)];
+            hi = [hi[0].max(p.x), hi[1].max(p.y)];
+        }
+        let area = ((hi[0] - lo[0]) * (hi[1] - lo[1])).max(0.0);
+        summary["points"] = points.len().into();
+        summary["points_per_pulse"] = (points.len() as f64 / pulses.len().max(1) as f64).into();
+        summary["area_m2"] = area.into();
+        summary["pulse_density_per_m2"] = if area > 0.0 {
+            (pulses.len() as f64 / area).into()
+        } else {
+            serde_json::Value::Null
+        };
+        let classes: Vec<(u8, usize)> = [1u8, 2, 5, 6]
+            .iter()
+            .map(|c| (*c, points.iter().filter(|p| p.classification == *c).count()))
+            .collect();
+        summary["points_by_class"] = serde_json::json!({
+            "unclassified": classes[0].1, "ground": classes[1].1, "vegetation": classes[2].1, "building": classes[3].1
+        });
+        if let Some(res) = want.dsm {
+            let dsm_outputs = super::dsm_stage(loaded, out, &points, res)?;
+            outputs.extend(dsm_outputs);
+        }
+    }
+    if want.photons {
+        let rows = photon_events(loaded, pulses, &waveforms);
+        write_photons(&out.join("photons.parquet"), &rows)?;
+        outputs.push("photons.parquet".to_string());
+        let count = |s: u8| rows.iter().filter(|r| r.source == s).count();
+        summary["photons"] = serde_json::json!({
+            "total": rows.len(), "laser": count(0), "solar": count(1), "dark": count(2),
+            "laser_per_shot": count(0) as f64 / pulses.len().max(1) as f64,
+        });
+    }
+    write_text_atomic(
+        &out.join("products.json"),
+        &serde_json::to_string_pretty(&summary).unwrap_or_default(),
+    )?;
+    outputs.push("products.json".to_string());
+    let note = if !want.points && !want.photons {
+        "the waveforms are the product"
+    } else {
+        ""
+    };
+    Ok((outputs, note.to_string()))
+}

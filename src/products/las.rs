@@ -1,0 +1,353 @@
+//! points.las: LAS 1.4, point format 6, millimetre precision, with two extra dimensions.
+
+use crate::error::{Error, Result};
+use crate::fsutil::write_atomic;
+use crate::products::points::Point;
+use las::point::Classification;
+use las::{Builder, Reader, Transform, Vector, Version, Vlr, Writer};
+use std::io::{BufWriter, Write};
+use std::path::Path;
+
+pub const SCALE: f64 = 0.001;
+
+/// Extra bytes per point: `apparent_reflectance` f32 then `pulse_id` u64, little-endian.
+const EXTRA: [(&str, u8, usize, &str); 2] = [
+    (
+        "apparent_reflectance",
+        9,
+        4,
+        "(pi / solid angle) (Q_i / Q_e)",
+    ),
+    ("pulse_id", 7, 8, "pulse index in pulses.parquet"),
+];
+
+/// LAS 1.4 data types: 1 u8, 2 i8, 3 u16, 4 i16, 5 u32, 6 i32, 7 u64, 8 i64, 9 f32, 10 f64.
+fn type_size(t: u8) -> Option<usize> {
+    match t {
+        1 | 2 => Some(1),
+        3 | 4 => Some(2),
+        5 | 6 | 9 => Some(4),
+        7 | 8 | 10 => Some(8),
+        _ => None,
+    }
+}
+
+/// The Extra Bytes VLR (LAS 1.4 R15, table 24): one 192-byte descriptor per field, options
+/// 0 (no no-data, min, max, scale or offset).
+fn extra_bytes_vlr() -> Vlr {
+    let mut data = Vec::with_capacity(192 * EXTRA.len());
+    for (name, data_type, _, description) in EXTRA {
+        let mut d = [0u8; 192];
+        d[2] = data_type;
+        d[4..4 + name.len()].copy_from_slice(name.as_bytes());
+        d[160..160 + description.len()].copy_from_slice(description.as_bytes());
+        data.extend_from_slice(&d);
+    }
+    Vlr {
+        user_id: "LASF_Spec".to_string(),
+        record_id: 4,
+        description: "Extra bytes".to_string(),
+        data,
+    }
+}
+
+fn extra_len() -> u16 {
+    EXTRA.iter().map(|e| e.2).sum::<usize>() as u16
+}
+
+/// Writes the points (in the given order) to a LAS 1.4 point format 6 file. The offset is
+/// the floor of each coordinate's minimum, so every coordinate is a whole number of
+/// millimetres from it and fits i32 for extents up to 2000 km.
+pub fn write_las(path: &Path, points: &[Point]) -> Result<()> {
+    let err = |e: las::Error| Error::file(path, format!("cannot write LAS: {e}"));
+    let min = |f: fn(&Point) -> f64| -> f64 {
+        let m = points.iter().map(f).fold(f64::INFINITY, f64::min);
+        if m.is_finite() {
+            m.floor()
+        } else {
+            0.0
+        }
+    };
+    for p in points {
+        if !(p.x.is_finite() && p.y.is_finite() && p.z.is_finite()) {
+            return Err(Error::file(
+                path,
+                format!("point of pulse {} has a non-finite coordinate", p.pulse_id),
+            ));
+        }
+    }
+    let mut b = Builder::from((1, 4));
+    b.version = Version::new(1, 4);
+    b.point_format = las::point::Format::new(6).map_err(err)?;
+    b.point_format.extra_bytes = extra_len();
+    b.transforms = Vector {
+        x: Transform {
+            scale: SCALE,
+            offset: min(|p| p.x),
+        },
+        y: Transform {
+            scale: SCALE,
+            offset: min(|p| p.y),
+        },
+        z: Transform {
+            scale: SCALE,
+            offset: min(|p| p.z),
+        },
+    };
+    b.generating_software = format!("lidarsim {}", env!("CARGO_PKG_VERSION"));
+    b.vlrs.push(extra_bytes_vlr());
+    let header = b.into_header().map_err(err)?;
+    write_atomic(path, |file| {
+        let mut w = Writer::new(BufWriter::new(file), header).map_err(err)?;
+        for p in points {
+            w.write_point(to_las(p)?).map_err(err)?;
+        }
+        let mut inner = w.into_inner().map_err(err)?;
+        inner
+            .flush()
+            .map_err(|e| Error::file(path, format!("cannot write LAS: {e}")))?;
+        Ok(())
+    })
+}
+
+fn to_las(p: &Point) -> Result<las::Point> {
+    let mut extra = Vec::with_capacity(extra_len() as usize);
+    extra.extend_from_slice(&p.apparent_reflectance.to_le_bytes());
+    extra.extend_from_slice(&p.pulse_id.to_le_bytes());
+    // Code 12 (overlap) is a flag in LAS 1.4, not a class: such a point is unclassified.
+    let classification =
+        Classification::new(p.classification).unwrap_or(Classification::Unclassified);
+    Ok(las::Point {
+        x: p.x,
+        y: p.y,
+        z: p.z,
+        intensity: p.intensity,
+        return_number: p.return_number.min(15),
+        number_of_returns: p.number_of_returns.min(15),
+        classification,
+        scan_angle: scan_angle_for_las(p.scan_angle_deg),
+        point_source_id: p.point_source_id,
+        gps_time: Some(p.gps_time),
+        extra_bytes: extra,
+        ..Default::default()
+    })
+}
+
+/// Format 6 stores the scan angle in 0.006° steps and the crate truncates towards zero:
+/// hand it the middle of the nearest step so the stored value is the rounded one.
+fn scan_angle_for_las(deg: f32) -> f32 {
+    let k = (deg as f64 / 0.006).round().clamp(-30_000.0, 30_000.0);
+    if !k.is_finite() {
+        return 0.0;
+    }
+    ((k + 0.5f64.copysign(k)) * 0.006) as f32
+}
+
+/// Reads a LAS file written by [`write_las`] (or any file with the same two extra
+/// dimensions, found by name in its Extra Bytes VLR).
+pub fn read_las(path: &Path) -> Result<Vec<Point>> {
+    let err = |e: las::Error| Error::file(path, format!("cannot read LAS: {e}"));
+    let mut reader = Reader::from_path(path).map_err(err)?;
+    let offsets = {
+        let vlr = reader
+            .header()
+            .all_vlrs()
+            .find(|v| v.user_id == "LASF_Spec" && v.record_id == 4)
+            .ok_or_else(|| Error::file(path, "no Extra Bytes VLR"))?;
+        let mut at = 0usize;
+        let mut found = [None; 2];
+        for d in vlr.data.chunks_exact(192) {
+            let name_end = d[4..36].iter().position(|&c| c == 0).unwrap_or(32);
+            let name = std::str::from_utf8(&d[4..4 + name_end]).unwrap_or("");
+            let size = if d[2] == 0 {
+                d[3] as usize // undocumented bytes: options holds the length
+            } else {
+                type_size(d[2]).ok_or_else(|| Error::file(path, "unknown extra bytes type"))?
+            };
+            for (k, e) in EXTRA.iter().enumerate() {
+                if e.0 == name && e.1 == d[2] {
+                    found[k] = Some(at);
+                }
+            }
+            at += size;
+        }
+        match found {
+            [Some(a), Some(b)] => (a, b),
+            _ => {
+                return Err(Error::file(
+                    path,
+                    "missing apparent_reflectance or pulse_id",
+                ))
+            }
+        }
+    };
+    let data = reader.read_all().map_err(err)?;
+    let mut out = Vec::with_capacity(data.len());
+    for p in data.points() {
+        let p = p.map_err(err)?;
+        let e = &p.extra_bytes;
+        if e.len() < offsets.0 + 4 || e.len() < offsets.1 + 8 {
+            return Err(Error::file(path, "point too short for its extra bytes"));
+        }
+        let rho = f32::from_le_bytes(e[offsets.0..offsets.0 + 4].try_into().expect("4 bytes"));
+        let id = u64::from_le_bytes(e[offsets.1..offsets.1 + 8].try_into().expect("8 bytes"));
+        out.push(Point {
+            x: p.x,
+            y: p.y,
+            z: p.z,
+            gps_time: p.gps_time.unwrap_or(0.0),
+            intensity: p.intensity,
+            return_number: p.return_number,
+            number_of_returns: p.number_of_returns,
+            scan_angle_deg: p.scan_angle,
+            point_source_id: p.point_source_id,
+            classification: u8::from(p.classification),
+            apparent_reflectance: rho,
+            pulse_id: id,
+        });
+    }
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::products::rng::SplitMix64;
+
+    fn sample(n: usize) -> Vec<Point> {
+        let mut r = SplitMix64::new(11);
+        (0..n)
+            .map(|i| {
+                let nr = 1 + (i % 4) as u8;
+                Point {
+                    x: 651_234.0 + 98.0 * r.uniform(),
+                    y: 5_432_100.0 + 98.0 * r.uniform(),
+                    z: -3.0 + 30.0 * r.uniform(),
+                    gps_time: 1.0e5 + i as f64 * 1e-5,
+                    intensity: (r.next_u64() % 65536) as u16,
+                    return_number: 1 + (i as u8 % nr),
+                    number_of_returns: nr,
+                    // Format 6 stores the angle in 0.006° steps.
+                    scan_angle_deg: ((r.uniform() * 22.2 - 11.1) / 0.006).round() as f32 * 0.006,
+                    point_source_id: 1 + (i % 3) as u16,
+                    classification: [1, 2, 5, 6][i % 4],
+                    apparent_reflectance: r.uniform() as f32,
+                    pulse_id: (1u64 << 40) + i as u64,
+                }
+            })
+            .collect()
+    }
+
+    fn tmp(name: &str) -> std::path::PathBuf {
+        let d = std::env::temp_dir().join(format!("lidarsim-products-{}", std::process::id()));
+        d.join(name)
+    }
+
+    #[test]
+    fn write_then_read_back() {
+        let pts = sample(1000);
+        let path = tmp("roundtrip.las");
+        write_las(&path, &pts).unwrap();
+        let back = read_las(&path).unwrap();
+        assert_eq!(back.len(), pts.len());
+        for (a, b) in pts.iter().zip(&back) {
+            assert!((a.x - b.x).abs() <= 0.0005 + 1e-9, "{} {}", a.x, b.x);
+            assert!((a.y - b.y).abs() <= 0.0005 + 1e-9);
+            assert!((a.z - b.z).abs() <= 0.0005 + 1e-9);
+            assert_eq!(a.gps_time, b.gps_time);
+            assert_eq!(
+                (
+                    a.intensity,
+                    a.return_number,
+                    a.number_of_returns,
+                    a.point_source_id
+                ),
+                (
+                    b.intensity,
+                    b.return_number,
+                    b.number_of_returns,
+                    b.point_source_id
+                )
+            );
+            assert!((a.scan_angle_deg - b.scan_angle_deg).abs() < 1e-4);
+            assert_eq!(a.classification, b.classification);
+            assert_eq!(a.apparent_reflectance, b.apparent_reflectance);
+            assert_eq!(a.pulse_id, b.pulse_id);
+        }
+        let h = Reader::from_path(&path).unwrap().header().clone();
+        assert_eq!(h.version(), Version::new(1, 4));
+        assert_eq!(h.point_format().to_u8().unwrap(), 6);
+        assert_eq!(h.transforms().x.scale, 0.001);
+        assert_eq!(h.transforms().z.offset, -3.0);
+        // Nothing left under a temporary name.
+        let names: Vec<_> = std::fs::read_dir(path.parent().unwrap())
+            .unwrap()
+            .map(|e| e.unwrap().file_name())
+            .collect();
+        assert!(names.iter().all(|n| !n.to_string_lossy().contains(".tmp-")));
+    }
+
+    #[test]
+    fn empty_and_bad_points() {
+        let path = tmp("empty.las");
+        write_las(&path, &[]).unwrap();
+        assert!(read_las(&path).unwrap().is_empty());
+        let mut p = sample(2);
+        p[1].z = f64::NAN;
+        assert!(write_las(&tmp("bad.las"), &p).is_err());
+        assert!(!tmp("bad.las").exists());
+        assert!(read_las(&tmp("missing.las")).is_err());
+    }
+
+    #[test]
+    fn laspy_reads_the_file() {
+        let ok = std::process::Command::new("python3")
+            .args(["-c", "import laspy"])
+            .output()
+            .map(|o| o.status.success())
+            .unwrap_or(false);
+        if !ok {
+            println!("SKIPPED: python3 with laspy is not available");
+            return;
+        }
+        let pts = sample(257);
+        let path = tmp("laspy.las");
+        write_las(&path, &pts).unwrap();
+        let returns: Vec<String> = pts.iter().map(|p| p.return_number.to_string()).collect();
+        let script = format!(
+            r#"
+import sys, laspy, numpy as np
+f = laspy.read(sys.argv[1])
+assert f.header.version.major == 1 and f.header.version.minor == 4, f.header.version
+assert f.header.point_format.id == 6, f.header.point_format.id
+assert len(f.points) == {n}, len(f.points)
+assert list(f.header.scales) == [0.001, 0.001, 0.001], f.header.scales
+names = list(f.point_format.extra_dimension_names)
+assert names == ["apparent_reflectance", "pulse_id"], names
+assert f["pulse_id"].dtype == np.uint64 and f["apparent_reflectance"].dtype == np.float32
+assert list(f.return_number) == [{returns}]
+assert int(f["pulse_id"][3]) == {id3}, f["pulse_id"][3]
+assert abs(float(f["apparent_reflectance"][5]) - {rho5}) < 1e-6
+assert abs(float(f.x[7]) - {x7}) < 0.0006
+print("laspy ok")
+"#,
+            n = pts.len(),
+            returns = returns.join(","),
+            id3 = pts[3].pulse_id,
+            rho5 = pts[5].apparent_reflectance,
+            x7 = pts[7].x,
+        );
+        let out = std::process::Command::new("python3")
+            .arg("-c")
+            .arg(script)
+            .arg(&path)
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "laspy check failed: {}{}",
+            String::from_utf8_lossy(&out.stdout),
+            String::from_utf8_lossy(&out.stderr)
+        );
+    }
+}

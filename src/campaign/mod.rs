@@ -202,14 +202,23 @@ pub struct Sun {
     pub azimuth_deg: f64,
     /// Spectral irradiance at the top of the scene, W m⁻² µm⁻¹.
     pub irradiance_w_m2_um: f64,
-    /// Probability that a sample traces its light sub-path from the sun rather than the
-    /// laser (the paper's 0.5).
-    #[serde(default = "half")]
-    pub selection_probability: f64,
+    /// How a sample picks the light its light sub-path starts from: `fixed` with
+    /// `selection_probability` for the sun (the paper's 0.5), or `power`, in proportion to
+    /// the energy each light sends into the scene during the pulse's range gate.
+    #[serde(default)]
+    pub selection: SunSelection,
+    /// Probability of the sun with `selection: fixed`; default 0.5.
+    #[serde(default)]
+    pub selection_probability: Option<f64>,
 }
 
-fn half() -> f64 {
-    0.5
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq, Default)]
+#[serde(rename_all = "lowercase")]
+pub enum SunSelection {
+    /// The measured winner (see README, "The sun"): by power.
+    #[default]
+    Power,
+    Fixed,
 }
 
 #[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq, Default)]
@@ -456,11 +465,19 @@ impl Campaign {
                     "the sun needs `instrument.bandwidth_nm`, the receiver's band, for the solar signal",
                 ));
             }
-            if !(s.selection_probability > 0.0 && s.selection_probability < 1.0) {
-                return Err(doc.error(
-                    "sun.selection_probability",
-                    "must lie strictly between 0 and 1",
-                ));
+            if let Some(q) = s.selection_probability {
+                if s.selection != SunSelection::Fixed {
+                    return Err(doc.error(
+                        "sun.selection_probability",
+                        "applies to `selection: fixed` only: add it, or remove the probability to select by power",
+                    ));
+                }
+                if !(q > 0.0 && q < 1.0) {
+                    return Err(doc.error(
+                        "sun.selection_probability",
+                        format!("must lie strictly between 0 and 1, found {q}"),
+                    ));
+                }
             }
             c.within(
                 "sun.zenith_deg",

@@ -5,7 +5,7 @@
 //! many rays, then, for each method, the fewest rays (on a 1-2-5 ladder) whose waveforms reach
 //! rRMSE ≤ 5% against it (median over several seeds), with their wall time.
 
-use crate::campaign::{Instrument, Method, MisHeuristic};
+use crate::campaign::{Instrument, Method, MisHeuristic, SunSelection};
 use crate::error::{Error, Result};
 use crate::scene::generate::{canopy, Canopy};
 use crate::scene::Scene;
@@ -226,19 +226,21 @@ pub fn run(opts: &BenchOptions) -> Result<String> {
         rows.push(row);
     }
     // The sun in the same paths: wall time at the same rays per pulse, sun at 50° zenith.
-    let sun_spec = crate::campaign::Sun {
+    let sun_spec = |selection| crate::campaign::Sun {
         zenith_deg: 50.0,
         azimuth_deg: 180.0,
         irradiance_w_m2_um: 640.0,
-        selection_probability: 0.5,
+        selection,
+        selection_probability: (selection == SunSelection::Fixed).then_some(0.5),
     };
-    let sun = SunSource::new(&sun_spec, 0.8, scene.bounds());
+    let gate_s = b.gate.dt * b.gate.bins as f64;
     let sun_rays = opts.reference_rays / 50;
+    let fixed = SunSource::new(&sun_spec(SunSelection::Fixed), 0.8, scene.bounds());
     let (mut off, mut on) = (Vec::new(), Vec::new());
     let mut photons = 0.0;
     for seed in 0..opts.seeds {
         off.push(b.run_with_sun(Method::Bdpt, sun_rays, 40 + seed, None).1);
-        let (w, t) = b.run_with_sun(Method::Bdpt, sun_rays, 40 + seed, Some(sun));
+        let (w, t) = b.run_with_sun(Method::Bdpt, sun_rays, 40 + seed, Some(fixed));
         on.push(t);
         photons = w.solar_photons_per_bin as f64;
     }
@@ -249,7 +251,80 @@ pub fn run(opts: &BenchOptions) -> Result<String> {
         "\n### Sun on and off (bdpt, {sun_rays} rays, sun at 50° zenith, 0.8 nm band)\n\n| sun | wall s (median) |\n| --- | ---: |\n| off | {t_off:.3} |\n| on | {t_on:.3} |\n\nRatio {:.2}; {photons:.3} solar photons per bin.",
         t_on / t_off
     );
+    let selections: Vec<SelectionRow> = [SunSelection::Fixed, SunSelection::Power]
+        .into_iter()
+        .map(|sel| {
+            let sun = SunSource::new(&sun_spec(sel), 0.8, scene.bounds())
+                .for_gate(b.inst.pulse_energy_j, gate_s);
+            selection_row(&b, &reference, sun, sel, sun_rays, opts.seeds)
+        })
+        .collect();
+    text += &selection_table(&selections, sun_rays);
     Ok(text)
+}
+
+/// How one way of choosing between the sun and the laser converges.
+#[derive(Clone, Debug)]
+pub struct SelectionRow {
+    pub selection: SunSelection,
+    /// Probability of the sun.
+    pub q: f64,
+    /// Medians over seeds at the same rays: laser rRMSE against the reference, relative
+    /// standard error of the solar power, wall seconds.
+    pub laser_rrmse: f64,
+    pub solar_rel_se: f64,
+    pub seconds: f64,
+}
+
+impl SelectionRow {
+    /// Wall time to reach both laser rRMSE ≤ 5 % and solar relative SE ≤ 1 %, from the
+    /// 1/√N law of Monte Carlo errors: t · max((rRMSE/5 %)², (SE/1 %)²).
+    pub fn seconds_to_target(&self) -> f64 {
+        self.seconds * (self.laser_rrmse / 0.05).powi(2).max((self.solar_rel_se / 0.01).powi(2))
+    }
+}
+
+fn selection_row(
+    b: &Bench,
+    reference: &Waveform,
+    sun: SunSource,
+    selection: SunSelection,
+    rays: u64,
+    seeds: u64,
+) -> SelectionRow {
+    let (mut e, mut se, mut t) = (Vec::new(), Vec::new(), Vec::new());
+    for seed in 0..seeds {
+        let (w, secs) = b.run_with_sun(Method::Bdpt, rays, 60 + seed, Some(sun));
+        e.push(rrmse(&w.laser_photons, &reference.laser_photons));
+        se.push(w.solar_power_se_w / w.solar_power_w);
+        t.push(secs);
+    }
+    SelectionRow {
+        selection,
+        q: sun.probability,
+        laser_rrmse: median(&mut e),
+        solar_rel_se: median(&mut se),
+        seconds: median(&mut t),
+    }
+}
+
+fn selection_table(rows: &[SelectionRow], rays: u64) -> String {
+    let mut s = format!(
+        "\n### Choosing the light: fixed 0.5 against by power (bdpt, {rays} rays)\n\nTime to target: wall time scaled by 1/√N to reach laser rRMSE ≤ 5% and solar relative SE ≤ 1%.\n\n| selection | sun probability | laser rRMSE | solar rel. SE | wall s | time to target s |\n| --- | ---: | ---: | ---: | ---: | ---: |\n"
+    );
+    for r in rows {
+        let _ = writeln!(
+            s,
+            "| {} | {:.3} | {:.2}% | {:.2}% | {:.3} | {:.3} |",
+            format!("{:?}", r.selection).to_lowercase(),
+            r.q,
+            100.0 * r.laser_rrmse,
+            100.0 * r.solar_rel_se,
+            r.seconds,
+            r.seconds_to_target()
+        );
+    }
+    s
 }
 
 fn median(v: &mut [f64]) -> f64 {

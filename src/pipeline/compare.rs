@@ -4,7 +4,7 @@
 
 use crate::error::{Error, Result};
 use crate::fsutil::write_text_atomic;
-use crate::pipeline::plot::{line_plot, Series};
+use crate::products::plot::{line_plot, Series};
 use std::path::{Path, PathBuf};
 
 /// One run's row.

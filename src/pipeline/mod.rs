@@ -11,7 +11,6 @@
 pub mod bench;
 pub mod compare;
 pub mod parquet;
-pub mod plot;
 pub mod products;
 
 use crate::campaign::{Campaign, Loaded};
@@ -304,9 +303,12 @@ fn dsm_stage(
     loaded: &Loaded,
     out: &Path,
     points: &[crate::products::points::Point],
+    pulses: &[Pulse],
     res: f64,
 ) -> Result<Vec<String>> {
-    use crate::products::dsm::{compare, first_return_dsm_with_angle, write_report, DsmPoint};
+    use crate::products::dsm::{
+        aim_angles, compare, first_return_dsm_with_angle, write_report, DsmPoint,
+    };
     use crate::scene::dsm::Grid;
     let firsts: Vec<DsmPoint> = points
         .iter()
@@ -338,7 +340,16 @@ fn dsm_stage(
     );
     let reference = scene.top_surface_grid(&grid);
     let (measured, angles) = first_return_dsm_with_angle(&firsts, &grid);
-    let report = compare(&reference, &measured, &angles, &grid);
+    // pulses are aimed at the ground: the 5th percentile of the reference heights
+    let mut heights: Vec<f64> = reference
+        .iter()
+        .copied()
+        .filter(|z| z.is_finite())
+        .collect();
+    heights.sort_by(f64::total_cmp);
+    let ground = heights.get(heights.len() / 20).copied().unwrap_or(slo.z);
+    let aim = aim_angles(pulses, &grid, ground);
+    let report = compare(&reference, &measured, &aim, &angles, &grid);
     write_report(&out.join("dsm"), &report, &reference, &measured, &grid)?;
     log(&format!(
         "dsm: bias {:+.3} m, RMSE {:.3} m, coverage {:.1}% over {} cells of {res} m",
@@ -349,7 +360,7 @@ fn dsm_stage(
     ));
     Ok(vec![
         "dsm/report.json".into(),
-        "dsm/error_vs_scan_angle.svg".into(),
+        "dsm/error_vs_scan_angle.png".into(),
         "dsm/error_map.png".into(),
     ])
 }
@@ -433,11 +444,11 @@ fn write_sweep_summary(
     let xs: Option<Vec<f64>> = rows.iter().map(|(v, _)| v[0].as_f64()).collect();
     let Some(xs) = xs else { return Ok(()) };
     let key = keys[0].as_str();
-    let series = |name: &str, f: &dyn Fn(&RunTotals) -> f64| plot::Series {
+    let series = |name: &str, f: &dyn Fn(&RunTotals) -> f64| crate::products::plot::Series {
         name: name.into(),
         points: xs.iter().zip(rows).map(|(x, (_, t))| (*x, f(t))).collect(),
     };
-    let svg = plot::line_plot(
+    let svg = crate::products::plot::line_plot(
         "Received laser energy",
         key,
         "J per pulse",
@@ -445,14 +456,14 @@ fn write_sweep_summary(
     );
     write_text_atomic(&out.join("sweep_energy.svg"), &svg)?;
     if rows.iter().any(|(_, t)| t.solar_photons_per_bin > 0.0) {
-        let svg = plot::line_plot(
+        let svg = crate::products::plot::line_plot(
             "Solar background",
             key,
             "solar photons per bin",
             &[series("N_SN", &|t| t.solar_photons_per_bin)],
         );
         write_text_atomic(&out.join("sweep_solar.svg"), &svg)?;
-        let svg = plot::line_plot(
+        let svg = crate::products::plot::line_plot(
             "Scene BRF",
             key,
             "BRF",
@@ -862,6 +873,7 @@ pub fn simulate(
         .map(|p| {
             let gate = Gate::for_pulse(inst, p.origin, p.direction, bounds);
             let sub_bins = waveform::sub_bins_per_bin(gate.dt, sigma);
+            let sun = sun.map(|s| s.for_gate(inst.pulse_energy_j, gate.dt * gate.bins as f64));
             let setup = PulseSetup {
                 scene,
                 laser: Laser::new(inst, p.origin, p.direction),
@@ -913,6 +925,7 @@ fn report(
     let mut multiple = 0.0;
     let mut rays = 0u64;
     let mut paths = 0.0;
+    let (mut solar, mut brf_fov, mut brf_fp) = (0.0, 0.0, 0.0);
     for f in std::fs::read_dir(out.join("waveforms"))
         .map_err(|e| Error::file(out, e))?
         .flatten()
@@ -924,6 +937,9 @@ fn report(
                 multiple += w.received_energy_j - w.order_energy_j.first().copied().unwrap_or(0.0);
                 rays += w.rays as u64;
                 paths += w.paths_per_ray as f64 * w.rays as f64;
+                solar += w.solar_photons_per_bin as f64;
+                brf_fov += w.brf_fov_solar as f64;
+                brf_fp += w.brf_footprint_laser as f64;
             }
         }
     }
@@ -956,7 +972,77 @@ fn report(
         total / received.len().max(1) as f64,
         if total > 0.0 { 100.0 * multiple / total } else { 0.0 },
     );
+    let n = received.len().max(1) as f64;
+    text += &format!(
+        "| scene BRF in the footprint, from the laser (π/ΔΩ)(Q_r/Q_e) | {:.4} |\n",
+        brf_fp / n
+    );
+    if let Some(sun) = &c.sun {
+        text += &format!(
+            "| sun | zenith {}°, azimuth {}° |\n| solar photons per bin | {:.4} |\n| scene BRF in the field of view, from the sun (Eq. 20) | {:.4} |\n",
+            sun.zenith_deg, sun.azimuth_deg, solar / n, brf_fov / n
+        );
+    }
+    text += &products_section(out);
     Ok(text)
+}
+
+/// The products part of report.md: figures from products.json and dsm/report.json, and the
+/// plots beside them.
+fn products_section(out: &Path) -> String {
+    let read = |p: &Path| -> Option<serde_json::Value> {
+        serde_json::from_str(&std::fs::read_to_string(p).ok()?).ok()
+    };
+    let mut text = String::new();
+    let Some(p) = read(&out.join("products.json")) else {
+        return text;
+    };
+    let num = |v: &serde_json::Value| v.as_f64().map_or("–".to_string(), |x| format!("{x:.3}"));
+    if p.get("points").is_some() {
+        let by = &p["points_by_class"];
+        text += &format!(
+            "\n## Discrete returns (points.las)\n\n| | |\n| --- | --- |\n| points | {} |\n| points per pulse | {} |\n| pulse density | {} per m² |\n| ground / vegetation / building / unclassified | {} / {} / {} / {} |\n",
+            p["points"], num(&p["points_per_pulse"]), num(&p["pulse_density_per_m2"]),
+            by["ground"], by["vegetation"], by["building"], by["unclassified"]
+        );
+        for (f, what) in [
+            (
+                "points_top.png",
+                "Points from above, coloured by apparent reflectance",
+            ),
+            ("waveforms.png", "Waveforms with their fitted components"),
+        ] {
+            if out.join(f).exists() {
+                text += &format!("\n{what}:\n\n![{what}]({f})\n");
+            }
+        }
+    }
+    if let Some(d) = read(&out.join("dsm/report.json")) {
+        text += &format!(
+            "\n## DSM error ({} m cells)\n\n| bias | RMSE | MAE | coverage | cells |\n| --- | --- | --- | --- | --- |\n| {} m | {} m | {} m | {} | {} |\n\n| \\|scan angle\\| (°) | cells | coverage | bias (m) | RMSE (m) |\n| --- | --- | --- | --- | --- |\n",
+            d["resolution_m"], num(&d["bias_m"]), num(&d["rmse_m"]), num(&d["mae_m"]),
+            num(&d["coverage"]), d["cells"]
+        );
+        for b in d["by_scan_angle"].as_array().into_iter().flatten() {
+            text += &format!(
+                "| {}–{} | {} | {} | {} | {} |\n",
+                b["bin_deg_lo"],
+                b["bin_deg_hi"],
+                b["cells_surfaced"],
+                num(&b["coverage"]),
+                num(&b["bias_m"]),
+                num(&b["rmse_m"])
+            );
+        }
+        text += "\n![DSM error map](dsm/error_map.png)\n\n![DSM error and coverage against scan angle](dsm/error_vs_scan_angle.png)\n";
+    }
+    if let Some(ph) = p.get("photons") {
+        text += &format!(
+            "\n## Photon counting (photons.parquet)\n\n| total | laser | solar | dark | laser per shot |\n| --- | --- | --- | --- | --- |\n| {} | {} | {} | {} | {} |\n",
+            ph["total"], ph["laser"], ph["solar"], ph["dark"], num(&ph["laser_per_shot"])
+        );
+    }
+    text
 }
 
 /// A progress bar on a terminal; hidden otherwise (stages then log plain lines).

@@ -6,10 +6,11 @@ use crate::error::{Error, Result};
 use crate::fsutil::write_text_atomic;
 use crate::pipeline::parquet;
 use crate::plan::Pulse;
+use crate::products::figures::{self, TopPoint, WaveformFigure};
 use crate::products::las::write_las;
 use crate::products::photons::{count_photons, photon_rows, write_photons, PhotonRow};
 use crate::products::points::{points_on_axis, Point, PointConfig};
-use crate::products::returns::{decompose, Decomposition};
+use crate::products::returns::{decompose, Component, Decomposition};
 use crate::sensor::pulse_sigma_s;
 use crate::waveform::Waveform;
 use rayon::prelude::*;
@@ -66,6 +67,18 @@ fn class_of(w: &Waveform, centre: f64, sigma: f64) -> u8 {
     best.1
 }
 
+/// The decomposition of one waveform as the campaign asks for it.
+fn components(loaded: &Loaded, w: &Waveform) -> Vec<Component> {
+    let inst = &loaded.campaign.instrument;
+    decompose(
+        &w.laser_photons,
+        inst.detection_threshold_photons,
+        inst.max_returns as usize,
+        Decomposition::Gaussian,
+        pulse_sigma_s(inst) / (inst.bin_ns * 1e-9),
+    )
+}
+
 /// Discrete returns of every pulse, in pulse order then time.
 pub fn discrete_returns(loaded: &Loaded, pulses: &[Pulse], waveforms: &[Waveform]) -> Vec<Point> {
     let c = &loaded.campaign;
@@ -77,18 +90,11 @@ pub fn discrete_returns(loaded: &Loaded, pulses: &[Pulse], waveforms: &[Waveform
         telescope_area_m2: inst.receiver_area_m2,
         reference_range_m: reference_range,
     };
-    let sigma_bins = pulse_sigma_s(inst) / (inst.bin_ns * 1e-9);
     let by_pulse: Vec<Vec<Point>> = waveforms
         .par_iter()
         .map(|w| {
             let pulse = &pulses[w.pulse_id as usize];
-            let comps = decompose(
-                &w.laser_photons,
-                inst.detection_threshold_photons,
-                inst.max_returns as usize,
-                Decomposition::Gaussian,
-                sigma_bins,
-            );
+            let comps = components(loaded, w);
             let classes: Vec<u8> = comps
                 .iter()
                 .map(|k| class_of(w, k.centre_bin, k.sigma_bins))
@@ -97,6 +103,77 @@ pub fn discrete_returns(loaded: &Loaded, pulses: &[Pulse], waveforms: &[Waveform
         })
         .collect();
     by_pulse.into_iter().flatten().collect()
+}
+
+/// Up to four waveforms worth looking at: those with the most returns, and the first with a
+/// single return, for `waveforms.png`.
+fn example_waveforms(
+    loaded: &Loaded,
+    waveforms: &[Waveform],
+    points: &[Point],
+) -> Vec<WaveformFigure> {
+    let mut returns: std::collections::BTreeMap<u64, u8> = std::collections::BTreeMap::new();
+    for p in points {
+        returns.insert(p.pulse_id, p.number_of_returns);
+    }
+    let mut order: Vec<(u64, u8)> = returns.into_iter().collect();
+    order.sort_by(|a, b| b.1.cmp(&a.1).then(a.0.cmp(&b.0)));
+    let mut chosen: Vec<u64> = order.iter().take(3).map(|r| r.0).collect();
+    if let Some(single) = order.iter().find(|r| r.1 == 1 && !chosen.contains(&r.0)) {
+        chosen.push(single.0);
+    }
+    chosen
+        .iter()
+        .filter_map(|id| waveforms.iter().find(|w| w.pulse_id == *id))
+        .map(|w| WaveformFigure {
+            pulse_id: w.pulse_id,
+            t0_ns: w.t0_ns,
+            bin_ns: w.bin_ns as f64,
+            photons: w.laser_photons.clone(),
+            components: components(loaded, w),
+        })
+        .collect()
+}
+
+/// `points_top.png` and `waveforms.png` beside points.las.
+fn point_figures(
+    loaded: &Loaded,
+    out: &Path,
+    waveforms: &[Waveform],
+    points: &[Point],
+) -> Result<Vec<String>> {
+    // lowest first, so the top of the canopy is what one sees from above
+    let mut top: Vec<(f64, TopPoint)> = points
+        .iter()
+        .map(|p| {
+            (
+                p.z,
+                TopPoint {
+                    x: p.x,
+                    y: p.y,
+                    reflectance: p.apparent_reflectance as f64,
+                },
+            )
+        })
+        .collect();
+    top.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let top: Vec<TopPoint> = top.into_iter().map(|t| t.1).collect();
+    figures::points_top_view(
+        &out.join("points_top.png"),
+        &top,
+        &format!(
+            "{}: {} points from above, by apparent reflectance",
+            loaded.campaign.name,
+            points.len()
+        ),
+    )?;
+    let examples = example_waveforms(loaded, waveforms, points);
+    let mut written = vec!["points_top.png".to_string()];
+    if !examples.is_empty() {
+        figures::waveforms(&out.join("waveforms.png"), &examples)?;
+        written.push("waveforms.png".to_string());
+    }
+    Ok(written)
 }
 
 /// Photon events of every pulse (photon counting), deterministic per (seed, pulse).
@@ -148,6 +225,7 @@ pub fn run(
         let points = discrete_returns(loaded, pulses, &waveforms);
         write_las(&out.join("points.las"), &points)?;
         outputs.push("points.las".to_string());
+        outputs.extend(point_figures(loaded, out, &waveforms, &points)?);
         // pulse density over the area the first returns cover
         let (mut lo, mut hi) = ([f64::MAX; 2], [f64::MIN; 2]);
         for p in points.iter().filter(|p| p.return_number == 1) {
@@ -171,7 +249,7 @@ pub fn run(
             "unclassified": classes[0].1, "ground": classes[1].1, "vegetation": classes[2].1, "building": classes[3].1
         });
         if let Some(res) = want.dsm {
-            let dsm_outputs = super::dsm_stage(loaded, out, &points, res)?;
+            let dsm_outputs = super::dsm_stage(loaded, out, &points, pulses, res)?;
             outputs.extend(dsm_outputs);
         }
     }

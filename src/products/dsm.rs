@@ -2,16 +2,18 @@
 //! minus the reference DSM of the scene's own surfaces (`Scene::top_surface_grid`) on the same
 //! grid, summarised as bias, RMSE, coverage and against scan angle.
 //!
-//! Scan-angle attribution: a cell's error is attributed to the |scan angle| of the point that
-//! set the cell's DSM value (its highest first return), since that pulse's viewing geometry is
-//! what decided the height; among points of equal height, the smallest |angle| wins.
+//! Scan-angle attribution: a cell belongs to the mean |scan angle| of the pulses aimed at it
+//! (whose axis crosses the cell at the ground's height), whether or not a return came back
+//! from it: so coverage per angle counts the blind spots behind buildings and crowns, which
+//! grow with the angle. A cell no pulse was aimed at takes the |scan angle| of the point
+//! that set its DSM value (its highest first return; among equal heights the smallest angle).
 
 use crate::error::{Error, Result};
-use crate::fsutil::{write_atomic, write_text_atomic};
-use crate::pipeline::plot::{line_plot, Series};
+use crate::fsutil::write_text_atomic;
+use crate::plan::Pulse;
+use crate::products::figures;
 pub use crate::scene::dsm::Grid;
 use serde::Serialize;
-use std::io::Write;
 use std::path::Path;
 
 /// One point as the DSM needs it: world position, scan angle (degrees), and whether it is its
@@ -56,12 +58,42 @@ pub fn first_return_dsm_with_angle(points: &[DsmPoint], grid: &Grid) -> (Vec<f64
     (z, angle)
 }
 
+/// Per cell, the mean |scan angle| (degrees) of the pulses whose axis crosses the plane
+/// z = `ground_z` in that cell (NaN where none does).
+pub fn aim_angles(pulses: &[Pulse], grid: &Grid, ground_z: f64) -> Vec<f64> {
+    let mut sum = vec![0.0; grid.len()];
+    let mut count = vec![0u32; grid.len()];
+    for p in pulses {
+        let d = p.direction;
+        if d.z.abs() < 1e-12 {
+            continue; // horizontal: never reaches the ground plane
+        }
+        let t = (ground_z - p.origin.z) / d.z;
+        if !(t > 0.0 && t.is_finite()) {
+            continue;
+        }
+        let hit = p.origin + d * t;
+        if let Some(k) = grid.index(hit.x, hit.y) {
+            sum[k] += (p.scan_angle_deg as f64).abs();
+            count[k] += 1;
+        }
+    }
+    sum.iter()
+        .zip(&count)
+        .map(|(s, &n)| if n > 0 { s / n as f64 } else { f64::NAN })
+        .collect()
+}
+
 /// Error figures of the cells whose |scan angle| falls in [bin_deg_lo, bin_deg_hi).
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct AngleBin {
     pub bin_deg_lo: f64,
     pub bin_deg_hi: f64,
+    /// Cells with a reference surface in this bin, and those of them with a first return.
+    pub cells_surfaced: usize,
     pub cells: usize,
+    /// `cells / cells_surfaced`; 1 − coverage is the bin's coverage gap.
+    pub coverage: f64,
     /// NaN (null in JSON) for an empty bin.
     pub bias_m: f64,
     pub rmse_m: f64,
@@ -110,16 +142,19 @@ impl Sums {
     }
 }
 
-/// Compares a measured DSM with the reference on `grid`; `angle_per_cell` is the |scan angle|
-/// attributed to each cell (see the module notes), NaN where unknown.
+/// Compares a measured DSM with the reference on `grid`. `aim_angle` is the |scan angle| of
+/// the pulses aimed at each cell ([`aim_angles`]), `point_angle` that of the point that set
+/// the cell ([`first_return_dsm_with_angle`]), used where no pulse was aimed; NaN where
+/// unknown.
 pub fn compare(
     reference: &[f64],
     measured: &[f64],
-    angle_per_cell: &[f64],
+    aim_angle: &[f64],
+    point_angle: &[f64],
     grid: &Grid,
 ) -> DsmReport {
     let mut all = Sums::default();
-    let mut bins: Vec<Sums> = Vec::new();
+    let mut bins: Vec<(usize, Sums)> = Vec::new();
     let mut cells = 0;
     for (k, &r) in reference.iter().enumerate() {
         if !r.is_finite() {
@@ -127,18 +162,26 @@ pub fn compare(
         }
         cells += 1;
         let m = measured.get(k).copied().unwrap_or(f64::NAN);
+        let aim = aim_angle.get(k).copied().unwrap_or(f64::NAN).abs();
+        let a = if aim.is_finite() {
+            aim
+        } else {
+            point_angle.get(k).copied().unwrap_or(f64::NAN).abs()
+        };
+        let bin = a.is_finite().then(|| (a / ANGLE_BIN_DEG).floor() as usize);
+        if let Some(b) = bin {
+            if bins.len() <= b {
+                bins.resize_with(b + 1, || (0, Sums::default()));
+            }
+            bins[b].0 += 1;
+        }
         if !m.is_finite() {
             continue;
         }
         let e = m - r;
         all.add(e);
-        let a = angle_per_cell.get(k).copied().unwrap_or(f64::NAN).abs();
-        if a.is_finite() {
-            let b = (a / ANGLE_BIN_DEG).floor() as usize;
-            if bins.len() <= b {
-                bins.resize_with(b + 1, Sums::default);
-            }
-            bins[b].add(e);
+        if let Some(b) = bin {
+            bins[b].1.add(e);
         }
     }
     DsmReport {
@@ -155,10 +198,16 @@ pub fn compare(
         by_scan_angle: bins
             .iter()
             .enumerate()
-            .map(|(b, s)| AngleBin {
+            .map(|(b, (surfaced, s))| AngleBin {
                 bin_deg_lo: b as f64 * ANGLE_BIN_DEG,
                 bin_deg_hi: (b + 1) as f64 * ANGLE_BIN_DEG,
+                cells_surfaced: *surfaced,
                 cells: s.n,
+                coverage: if *surfaced == 0 {
+                    f64::NAN
+                } else {
+                    s.n as f64 / *surfaced as f64
+                },
                 bias_m: s.mean(s.sum),
                 rmse_m: s.mean(s.sum_sq).sqrt(),
             })
@@ -167,8 +216,8 @@ pub fn compare(
     }
 }
 
-/// Writes `dir/report.json`, `dir/error_vs_scan_angle.svg` (bias and RMSE per angle bin) and
-/// `dir/error_map.png` (see `error_map_rgb`).
+/// Writes `dir/report.json`, `dir/error_vs_scan_angle.png` (bias, RMSE and coverage per angle
+/// bin) and `dir/error_map.png`.
 pub fn write_report(
     dir: &Path,
     report: &DsmReport,
@@ -179,186 +228,17 @@ pub fn write_report(
     let json = serde_json::to_string_pretty(report)
         .map_err(|e| Error::msg(format!("cannot encode the DSM report: {e}")))?;
     write_text_atomic(&dir.join("report.json"), &(json + "\n"))?;
-
-    let centre = |b: &AngleBin| 0.5 * (b.bin_deg_lo + b.bin_deg_hi);
-    let series = [
-        Series {
-            name: "bias (m)".into(),
-            points: report
-                .by_scan_angle
-                .iter()
-                .map(|b| (centre(b), b.bias_m))
-                .collect(),
-        },
-        Series {
-            name: "RMSE (m)".into(),
-            points: report
-                .by_scan_angle
-                .iter()
-                .map(|b| (centre(b), b.rmse_m))
-                .collect(),
-        },
-    ];
-    let svg = line_plot(
+    figures::dsm_error_vs_angle(&dir.join("error_vs_scan_angle.png"), report)?;
+    figures::dsm_error_map(
+        &dir.join("error_map.png"),
+        reference,
+        measured,
+        grid,
         &format!(
-            "DSM error vs scan angle ({} m cells)",
-            fmt_res(report.resolution_m)
+            "first-return DSM − reference, {} m cells: bias {:+.3} m, RMSE {:.3} m",
+            report.resolution_m, report.bias_m, report.rmse_m
         ),
-        "|scan angle| (deg), centre of 2° bin",
-        "first-return DSM − reference (m)",
-        &series,
-    );
-    write_text_atomic(&dir.join("error_vs_scan_angle.svg"), &svg)?;
-
-    let (w, h, rgb) = error_map_rgb(reference, measured, grid);
-    let png = encode_png_rgb(w, h, &rgb);
-    let path = dir.join("error_map.png");
-    write_atomic(&path, |mut f| {
-        f.write_all(&png)
-            .map_err(|e| Error::file(&path, format!("cannot write: {e}")))
-    })
-}
-
-fn fmt_res(v: f64) -> String {
-    let s = format!("{v:.3}");
-    s.trim_end_matches('0').trim_end_matches('.').to_string()
-}
-
-/// Errors beyond this (m) get the full colour.
-const MAP_SATURATION_M: f64 = 1.0;
-/// The map is drawn at least this wide: small grids get k×k pixel blocks per cell.
-const MAP_MIN_WIDTH_PX: usize = 400;
-/// No first return where the reference has a surface: a blind spot.
-const GREY_MISSED: [u8; 3] = [128, 128, 128];
-/// No reference surface.
-const GREY_EMPTY: [u8; 3] = [64, 64, 64];
-
-/// The per-cell error as an 8-bit RGB image, north (high y) up: blue below the reference,
-/// white on it, red above, saturating at ±1 m; mid grey where the reference has a surface but
-/// no first return fell, dark grey where there is no reference. Returns (width, height, rgb).
-pub fn error_map_rgb(reference: &[f64], measured: &[f64], grid: &Grid) -> (usize, usize, Vec<u8>) {
-    let k = MAP_MIN_WIDTH_PX.div_ceil(grid.nx.max(1)).max(1);
-    let (w, h) = (grid.nx * k, grid.ny * k);
-    let mut rgb = vec![0u8; w * h * 3];
-    for j in 0..grid.ny {
-        for i in 0..grid.nx {
-            let c = grid.nx * j + i;
-            let r = reference.get(c).copied().unwrap_or(f64::NAN);
-            let m = measured.get(c).copied().unwrap_or(f64::NAN);
-            let colour = if !r.is_finite() {
-                GREY_EMPTY
-            } else if !m.is_finite() {
-                GREY_MISSED
-            } else {
-                diverging((m - r) / MAP_SATURATION_M)
-            };
-            let row0 = (grid.ny - 1 - j) * k;
-            for y in row0..row0 + k {
-                for x in i * k..(i + 1) * k {
-                    rgb[(y * w + x) * 3..][..3].copy_from_slice(&colour);
-                }
-            }
-        }
-    }
-    (w, h, rgb)
-}
-
-/// Blue (−1) through white (0) to red (+1).
-fn diverging(t: f64) -> [u8; 3] {
-    let t = t.clamp(-1.0, 1.0);
-    let fade = |a: f64| (255.0 * (1.0 - a)).round() as u8;
-    if t < 0.0 {
-        [fade(-t), fade(-t), 255]
-    } else {
-        [255, fade(t), fade(t)]
-    }
-}
-
-/// A PNG of 8-bit RGB pixels (`rgb`, row-major, top row first), uncompressed: zlib with
-/// stored deflate blocks, so no compression library is needed.
-pub fn encode_png_rgb(width: usize, height: usize, rgb: &[u8]) -> Vec<u8> {
-    assert_eq!(rgb.len(), width * height * 3, "pixel buffer size");
-    let mut raw = Vec::with_capacity(height * (width * 3 + 1));
-    for row in rgb.chunks_exact(width * 3) {
-        raw.push(0); // filter: none
-        raw.extend_from_slice(row);
-    }
-    let mut z = Vec::with_capacity(raw.len() + raw.len() / 65535 * 5 + 16);
-    z.extend_from_slice(&[0x78, 0x01]);
-    let blocks: Vec<&[u8]> = if raw.is_empty() {
-        vec![&raw[..]]
-    } else {
-        raw.chunks(65535).collect()
-    };
-    for (b, block) in blocks.iter().enumerate() {
-        z.push(u8::from(b + 1 == blocks.len()));
-        let len = block.len() as u16;
-        z.extend_from_slice(&len.to_le_bytes());
-        z.extend_from_slice(&(!len).to_le_bytes());
-        z.extend_from_slice(block);
-    }
-    z.extend_from_slice(&adler32(&raw).to_be_bytes());
-
-    let mut png = vec![0x89, b'P', b'N', b'G', 0x0d, 0x0a, 0x1a, 0x0a];
-    let mut ihdr = Vec::with_capacity(13);
-    ihdr.extend_from_slice(&(width as u32).to_be_bytes());
-    ihdr.extend_from_slice(&(height as u32).to_be_bytes());
-    ihdr.extend_from_slice(&[8, 2, 0, 0, 0]); // 8 bits, RGB, deflate, adaptive, no interlace
-    chunk(&mut png, b"IHDR", &ihdr);
-    chunk(&mut png, b"IDAT", &z);
-    chunk(&mut png, b"IEND", &[]);
-    png
-}
-
-fn chunk(out: &mut Vec<u8>, kind: &[u8; 4], data: &[u8]) {
-    out.extend_from_slice(&(data.len() as u32).to_be_bytes());
-    let start = out.len();
-    out.extend_from_slice(kind);
-    out.extend_from_slice(data);
-    let crc = crc32(&out[start..]);
-    out.extend_from_slice(&crc.to_be_bytes());
-}
-
-const CRC_TABLE: [u32; 256] = {
-    let mut t = [0u32; 256];
-    let mut n = 0;
-    while n < 256 {
-        let mut c = n as u32;
-        let mut k = 0;
-        while k < 8 {
-            c = if c & 1 != 0 {
-                0xEDB8_8320 ^ (c >> 1)
-            } else {
-                c >> 1
-            };
-            k += 1;
-        }
-        t[n] = c;
-        n += 1;
-    }
-    t
-};
-
-/// CRC-32 (ISO-HDLC, as PNG uses).
-fn crc32(data: &[u8]) -> u32 {
-    !data.iter().fold(!0u32, |c, &b| {
-        CRC_TABLE[((c ^ b as u32) & 0xff) as usize] ^ (c >> 8)
-    })
-}
-
-fn adler32(data: &[u8]) -> u32 {
-    const MOD: u32 = 65521;
-    let (mut a, mut b) = (1u32, 0u32);
-    // 5552 bytes is the most that can be summed before b could overflow u32
-    for block in data.chunks(5552) {
-        for &x in block {
-            a += x as u32;
-            b += a;
-        }
-        a %= MOD;
-        b %= MOD;
-    }
-    (b << 16) | a
+    )
 }
 
 #[cfg(test)]
@@ -418,7 +298,7 @@ mod tests {
         }
         let (measured, angle) = first_return_dsm_with_angle(&points, &grid);
         assert_eq!(measured, first_return_dsm(&points, &grid));
-        let r = compare(&reference, &measured, &angle, &grid);
+        let r = compare(&reference, &measured, &[], &angle, &grid);
         assert!(r.bias_m.abs() < 0.01 && r.rmse_m < 0.01, "{r:?}");
         assert_eq!((r.cells, r.cells_with_points, r.coverage), (100, 100, 1.0));
         assert_eq!(r.resolution_m, 2.0);
@@ -440,11 +320,10 @@ mod tests {
                 .unwrap();
         assert_eq!(json["cells"], 100);
         assert!(json["by_scan_angle"][0]["rmse_m"].is_number());
-        let svg = std::fs::read_to_string(out.join("error_vs_scan_angle.svg")).unwrap();
-        assert!(svg.starts_with("<svg") && svg.contains("RMSE"));
-        let png = std::fs::read(out.join("error_map.png")).unwrap();
-        assert_eq!(&png[..8], b"\x89PNG\r\n\x1a\n");
-        assert_eq!(&png[16..24], &[0, 0, 1, 144, 0, 0, 1, 144]); // 400 × 400
+        for f in ["error_vs_scan_angle.png", "error_map.png"] {
+            let png = std::fs::read(out.join(f)).unwrap();
+            assert_eq!(&png[..8], b"\x89PNG\r\n\x1a\n");
+        }
     }
 
     #[test]
@@ -489,7 +368,7 @@ mod tests {
         assert_eq!(angle[0], 1.0);
         assert_eq!(measured[2 * 4 + 2], 1.0);
         assert!(measured[2 * 4].is_nan());
-        let r = compare(&reference, &measured, &angle, &grid);
+        let r = compare(&reference, &measured, &[], &angle, &grid);
         assert_eq!((r.cells, r.cells_with_points), (9, 6));
         assert!((r.coverage - 6.0 / 9.0).abs() < 1e-12);
         let errors = [0.2, 0.2, -0.2, -0.2, 0.0, 0.0];
@@ -509,145 +388,10 @@ mod tests {
         assert!((r.by_scan_angle[0].rmse_m - 0.2).abs() < 1e-12);
 
         // no points at all: nothing covered, figures undefined, written as null
-        let r = compare(&reference, &[f64::NAN; 12], &[f64::NAN; 12], &grid);
+        let r = compare(&reference, &[f64::NAN; 12], &[], &[f64::NAN; 12], &grid);
         assert_eq!((r.cells_with_points, r.coverage), (0, 0.0));
         assert!(r.bias_m.is_nan() && r.by_scan_angle.is_empty());
         let json = serde_json::to_string(&r).unwrap();
         assert!(json.contains("\"bias_m\":null"), "{json}");
-    }
-
-    #[test]
-    fn crc_and_adler_known_values() {
-        assert_eq!(crc32(b"123456789"), 0xCBF4_3926);
-        assert_eq!(adler32(b"Wikipedia"), 0x11E6_0398);
-        assert_eq!(adler32(&[]), 1);
-        // long enough to need the modulo several times
-        let big: Vec<u8> = (0..200_000u32).map(|i| (i * 7 + 3) as u8).collect();
-        let (mut a, mut b) = (1u64, 0u64);
-        for &x in &big {
-            a = (a + x as u64) % 65521;
-            b = (b + a) % 65521;
-        }
-        assert_eq!(adler32(&big), ((b << 16) | a) as u32);
-    }
-
-    #[test]
-    fn png_layout_and_decode() {
-        // wide enough for several stored blocks
-        let (w, h) = (300, 100);
-        let rgb: Vec<u8> = (0..w * h * 3).map(|i| (i % 251) as u8).collect();
-        let png = encode_png_rgb(w, h, &rgb);
-        assert_eq!(&png[..8], b"\x89PNG\r\n\x1a\n");
-        // walk the chunks and check every CRC
-        let mut at = 8;
-        let mut kinds = Vec::new();
-        let mut idat = Vec::new();
-        while at < png.len() {
-            let len = u32::from_be_bytes(png[at..at + 4].try_into().unwrap()) as usize;
-            let body = &png[at + 4..at + 8 + len];
-            let crc = u32::from_be_bytes(png[at + 8 + len..at + 12 + len].try_into().unwrap());
-            assert_eq!(crc32(body), crc);
-            kinds.push(String::from_utf8(body[..4].to_vec()).unwrap());
-            if &body[..4] == b"IDAT" {
-                idat.extend_from_slice(&body[4..]);
-            }
-            at += 12 + len;
-        }
-        assert_eq!(kinds, ["IHDR", "IDAT", "IEND"]);
-        // inflate the stored blocks by hand
-        assert_eq!(idat[0], 0x78);
-        assert_eq!(((idat[0] as u16) << 8 | idat[1] as u16) % 31, 0);
-        let mut raw = Vec::new();
-        let mut p = 2;
-        loop {
-            let last = idat[p] & 1 == 1;
-            assert_eq!(idat[p] & 6, 0, "stored block");
-            let len = u16::from_le_bytes([idat[p + 1], idat[p + 2]]);
-            let nlen = u16::from_le_bytes([idat[p + 3], idat[p + 4]]);
-            assert_eq!(len, !nlen);
-            raw.extend_from_slice(&idat[p + 5..p + 5 + len as usize]);
-            p += 5 + len as usize;
-            if last {
-                break;
-            }
-        }
-        assert_eq!(
-            u32::from_be_bytes(idat[p..p + 4].try_into().unwrap()),
-            adler32(&raw)
-        );
-        assert_eq!(p + 4, idat.len());
-        assert_eq!(raw.len(), h * (w * 3 + 1));
-        for (y, row) in raw.chunks(w * 3 + 1).enumerate() {
-            assert_eq!(row[0], 0);
-            assert_eq!(&row[1..], &rgb[y * w * 3..(y + 1) * w * 3]);
-        }
-
-        // and an independent decoder, where one is at hand
-        let d = tmp("png");
-        let f = d.join("t.png");
-        std::fs::write(&f, &png).unwrap();
-        let script = r#"
-import sys, zlib, struct
-b = open(sys.argv[1], 'rb').read()
-assert b[:8] == b'\x89PNG\r\n\x1a\n'
-i, idat, ihdr = 8, b'', None
-while i < len(b):
-    n, = struct.unpack('>I', b[i:i+4]); t = b[i+4:i+8]; d = b[i+8:i+8+n]
-    assert struct.unpack('>I', b[i+8+n:i+12+n])[0] == zlib.crc32(t + d) & 0xffffffff
-    if t == b'IHDR': ihdr = struct.unpack('>IIBBBBB', d)
-    if t == b'IDAT': idat += d
-    i += 12 + n
-w, h = ihdr[0], ihdr[1]
-raw = zlib.decompress(idat)
-assert len(raw) == h * (3 * w + 1)
-print(w, h, raw[1], raw[-1])
-"#;
-        match std::process::Command::new("python3")
-            .arg("-c")
-            .arg(script)
-            .arg(&f)
-            .output()
-        {
-            Ok(out) if out.status.success() => {
-                let s = String::from_utf8_lossy(&out.stdout);
-                let last = rgb[rgb.len() - 1];
-                assert_eq!(s.trim(), format!("{w} {h} {} {last}", rgb[0]));
-            }
-            Ok(out) => panic!(
-                "python3 rejects the PNG: {}",
-                String::from_utf8_lossy(&out.stderr)
-            ),
-            Err(_) => eprintln!("python3 not available: decode check skipped"),
-        }
-    }
-
-    #[test]
-    fn error_map_colours() {
-        let grid = Grid {
-            x0: 0.0,
-            y0: 0.0,
-            cell: 1.0,
-            nx: 4,
-            ny: 2,
-        };
-        let reference = [0.0, 0.0, 0.0, f64::NAN, 0.0, 0.0, 0.0, 0.0];
-        let measured = [-2.0, 0.0, 0.5, 1.0, f64::NAN, 3.0, 0.0, 0.0];
-        let (w, h, rgb) = error_map_rgb(&reference, &measured, &grid);
-        assert_eq!((w, h), (400, 200));
-        // row j = 0 is drawn at the bottom
-        let px = |i: usize, j: usize| {
-            let (x, y) = (i * 100 + 50, (1 - j) * 100 + 50);
-            [
-                rgb[(y * w + x) * 3],
-                rgb[(y * w + x) * 3 + 1],
-                rgb[(y * w + x) * 3 + 2],
-            ]
-        };
-        assert_eq!(px(0, 0), [0, 0, 255]);
-        assert_eq!(px(1, 0), [255, 255, 255]);
-        assert_eq!(px(2, 0), [255, 128, 128]);
-        assert_eq!(px(3, 0), GREY_EMPTY);
-        assert_eq!(px(0, 1), GREY_MISSED);
-        assert_eq!(px(1, 1), [255, 0, 0]);
     }
 }

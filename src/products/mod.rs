@@ -2,8 +2,10 @@
 //! LAS file, and photon-counting events.
 
 pub mod dsm;
+pub mod figures;
 pub mod las;
 pub mod photons;
+pub mod plot;
 pub mod points;
 pub mod returns;
 pub mod rng;

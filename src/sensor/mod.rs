@@ -337,6 +337,8 @@ pub struct SunSource {
     pub cos_zenith: f64,
     /// Probability that a sample's light sub-path starts at the sun.
     pub probability: f64,
+    /// Pick `probability` per pulse by power (see [`SunSource::for_gate`]).
+    pub by_power: bool,
 }
 
 impl SunSource {
@@ -352,8 +354,29 @@ impl SunSource {
             center,
             radius: ((bounds.1 - bounds.0).length() * 0.5).max(1e-3),
             cos_zenith: t.cos(),
-            probability: sun.selection_probability,
+            probability: sun.selection_probability.unwrap_or(0.5),
+            by_power: sun.selection == crate::campaign::SunSelection::Power,
         }
+    }
+
+    /// Least and most probability selection by power gives either light: a light never
+    /// chosen would leave its signal to the connections alone (s = 1), and one chosen 1 in
+    /// 10^4 would make its sub-path strategies pure noise.
+    pub const POWER_SELECTION_BOUNDS: (f64, f64) = (0.02, 0.98);
+
+    /// The sun for one pulse. By power, the sun is chosen with probability
+    /// E_sun / (E_sun + Q_e), where E_sun = E Δλ · πR² · T is the solar energy that crosses the
+    /// disk during the range gate (T long), Q_e the pulse energy: the lights' shares of
+    /// the energy emitted into the scene while the receiver listens.
+    pub fn for_gate(&self, pulse_energy_j: f64, gate_s: f64) -> SunSource {
+        let mut s = *self;
+        if self.by_power {
+            let e_sun = self.band_irradiance * self.disk_area() * gate_s.max(0.0);
+            let q = e_sun / (e_sun + pulse_energy_j);
+            let (lo, hi) = Self::POWER_SELECTION_BOUNDS;
+            s.probability = if q.is_finite() { q.clamp(lo, hi) } else { 0.5 };
+        }
+        s
     }
 
     /// Uniform point on the disk (pdf 1 / πR²), outside the bounding sphere, up-sun.

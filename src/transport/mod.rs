@@ -125,6 +125,10 @@ impl Vertex {
 pub struct Tally {
     /// Energy per sub-bin over the gate, J.
     pub sub: Vec<f64>,
+    /// Σ energy × position within its sub-bin (0..1) per sub-bin: the energy's mean time in
+    /// each sub-bin, so that the pulse convolution puts a return where it was, not at a
+    /// sub-bin centre (up to σ/8 off otherwise, 1.9 cm of range for a 4 ns pulse).
+    pub sub_moment: Vec<f64>,
     /// Σ over rays of the square of each ray's energy per bin.
     pub bin_sq: Vec<f64>,
     /// Energy per bin by the class of the surface the laser lit first (ground, vegetation,
@@ -150,6 +154,7 @@ impl Tally {
     fn new(bins: usize, sub_bins: usize, max_order: u32) -> Tally {
         Tally {
             sub: vec![0.0; bins * sub_bins],
+            sub_moment: vec![0.0; bins * sub_bins],
             bin_sq: vec![0.0; bins],
             class_bins: std::array::from_fn(|_| vec![0.0; bins]),
             outside: 0.0,
@@ -166,6 +171,7 @@ impl Tally {
     fn merge(&mut self, o: &Tally) {
         let add = |a: &mut [f64], b: &[f64]| a.iter_mut().zip(b).for_each(|(x, y)| *x += y);
         add(&mut self.sub, &o.sub);
+        add(&mut self.sub_moment, &o.sub_moment);
         add(&mut self.bin_sq, &o.bin_sq);
         for (a, b) in self.class_bins.iter_mut().zip(&o.class_bins) {
             add(a, b);
@@ -277,6 +283,7 @@ impl Accum {
         if x >= 0.0 && (x as usize) < self.tally.sub.len() {
             let i = x as usize;
             self.tally.sub[i] += energy;
+            self.tally.sub_moment[i] += energy * (x - i as f64);
             let b = i / self.sub_bins;
             self.tally.class_bins[class][b] += energy;
             if self.ray_bin[b] == 0.0 {

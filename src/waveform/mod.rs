@@ -85,9 +85,17 @@ pub fn impulse_bins(sub: &[f64], sub_bins: usize) -> Vec<f64> {
     sub.chunks(sub_bins).map(|c| c.iter().sum()).collect()
 }
 
-/// Spreads each sub-bin's energy (at the sub-bin's centre time) over the bins with a Gaussian
+/// Spreads each sub-bin's energy (at its energy-weighted mean time) over the bins with a Gaussian
 /// of standard deviation `sigma` (s), integrated exactly over each bin.
-pub fn convolve(sub: &[f64], sub_bins: usize, gate: &Gate, sigma: f64) -> Vec<f64> {
+///
+/// `sub_moment[i] / sub[i]` is the mean position (0..1) of sub-bin i's energy within it.
+pub fn convolve(
+    sub: &[f64],
+    sub_moment: &[f64],
+    sub_bins: usize,
+    gate: &Gate,
+    sigma: f64,
+) -> Vec<f64> {
     let mut out = vec![0.0; gate.bins];
     if sigma <= 0.0 {
         return impulse_bins(sub, sub_bins);
@@ -98,7 +106,11 @@ pub fn convolve(sub: &[f64], sub_bins: usize, gate: &Gate, sigma: f64) -> Vec<f6
         if e == 0.0 {
             continue;
         }
-        let t = (i as f64 + 0.5) * sub_dt; // relative to t0
+        let pos = match sub_moment.get(i) {
+            Some(m) if (0.0..=e).contains(m) => m / e,
+            _ => 0.5,
+        };
+        let t = (i as f64 + pos) * sub_dt; // relative to t0
         let centre = (t / gate.dt) as i64;
         let lo = (centre - reach).max(0);
         let hi = (centre + reach).min(gate.bins as i64 - 1);
@@ -153,7 +165,7 @@ pub fn waveform(
     radiometry: &Radiometry,
 ) -> Waveform {
     let impulse = impulse_bins(&tally.sub, sub_bins);
-    let convolved = convolve(&tally.sub, sub_bins, gate, pulse_sigma_s);
+    let convolved = convolve(&tally.sub, &tally.sub_moment, sub_bins, gate, pulse_sigma_s);
     let n = tally.rays.max(1) as f64;
     let (solar_w, solar_se) = tally.solar_power();
     // range of the return's energy centroid, for the footprint's solid angle
@@ -203,6 +215,33 @@ mod tests {
     use super::*;
 
     #[test]
+    fn convolution_puts_a_return_at_its_exact_time() {
+        let gate = Gate {
+            t0: 0.0,
+            dt: 0.5e-9,
+            bins: 80,
+        };
+        let sigma = 4e-9 / 2.354_820_045;
+        let m = sub_bins_per_bin(gate.dt, sigma);
+        for frac in [0.0, 0.13, 0.5, 0.77, 0.999] {
+            // one return at 20.3 bins + frac of a sub-bin
+            let x = 40.0 * m as f64 + frac;
+            let mut sub = vec![0.0; 80 * m];
+            let mut moment = vec![0.0; 80 * m];
+            sub[x as usize] = 2.0;
+            moment[x as usize] = 2.0 * (x - x.floor());
+            let c = convolve(&sub, &moment, m, &gate, sigma);
+            let centroid: f64 = c
+                .iter()
+                .enumerate()
+                .map(|(i, v)| (i as f64 + 0.5) * v)
+                .sum::<f64>()
+                / 2.0;
+            assert!((centroid - x / m as f64).abs() < 1e-4, "{frac}: {centroid}");
+        }
+    }
+
+    #[test]
     fn convolution_keeps_energy_and_is_independent_of_position_in_bin() {
         let gate = Gate {
             t0: 0.0,
@@ -216,8 +255,9 @@ mod tests {
         a[50 * m] = 1.0; // early in bin 50
         let mut b = vec![0.0; 100 * m];
         b[50 * m + m - 1] = 1.0; // late in bin 50
-        let ca = convolve(&a, m, &gate, sigma);
-        let cb = convolve(&b, m, &gate, sigma);
+        let half = |v: &[f64]| v.iter().map(|e| e * 0.5).collect::<Vec<f64>>();
+        let ca = convolve(&a, &half(&a), m, &gate, sigma);
+        let cb = convolve(&b, &half(&b), m, &gate, sigma);
         assert!((ca.iter().sum::<f64>() - 1.0).abs() < 1e-6);
         // centroids follow the sub-bin times, not the bin centre
         let centroid = |c: &[f64]| {

@@ -264,3 +264,18 @@ fn bad_yaml_syntax() {
     let (code, err, _) = check("syntax", &c, SCENE);
     assert_one_message(code, &err, &["campaign.yaml:"]);
 }
+
+#[test]
+fn sun_selection_probability_without_fixed_selection() {
+    let c = CAMPAIGN.replace("  receiver_area_m2: 0.1\n", "  receiver_area_m2: 0.1\n  bandwidth_nm: 1\n")
+        + "sun:\n  zenith_deg: 30\n  azimuth_deg: 0\n  irradiance_w_m2_um: 600\n  selection: power\n  selection_probability: 0.3\n";
+    let (code, err, _) = check("sun_selection", &c, SCENE);
+    assert_one_message(
+        code,
+        &err,
+        &["campaign.yaml:22:", "sun.selection_probability", "fixed"],
+    );
+    let c = c.replace("selection: power", "selection: sometimes");
+    let (code, err, _) = check("sun_selection_kind", &c, SCENE);
+    assert_one_message(code, &err, &["campaign.yaml:21:", "sun.selection"]);
+}

@@ -8,9 +8,13 @@ const E: f64 = 640.0; // W m⁻² µm⁻¹
 const BAND_NM: f64 = 0.8;
 
 fn with_sun(campaign: &str, zenith: f64, azimuth: f64) -> String {
+    with_sun_selected(campaign, zenith, azimuth, "fixed")
+}
+
+fn with_sun_selected(campaign: &str, zenith: f64, azimuth: f64, selection: &str) -> String {
     campaign.replace("instrument:\n", "instrument:\n  bandwidth_nm: 0.8\n")
         + &format!(
-            "sun: {{ zenith_deg: {zenith}, azimuth_deg: {azimuth}, irradiance_w_m2_um: {E} }}\n"
+            "sun: {{ zenith_deg: {zenith}, azimuth_deg: {azimuth}, irradiance_w_m2_um: {E}, selection: {selection} }}\n"
         )
 }
 
@@ -27,21 +31,30 @@ fn solar_photons_and_brfs_on_a_plane() {
         fwhm_ns: 2.0,
         ..Inst::default()
     };
-    for zenith in [0.0, 50.0, 80.0] {
-        let dir = tmp(&format!("sun_plane_{zenith}"));
+    // both ways of choosing the light are unbiased; by power picks the sun here with
+    // probability ~0.9 (a 1 mJ pulse against a 1.2 km disk of sunlight over a 2.2 µs gate)
+    for (zenith, selection) in [
+        (0.0, "fixed"),
+        (50.0, "fixed"),
+        (80.0, "fixed"),
+        (0.0, "power"),
+        (80.0, "power"),
+    ] {
+        let dir = tmp(&format!("sun_plane_{zenith}_{selection}"));
         let scene = plane_scene(&dir, rho, 600.0);
-        let c = with_sun(
+        let c = with_sun_selected(
             &campaign(
                 &scene,
                 &inst,
                 [10.0, -20.0, 1000.0],
                 [0.0, 0.0, -1.0],
                 "bdpt",
-                40_000,
+                100_000,
                 5,
             ),
             zenith,
             180.0,
+            selection,
         );
         let w = run(&dir, &c, None).remove(0);
         let hv = 6.626_070_15e-34 * C / 1064e-9;
@@ -51,7 +64,7 @@ fn solar_photons_and_brfs_on_a_plane() {
         let got = w.solar_photons_per_bin as f64;
         let se = w.solar_power_se_w / p_sun;
         println!(
-            "sun {zenith}°: {got:.5} photons/bin, expect {expect:.5}, rel {:+.5}, se {se:.5}",
+            "sun {zenith}° ({selection}): {got:.5} photons/bin, expect {expect:.5}, rel {:+.5}, se {se:.5}",
             got / expect - 1.0
         );
         assert!(
@@ -60,9 +73,18 @@ fn solar_photons_and_brfs_on_a_plane() {
         );
         assert!((got / expect - 1.0).abs() < 0.01);
         let (brf_s, brf_l) = (w.brf_fov_solar as f64, w.brf_footprint_laser as f64);
-        println!("  BRF solar {brf_s:.5} laser {brf_l:.5} (ρ = {rho})");
+        let se_l = w.received_energy_se_j / w.received_energy_j;
+        println!("  BRF solar {brf_s:.5} laser {brf_l:.5} (ρ = {rho}), laser rel. SE {se_l:.5}");
         assert!((brf_s / rho - 1.0).abs() < 0.01, "solar BRF {brf_s}");
-        assert!((brf_l / rho - 1.0).abs() < 0.01, "laser BRF {brf_l}");
+        if selection == "fixed" {
+            // the default: 1% with a standard error small enough to tell
+            assert!(3.0 * se_l < 0.01, "laser SE {se_l} too large for a 1% test");
+            assert!((brf_l / rho - 1.0).abs() < 0.01, "laser BRF {brf_l}");
+        } else {
+            // by power the laser is 4x noisier here (it is chosen 1 time in 10): unbiased
+            // within 3 standard errors
+            assert!((brf_l / rho - 1.0).abs() < 3.0 * se_l, "laser BRF {brf_l}");
+        }
     }
 }
 

@@ -280,7 +280,10 @@ impl SelectionRow {
     /// Wall time to reach both laser rRMSE ≤ 5 % and solar relative SE ≤ 1 %, from the
     /// 1/√N law of Monte Carlo errors: t · max((rRMSE/5 %)², (SE/1 %)²).
     pub fn seconds_to_target(&self) -> f64 {
-        self.seconds * (self.laser_rrmse / 0.05).powi(2).max((self.solar_rel_se / 0.01).powi(2))
+        self.seconds
+            * (self.laser_rrmse / 0.05)
+                .powi(2)
+                .max((self.solar_rel_se / 0.01).powi(2))
     }
 }
 

@@ -13,6 +13,9 @@ fn quick_bench_reports_falling_error() {
     assert!(text.contains(
         "| method | rays for rRMSE ≤ 5% | rRMSE | wall s | rays/s | effective paths/ray |"
     ));
+    assert!(text.contains("| footprint m | forward | backward | bdpt |"));
+    assert!(text.lines().any(|l| l.starts_with("| 1 | ")), "no Table 2 row");
+    assert!(text.contains("| fixed | 0.500 |") && text.contains("| power | "));
     for m in ["forward", "backward", "bdpt"] {
         assert!(
             text.lines().any(|l| l.starts_with(&format!("| {m} |"))),
@@ -46,4 +49,43 @@ fn quick_bench_reports_falling_error() {
             );
         }
     }
+}
+
+/// The campaign rows: a small photon-counting track through the pipeline, measured, and the
+/// orchard rows skipped with a reason when the RAMI scene is not where they look.
+#[test]
+fn campaign_rows_are_measured_and_missing_data_is_skipped() {
+    use lidarsim::pipeline::bench_campaigns as bc;
+    let dir = tmp("bench_campaigns");
+    let scene = plane_scene(&dir, 0.3, 60.0);
+    let text = bc::mabel_campaign(&scene, 532, true, 2.0, 50).replace(
+        "start: [-51, -49], end: [47, 49]",
+        "start: [-20, 0], end: [20, 0]",
+    );
+    let row = bc::run_row(&dir, "mabel_plane", "plane track", &text).unwrap();
+    assert_eq!(row.pulses, 20);
+    assert_eq!(row.rays_per_pulse, 50);
+    assert!(row.simulate_s > 0.0 && row.pulses_per_s > 0.0);
+    assert!(row.result.contains("laser") && row.result.contains("photons per shot"));
+    if std::path::Path::new("/proc/self/status").exists() {
+        assert!(row.peak_mb.unwrap() > 1.0);
+    }
+    let planned = bc::plan(&dir, &dir.join("no_such_rami.yaml"), false);
+    // the forest row generates a small forest: only check the orchard rows here
+    let skipped: Vec<String> = planned
+        .unwrap()
+        .into_iter()
+        .filter_map(|p| match p {
+            bc::Planned::Skipped { name, why } => Some(format!("{name}: {why}")),
+            bc::Planned::Run { .. } => None,
+        })
+        .collect();
+    assert_eq!(skipped.len(), 3, "{skipped:?}");
+    assert!(skipped[0].contains("no_such_rami.yaml not found"));
+    let table = bc::table(&[row], &[("mabel_532".into(), "absent".into())]);
+    assert!(table.contains(
+        "| campaign | what | pulses | rays/pulse | run s | simulate s | pulses/s | peak memory MB | result |"
+    ));
+    assert!(table.contains("| mabel_plane | plane track | 20 | 50 |"));
+    assert!(table.contains("| mabel_532 | skipped: absent |"));
 }

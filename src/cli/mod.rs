@@ -54,18 +54,29 @@ pub enum Command {
         #[command(subcommand)]
         command: SceneCommand,
     },
-    /// Speed against error on a generated canopy: rays and seconds each method needs for
-    /// rRMSE ≤ 5% against a reference waveform. Prints a markdown table.
+    /// The paper's experiments as a benchmark: rays and seconds each method needs for
+    /// rRMSE ≤ 5% on a GEDI-like pulse (also by footprint, Table 2), the sun's cost, and whole
+    /// campaigns (orchard GEDI with sun, MABEL tracks, ALS over a forest) with pulses/s and
+    /// peak memory. Quick by default; prints a markdown table and writes bench.md.
     Bench {
-        /// Folder for the generated scene and bench.md.
+        /// Folder for the generated scenes, the campaign runs and bench.md.
         #[arg(long, default_value = "runs/bench")]
         out: PathBuf,
-        /// Rays of the reference waveform.
-        #[arg(long, default_value_t = 10_000_000)]
-        reference_rays: u64,
-        /// Seeds per ray count (median rRMSE).
-        #[arg(long, default_value_t = 5)]
-        seeds: u64,
+        /// The paper's sizes: 10^7-ray reference, 5 seeds, 6929-pulse tracks, 1029-tree forest.
+        #[arg(long)]
+        full: bool,
+        /// Rays of the reference waveform [quick 10^6, full 10^7].
+        #[arg(long)]
+        reference_rays: Option<u64>,
+        /// Seeds per ray count (median rRMSE) [quick 3, full 5].
+        #[arg(long)]
+        seeds: Option<u64>,
+        /// Scene file of the RAMI orchard (skipped when its data is absent).
+        #[arg(long, default_value = "scenes/rami_wco.yaml")]
+        rami: PathBuf,
+        /// Leave out the campaign rows.
+        #[arg(long)]
+        no_campaigns: bool,
         #[arg(long)]
         threads: Option<usize>,
         /// Field-of-view half angle, mrad.
@@ -231,19 +242,29 @@ fn dispatch(cli: Cli) -> Result<()> {
         }
         Command::Bench {
             out,
+            full,
             reference_rays,
             seeds,
+            rami,
+            no_campaigns,
             threads,
             fov_mrad,
             trees,
         } => {
-            let mut opts = bench::BenchOptions {
-                reference_rays,
-                seeds,
-                dir: out,
-                fov_mrad,
-                ..Default::default()
+            let mut opts = if full {
+                bench::BenchOptions::full(out)
+            } else {
+                bench::BenchOptions::quick(out)
             };
+            if let Some(r) = reference_rays {
+                opts.reference_rays = r;
+            }
+            if let Some(s) = seeds {
+                opts.seeds = s;
+            }
+            opts.rami_scene = rami;
+            opts.campaigns = !no_campaigns;
+            opts.fov_mrad = fov_mrad;
             opts.canopy.trees = trees;
             let text = pipeline::with_threads(threads, || bench::run(&opts))?;
             let path = bench::write_report(&opts, &text)?;

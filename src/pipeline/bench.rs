@@ -31,6 +31,16 @@ pub struct BenchOptions {
     /// Field-of-view half angle, mrad (GEDI: 0.3).
     pub fov_mrad: f64,
     pub canopy: Canopy,
+    /// Footprint diameters (m) of the paper's Table 2: rays each method needs at each.
+    pub table2_footprints: Vec<f64>,
+    /// Largest ray count tried per method in the Table 2 rows.
+    pub table2_max_rays: u64,
+    /// Run the campaign rows (orchard GEDI and MABEL, ALS over a forest).
+    pub campaigns: bool,
+    /// The paper's sizes for the campaign rows (`--full`).
+    pub full: bool,
+    /// Scene file of the RAMI orchard for the campaign rows.
+    pub rami_scene: PathBuf,
 }
 
 impl Default for BenchOptions {
@@ -43,6 +53,35 @@ impl Default for BenchOptions {
             footprint_diameter_m: 25.0,
             fov_mrad: 0.3,
             canopy: Canopy::default(),
+            table2_footprints: vec![0.05, 1.0, 10.0, 25.0, 30.0],
+            table2_max_rays: 2_000_000,
+            campaigns: true,
+            full: false,
+            rami_scene: PathBuf::from("scenes/rami_wco.yaml"),
+        }
+    }
+}
+
+impl BenchOptions {
+    /// The default, quick bench: a 10^6-ray reference, 3 seeds, ladders to 2·10^5 rays,
+    /// campaign rows at a tenth of the paper's size.
+    pub fn quick(dir: PathBuf) -> BenchOptions {
+        BenchOptions {
+            reference_rays: 1_000_000,
+            seeds: 3,
+            max_rays: 1_000_000,
+            table2_max_rays: 200_000,
+            dir,
+            ..BenchOptions::default()
+        }
+    }
+
+    /// `--full`: the paper's sizes, a 10^7-ray reference, 5 seeds.
+    pub fn full(dir: PathBuf) -> BenchOptions {
+        BenchOptions {
+            full: true,
+            dir,
+            ..BenchOptions::default()
         }
     }
 }
@@ -154,25 +193,29 @@ impl Bench<'_> {
 
 /// Runs the benchmark and returns the markdown report.
 pub fn run(opts: &BenchOptions) -> Result<String> {
+    crate::pipeline::bench_campaigns::reset_peak_memory();
     let scene_dir = opts.dir.join("canopy");
     let spec = opts.canopy.clone();
     let scene_path = canopy(&scene_dir, &spec)?;
     let scene = Scene::load(&scene_path, 1064.0)?;
     let stats = scene.stats();
     let altitude = 419_000.0;
-    let inst = gedi(opts.footprint_diameter_m, opts.fov_mrad, altitude);
     let origin = DVec3::new(spec.size / 2.0, spec.size / 2.0, altitude);
-    let sigma = pulse_sigma_s(&inst);
-    let gate = Gate::for_pulse(&inst, origin, -DVec3::Z, scene.bounds());
-    let b = Bench {
-        scene: &scene,
-        sub_bins: waveform::sub_bins_per_bin(gate.dt, sigma),
-        inst,
-        origin,
-        gate,
-        sigma,
-        hv: crate::photon_energy_j(1064.0),
+    let bench_for = |footprint: f64| {
+        let inst = gedi(footprint, opts.fov_mrad, altitude);
+        let sigma = pulse_sigma_s(&inst);
+        let gate = Gate::for_pulse(&inst, origin, -DVec3::Z, scene.bounds());
+        Bench {
+            scene: &scene,
+            sub_bins: waveform::sub_bins_per_bin(gate.dt, sigma),
+            inst,
+            origin,
+            gate,
+            sigma,
+            hv: crate::photon_energy_j(1064.0),
+        }
     };
+    let b = bench_for(opts.footprint_diameter_m);
     eprintln!(
         "lidarsim bench: reference waveform, bdpt, {} rays",
         opts.reference_rays
@@ -181,50 +224,11 @@ pub fn run(opts: &BenchOptions) -> Result<String> {
     if reference.received_energy_j <= 0.0 {
         return Err(Error::msg("bench: the reference waveform is empty"));
     }
-    let mut rows = Vec::new();
-    for method in [Method::Forward, Method::Backward, Method::Bdpt] {
-        let mut row = Row {
-            method,
-            rays: None,
-            rrmse: f64::NAN,
-            seconds: f64::NAN,
-            rays_per_second: f64::NAN,
-            paths_per_ray: f64::NAN,
-            curve: Vec::new(),
-        };
-        let mut rays = 100u64;
-        let mut step = 0;
-        while rays <= opts.max_rays {
-            let mut errs = Vec::new();
-            let mut secs = Vec::new();
-            let mut paths = Vec::new();
-            for s in 0..opts.seeds {
-                let (w, t) = b.run(method, rays, 17 + s);
-                errs.push(rrmse(&w.laser_photons, &reference.laser_photons));
-                secs.push(t);
-                paths.push(w.paths_per_ray as f64);
-            }
-            let e = median(&mut errs);
-            eprintln!(
-                "lidarsim bench: {method:?} {rays} rays: rRMSE {:.2}%",
-                100.0 * e
-            );
-            row.curve.push((rays, e));
-            if e <= 0.05 {
-                let t = median(&mut secs);
-                row.rays = Some(rays);
-                row.rrmse = e;
-                row.seconds = t;
-                row.rays_per_second = rays as f64 / t;
-                row.paths_per_ray = median(&mut paths);
-                break;
-            }
-            // the 1-2-5 ladder
-            rays = rays * if step % 3 == 1 { 5 } else { 2 } / if step % 3 == 1 { 2 } else { 1 };
-            step += 1;
-        }
-        rows.push(row);
-    }
+    let rows: Vec<Row> = [Method::Forward, Method::Backward, Method::Bdpt]
+        .into_iter()
+        .map(|m| ladder(&b, &reference, m, opts.seeds, opts.max_rays))
+        .collect();
+    let single_pulse_peak_mb = crate::pipeline::bench_campaigns::peak_memory_mb();
     // The sun in the same paths: wall time at the same rays per pulse, sun at 50° zenith.
     let sun_spec = |selection| crate::campaign::Sun {
         zenith_deg: 50.0,
@@ -246,6 +250,12 @@ pub fn run(opts: &BenchOptions) -> Result<String> {
     }
     let (t_off, t_on) = (median(&mut off), median(&mut on));
     let mut text = report(opts, &spec, &stats, &reference, ref_secs, &rows);
+    if let Some(mb) = single_pulse_peak_mb {
+        let _ = writeln!(
+            text,
+            "\nPeak memory of the single-pulse runs (scene and tracer): {mb:.0} MB."
+        );
+    }
     let _ = writeln!(
         text,
         "\n### Sun on and off (bdpt, {sun_rays} rays, sun at 50° zenith, 0.8 nm band)\n\n| sun | wall s (median) |\n| --- | ---: |\n| off | {t_off:.3} |\n| on | {t_on:.3} |\n\nRatio {:.2}; {photons:.3} solar photons per bin.",
@@ -260,7 +270,70 @@ pub fn run(opts: &BenchOptions) -> Result<String> {
         })
         .collect();
     text += &selection_table(&selections, sun_rays);
+
+    // the paper's Table 2: rays for rRMSE ≤ 5% at other footprints
+    if !opts.table2_footprints.is_empty() {
+        let mut t2 = Vec::new();
+        for &d in &opts.table2_footprints {
+            let bd = bench_for(d);
+            let reference = if d == opts.footprint_diameter_m {
+                reference.clone()
+            } else {
+                eprintln!(
+                    "lidarsim bench: footprint {d} m: reference, {} rays",
+                    opts.reference_rays
+                );
+                bd.run(Method::Bdpt, opts.reference_rays, 1_000_003).0
+            };
+            let rows: Vec<Row> = [Method::Forward, Method::Backward, Method::Bdpt]
+                .into_iter()
+                .map(|m| ladder(&bd, &reference, m, opts.seeds, opts.table2_max_rays))
+                .collect();
+            t2.push((d, rows));
+        }
+        text += &table2(&t2, opts.table2_max_rays);
+    }
+
+    if opts.campaigns {
+        let planned =
+            crate::pipeline::bench_campaigns::plan(&opts.dir, &opts.rami_scene, opts.full)?;
+        let (mut rows, mut skipped) = (Vec::new(), Vec::new());
+        for p in planned {
+            match p {
+                crate::pipeline::bench_campaigns::Planned::Run { name, what, text } => {
+                    eprintln!("lidarsim bench: campaign {name}");
+                    rows.push(crate::pipeline::bench_campaigns::run_row(
+                        &opts.dir, &name, &what, &text,
+                    )?);
+                }
+                crate::pipeline::bench_campaigns::Planned::Skipped { name, why } => {
+                    eprintln!("lidarsim bench: campaign {name} skipped: {why}");
+                    skipped.push((name, why));
+                }
+            }
+        }
+        text += &crate::pipeline::bench_campaigns::table(&rows, &skipped);
+    }
     Ok(text)
+}
+
+/// Table 2 of the paper: rays (and wall seconds) each method needs for rRMSE ≤ 5% by
+/// footprint diameter.
+fn table2(rows: &[(f64, Vec<Row>)], max_rays: u64) -> String {
+    let mut s = String::from(
+        "\n### Rays for rRMSE ≤ 5% by footprint diameter (paper Table 2)\n\n| footprint m | forward | backward | bdpt |\n| ---: | ---: | ---: | ---: |\n",
+    );
+    for (d, r) in rows {
+        let cells: Vec<String> = r
+            .iter()
+            .map(|row| match row.rays {
+                Some(n) => format!("{n} ({:.3} s)", row.seconds),
+                None => format!("> {max_rays}"),
+            })
+            .collect();
+        let _ = writeln!(s, "| {d} | {} |", cells.join(" | "));
+    }
+    s
 }
 
 /// How one way of choosing between the sun and the laser converges.
@@ -328,6 +401,51 @@ fn selection_table(rows: &[SelectionRow], rays: u64) -> String {
         );
     }
     s
+}
+
+/// The fewest rays on a 1-2-5 ladder from 100 whose median rRMSE over `seeds` reaches 5%.
+fn ladder(b: &Bench, reference: &Waveform, method: Method, seeds: u64, max_rays: u64) -> Row {
+    let mut row = Row {
+        method,
+        rays: None,
+        rrmse: f64::NAN,
+        seconds: f64::NAN,
+        rays_per_second: f64::NAN,
+        paths_per_ray: f64::NAN,
+        curve: Vec::new(),
+    };
+    let mut rays = 100u64;
+    let mut step = 0;
+    while rays <= max_rays {
+        let mut errs = Vec::new();
+        let mut secs = Vec::new();
+        let mut paths = Vec::new();
+        for s in 0..seeds {
+            let (w, t) = b.run(method, rays, 17 + s);
+            errs.push(rrmse(&w.laser_photons, &reference.laser_photons));
+            secs.push(t);
+            paths.push(w.paths_per_ray as f64);
+        }
+        let e = median(&mut errs);
+        eprintln!(
+            "lidarsim bench: {method:?} {rays} rays: rRMSE {:.2}%",
+            100.0 * e
+        );
+        row.curve.push((rays, e));
+        if e <= 0.05 {
+            let t = median(&mut secs);
+            row.rays = Some(rays);
+            row.rrmse = e;
+            row.seconds = t;
+            row.rays_per_second = rays as f64 / t;
+            row.paths_per_ray = median(&mut paths);
+            break;
+        }
+        // the 1-2-5 ladder
+        rays = rays * if step % 3 == 1 { 5 } else { 2 } / if step % 3 == 1 { 2 } else { 1 };
+        step += 1;
+    }
+    row
 }
 
 fn median(v: &mut [f64]) -> f64 {
@@ -438,6 +556,9 @@ pub fn quick_options(dir: &Path) -> BenchOptions {
         reference_rays: 200_000,
         seeds: 3,
         max_rays: 50_000,
+        table2_footprints: vec![1.0],
+        table2_max_rays: 50_000,
+        campaigns: false,
         dir: dir.to_path_buf(),
         footprint_diameter_m: 25.0,
         // few but large leaves: a dense canopy that is quick to build

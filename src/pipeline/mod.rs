@@ -9,6 +9,7 @@
 //! uninterrupted one, since every random draw derives from (seed, pulse, chunk).
 
 pub mod bench;
+pub mod bench_campaigns;
 pub mod compare;
 pub mod parquet;
 pub mod products;
@@ -520,7 +521,7 @@ fn clean_temp_files(dir: &Path) {
     }
 }
 
-fn part_name(k: usize) -> String {
+pub fn part_name(k: usize) -> String {
     format!("waveforms/part-{k:05}.parquet")
 }
 

@@ -41,15 +41,6 @@ pub fn wanted(loaded: &Loaded) -> Wanted {
     }
 }
 
-/// Reads every waveform part of a run, in pulse order.
-pub fn read_all(out: &Path, parts: usize) -> Result<Vec<Waveform>> {
-    let mut all = Vec::new();
-    for k in 0..parts {
-        all.extend(parquet::read_waveforms(&out.join(super::part_name(k)))?);
-    }
-    Ok(all)
-}
-
 /// LAS class of a component: the surface class with the most impulse energy within two
 /// sigmas of its centre.
 fn class_of(w: &Waveform, centre: f64, sigma: f64) -> u8 {
@@ -105,41 +96,63 @@ pub fn discrete_returns(loaded: &Loaded, pulses: &[Pulse], waveforms: &[Waveform
     by_pulse.into_iter().flatten().collect()
 }
 
-/// Up to four waveforms worth looking at: those with the most returns, and the first with a
-/// single return, for `waveforms.png`.
-fn example_waveforms(
-    loaded: &Loaded,
-    waveforms: &[Waveform],
-    points: &[Point],
-) -> Vec<WaveformFigure> {
-    let mut returns: std::collections::BTreeMap<u64, u8> = std::collections::BTreeMap::new();
-    for p in points {
-        returns.insert(p.pulse_id, p.number_of_returns);
+/// Up to four waveforms worth looking at, kept while the parts stream by: the three with the
+/// most returns (earliest first among equals) and the first with a single return.
+#[derive(Default)]
+struct Examples {
+    most: Vec<(u8, u64, Waveform)>,
+    single: Option<Waveform>,
+}
+
+impl Examples {
+    fn offer(&mut self, waveforms: &[Waveform], points: &[Point]) {
+        let mut returns: std::collections::BTreeMap<u64, u8> = std::collections::BTreeMap::new();
+        for p in points {
+            returns.insert(p.pulse_id, p.number_of_returns);
+        }
+        for w in waveforms {
+            let Some(&n) = returns.get(&w.pulse_id) else {
+                continue;
+            };
+            if n == 1 && self.single.is_none() {
+                self.single = Some(w.clone());
+            }
+            let better = self.most.len() < 3
+                || self.most.last().is_some_and(|l| {
+                    (n, std::cmp::Reverse(w.pulse_id)) > (l.0, std::cmp::Reverse(l.1))
+                });
+            if better {
+                self.most.push((n, w.pulse_id, w.clone()));
+                self.most.sort_by(|a, b| b.0.cmp(&a.0).then(a.1.cmp(&b.1)));
+                self.most.truncate(3);
+            }
+        }
     }
-    let mut order: Vec<(u64, u8)> = returns.into_iter().collect();
-    order.sort_by(|a, b| b.1.cmp(&a.1).then(a.0.cmp(&b.0)));
-    let mut chosen: Vec<u64> = order.iter().take(3).map(|r| r.0).collect();
-    if let Some(single) = order.iter().find(|r| r.1 == 1 && !chosen.contains(&r.0)) {
-        chosen.push(single.0);
+
+    fn figures(self, loaded: &Loaded) -> Vec<WaveformFigure> {
+        let mut list: Vec<Waveform> = self.most.into_iter().map(|m| m.2).collect();
+        if let Some(s) = self.single {
+            if !list.iter().any(|w| w.pulse_id == s.pulse_id) {
+                list.push(s);
+            }
+        }
+        list.iter()
+            .map(|w| WaveformFigure {
+                pulse_id: w.pulse_id,
+                t0_ns: w.t0_ns,
+                bin_ns: w.bin_ns as f64,
+                photons: w.laser_photons.clone(),
+                components: components(loaded, w),
+            })
+            .collect()
     }
-    chosen
-        .iter()
-        .filter_map(|id| waveforms.iter().find(|w| w.pulse_id == *id))
-        .map(|w| WaveformFigure {
-            pulse_id: w.pulse_id,
-            t0_ns: w.t0_ns,
-            bin_ns: w.bin_ns as f64,
-            photons: w.laser_photons.clone(),
-            components: components(loaded, w),
-        })
-        .collect()
 }
 
 /// `points_top.png` and `waveforms.png` beside points.las.
 fn point_figures(
     loaded: &Loaded,
     out: &Path,
-    waveforms: &[Waveform],
+    examples: Examples,
     points: &[Point],
 ) -> Result<Vec<String>> {
     // lowest first, so the top of the canopy is what one sees from above
@@ -167,7 +180,7 @@ fn point_figures(
             points.len()
         ),
     )?;
-    let examples = example_waveforms(loaded, waveforms, points);
+    let examples = examples.figures(loaded);
     let mut written = vec!["points_top.png".to_string()];
     if !examples.is_empty() {
         figures::waveforms(&out.join("waveforms.png"), &examples)?;
@@ -210,22 +223,41 @@ pub fn run(
     parts: usize,
 ) -> Result<(Vec<String>, String)> {
     let want = wanted(loaded);
-    let waveforms = read_all(out, parts)?;
-    if waveforms.len() != pulses.len() {
+    // one part of waveforms in memory at a time: a long gate of fine bins makes a waveform
+    // tens of kilobytes, and a campaign millions of them
+    let (mut points, mut rows, mut examples, mut seen) =
+        (Vec::new(), Vec::new(), Examples::default(), 0usize);
+    for k in 0..parts {
+        let part = parquet::read_waveforms(&out.join(super::part_name(k)))?;
+        if part.iter().any(|w| w.pulse_id as usize >= pulses.len()) {
+            return Err(Error::msg(format!(
+                "{}: waveforms of pulses that were not planned: run again without --resume",
+                out.display()
+            )));
+        }
+        seen += part.len();
+        if want.points {
+            let p = discrete_returns(loaded, pulses, &part);
+            examples.offer(&part, &p);
+            points.extend(p);
+        }
+        if want.photons {
+            rows.extend(photon_events(loaded, pulses, &part));
+        }
+    }
+    if seen != pulses.len() {
         return Err(Error::msg(format!(
-            "{}: {} waveforms for {} planned pulses: run again with --resume",
+            "{}: {seen} waveforms for {} planned pulses: run again with --resume",
             out.display(),
-            waveforms.len(),
             pulses.len()
         )));
     }
     let mut outputs = Vec::new();
     let mut summary = serde_json::json!({ "pulses": pulses.len() });
     if want.points {
-        let points = discrete_returns(loaded, pulses, &waveforms);
         write_las(&out.join("points.las"), &points)?;
         outputs.push("points.las".to_string());
-        outputs.extend(point_figures(loaded, out, &waveforms, &points)?);
+        outputs.extend(point_figures(loaded, out, examples, &points)?);
         // pulse density over the area the first returns cover
         let (mut lo, mut hi) = ([f64::MAX; 2], [f64::MIN; 2]);
         for p in points.iter().filter(|p| p.return_number == 1) {
@@ -254,7 +286,6 @@ pub fn run(
         }
     }
     if want.photons {
-        let rows = photon_events(loaded, pulses, &waveforms);
         write_photons(&out.join("photons.parquet"), &rows)?;
         outputs.push("photons.parquet".to_string());
         let count = |s: u8| rows.iter().filter(|r| r.source == s).count();

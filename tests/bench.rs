@@ -14,7 +14,10 @@ fn quick_bench_reports_falling_error() {
         "| method | rays for rRMSE ≤ 5% | rRMSE | wall s | rays/s | effective paths/ray |"
     ));
     assert!(text.contains("| footprint m | forward | backward | bdpt |"));
-    assert!(text.lines().any(|l| l.starts_with("| 1 | ")), "no Table 2 row");
+    assert!(
+        text.lines().any(|l| l.starts_with("| 1 | ")),
+        "no Table 2 row"
+    );
     assert!(text.contains("| fixed | 0.500 |") && text.contains("| power | "));
     for m in ["forward", "backward", "bdpt"] {
         assert!(

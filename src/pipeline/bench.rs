@@ -194,13 +194,26 @@ impl Bench<'_> {
 /// Runs the benchmark and returns the markdown report.
 pub fn run(opts: &BenchOptions) -> Result<String> {
     crate::pipeline::bench_campaigns::reset_peak_memory();
-    let scene_dir = opts.dir.join("canopy");
+    // full: the generated forest (the paper's stand size); quick: a lighter canopy
     let spec = opts.canopy.clone();
-    let scene_path = canopy(&scene_dir, &spec)?;
+    let (scene_path, size, what) = if opts.full {
+        let (path, size) = crate::pipeline::bench_campaigns::forest_scene(&opts.dir, true)?;
+        (path, size, format!("generated forest (`lidarsim scene generate forest --seed 2`) on {size} m × {size} m"))
+    } else {
+        let path = canopy(&opts.dir.join("canopy"), &spec)?;
+        (
+            path,
+            spec.size,
+            format!(
+                "{} crowns ({} templates × {} leaves) on {} m × {} m",
+                spec.trees, spec.templates, spec.leaves, spec.size, spec.size
+            ),
+        )
+    };
     let scene = Scene::load(&scene_path, 1064.0)?;
     let stats = scene.stats();
     let altitude = 419_000.0;
-    let origin = DVec3::new(spec.size / 2.0, spec.size / 2.0, altitude);
+    let origin = DVec3::new(size / 2.0, size / 2.0, altitude);
     let bench_for = |footprint: f64| {
         let inst = gedi(footprint, opts.fov_mrad, altitude);
         let sigma = pulse_sigma_s(&inst);
@@ -249,7 +262,7 @@ pub fn run(opts: &BenchOptions) -> Result<String> {
         photons = w.solar_photons_per_bin as f64;
     }
     let (t_off, t_on) = (median(&mut off), median(&mut on));
-    let mut text = report(opts, &spec, &stats, &reference, ref_secs, &rows);
+    let mut text = report(opts, &what, &stats, &reference, ref_secs, &rows);
     if let Some(mb) = single_pulse_peak_mb {
         let _ = writeln!(
             text,
@@ -460,7 +473,7 @@ fn median(v: &mut [f64]) -> f64 {
 
 fn report(
     opts: &BenchOptions,
-    spec: &Canopy,
+    what: &str,
     stats: &crate::scene::SceneStats,
     reference: &Waveform,
     ref_secs: f64,
@@ -470,17 +483,12 @@ fn report(
     let threads = rayon::current_num_threads();
     let _ = writeln!(
         s,
-        "### Rays to reach rRMSE ≤ 5%: GEDI-like pulse, {} m footprint, generated canopy\n",
+        "### Rays to reach rRMSE ≤ 5%: GEDI-like pulse, {} m footprint, at the scene's centre\n",
         opts.footprint_diameter_m
     );
     let _ = writeln!(
         s,
-        "Scene: {} crowns ({} templates × {} leaves) on {} m × {} m, {} instanced triangles. Reference: bdpt, {} rays, {:.1} s; {:.1}% of its energy beyond first order. {} seeds per ray count, median; {} threads.\n",
-        spec.trees,
-        spec.templates,
-        spec.leaves,
-        spec.size,
-        spec.size,
+        "Scene: {what}, {} instanced triangles. Reference: bdpt, {} rays, {:.1} s; {:.1}% of its energy beyond first order. {} seeds per ray count, median; {} threads.\n",
         stats.instanced_triangles,
         opts.reference_rays,
         ref_secs,

@@ -6,6 +6,7 @@
 use crate::error::{Error, Result};
 use crate::products::dsm::{DsmReport, Grid};
 use crate::products::returns::Component;
+use plotters::coord::types::RangedCoordf64;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 use std::path::Path;
@@ -149,6 +150,37 @@ fn colour_bar(
     Ok(())
 }
 
+type MapChart<'a, 'b> =
+    ChartContext<'a, BitMapBackend<'b>, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
+
+/// A map in scene coordinates (x, y in metres), with its axes drawn.
+fn map_chart<'a, 'b>(
+    area: &'a Area<'b>,
+    path: &Path,
+    title: &str,
+    x: std::ops::Range<f64>,
+    y: std::ops::Range<f64>,
+) -> Result<MapChart<'a, 'b>> {
+    let mut chart = ChartBuilder::on(area)
+        .caption(title, ("sans-serif", 18))
+        .margin(10)
+        .x_label_area_size(40)
+        .y_label_area_size(55)
+        .build_cartesian_2d(x, y)
+        .map_err(|e| fail(path, e))?;
+    chart
+        .configure_mesh()
+        .disable_x_mesh()
+        .disable_y_mesh()
+        .x_desc("x (m)")
+        .y_desc("y (m)")
+        .x_label_formatter(&short)
+        .y_label_formatter(&short)
+        .draw()
+        .map_err(|e| fail(path, e))?;
+    Ok(chart)
+}
+
 /// `error_map.png`: first-return DSM minus reference per cell, north up, with a colour bar.
 pub fn dsm_error_map(
     path: &Path,
@@ -166,23 +198,7 @@ pub fn dsm_error_map(
             x0 + grid.cell * grid.nx as f64,
             y0 + grid.cell * grid.ny as f64,
         );
-        let mut chart = ChartBuilder::on(&left)
-            .caption(title, ("sans-serif", 18))
-            .margin(10)
-            .x_label_area_size(40)
-            .y_label_area_size(55)
-            .build_cartesian_2d(x0..x1, y0..y1)
-            .map_err(|e| fail(path, e))?;
-        chart
-            .configure_mesh()
-            .disable_x_mesh()
-            .disable_y_mesh()
-            .x_desc("x (m)")
-            .y_desc("y (m)")
-            .x_label_formatter(&short)
-            .y_label_formatter(&short)
-            .draw()
-            .map_err(|e| fail(path, e))?;
+        let mut chart = map_chart(&left, path, title, x0..x1, y0..y1)?;
         chart
             .draw_series((0..grid.ny).flat_map(|j| {
                 (0..grid.nx).map(move |i| {
@@ -344,23 +360,13 @@ pub fn points_top_view(path: &Path, points: &[TopPoint], title: &str) -> Result<
     png(path, (w, h), |root| {
         let (left, right) = root.split_horizontally(w - 110);
         let pad = 0.02 * span;
-        let mut chart = ChartBuilder::on(&left)
-            .caption(title, ("sans-serif", 18))
-            .margin(10)
-            .x_label_area_size(40)
-            .y_label_area_size(55)
-            .build_cartesian_2d((lo[0] - pad)..(hi[0] + pad), (lo[1] - pad)..(hi[1] + pad))
-            .map_err(|e| fail(path, e))?;
-        chart
-            .configure_mesh()
-            .disable_x_mesh()
-            .disable_y_mesh()
-            .x_desc("x (m)")
-            .y_desc("y (m)")
-            .x_label_formatter(&short)
-            .y_label_formatter(&short)
-            .draw()
-            .map_err(|e| fail(path, e))?;
+        let mut chart = map_chart(
+            &left,
+            path,
+            title,
+            (lo[0] - pad)..(hi[0] + pad),
+            (lo[1] - pad)..(hi[1] + pad),
+        )?;
         chart
             .draw_series(
                 shown

@@ -227,6 +227,9 @@ pub fn run(
     // tens of kilobytes, and a campaign millions of them
     let (mut points, mut rows, mut examples, mut seen) =
         (Vec::new(), Vec::new(), Examples::default(), 0usize);
+    let bar = super::progress(pulses.len() as u64, "products");
+    let start = std::time::Instant::now();
+    let every = parts.div_ceil(10).max(1);
     for k in 0..parts {
         let part = parquet::read_waveforms(&out.join(super::part_name(k)))?;
         if part.iter().any(|w| w.pulse_id as usize >= pulses.len()) {
@@ -244,7 +247,18 @@ pub fn run(
         if want.photons {
             rows.extend(photon_events(loaded, pulses, &part));
         }
+        bar.inc(part.len() as u64);
+        if bar.is_hidden() && (k + 1) % every == 0 && k + 1 < parts {
+            let rate = seen as f64 / start.elapsed().as_secs_f64().max(1e-9);
+            super::log(&format!(
+                "products: {}/{} parts, {rate:.0} pulses/s, {:.0} s left",
+                k + 1,
+                parts,
+                (pulses.len() - seen.min(pulses.len())) as f64 / rate
+            ));
+        }
     }
+    bar.finish_and_clear();
     if seen != pulses.len() {
         return Err(Error::msg(format!(
             "{}: {seen} waveforms for {} planned pulses: run again with --resume",

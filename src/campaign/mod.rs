@@ -339,13 +339,14 @@ impl Loaded {
     }
 }
 
-/// Checks that a number is finite and within a range, with a located error otherwise.
-struct Check<'a> {
-    doc: &'a Doc,
+/// Checks that a number is finite and within a range, with a located error otherwise (the
+/// campaign's and the platform planner's checks alike).
+pub(crate) struct Check<'a> {
+    pub doc: &'a Doc,
 }
 
 impl Check<'_> {
-    fn finite(&self, key: &str, v: f64) -> Result<()> {
+    pub(crate) fn finite(&self, key: &str, v: f64) -> Result<()> {
         if v.is_finite() {
             Ok(())
         } else {
@@ -354,7 +355,7 @@ impl Check<'_> {
                 .error(key, format!("must be a finite number, found {v}")))
         }
     }
-    fn positive(&self, key: &str, v: f64) -> Result<()> {
+    pub(crate) fn positive(&self, key: &str, v: f64) -> Result<()> {
         self.finite(key, v)?;
         if v > 0.0 {
             Ok(())
@@ -362,7 +363,7 @@ impl Check<'_> {
             Err(self.doc.error(key, format!("must be positive, found {v}")))
         }
     }
-    fn non_negative(&self, key: &str, v: f64) -> Result<()> {
+    pub(crate) fn non_negative(&self, key: &str, v: f64) -> Result<()> {
         self.finite(key, v)?;
         if v >= 0.0 {
             Ok(())
@@ -372,7 +373,7 @@ impl Check<'_> {
                 .error(key, format!("must not be negative, found {v}")))
         }
     }
-    fn within(&self, key: &str, v: f64, lo: f64, hi: f64, what: &str) -> Result<()> {
+    pub(crate) fn within(&self, key: &str, v: f64, lo: f64, hi: f64, what: &str) -> Result<()> {
         self.finite(key, v)?;
         if v >= lo && v <= hi {
             Ok(())
@@ -380,13 +381,28 @@ impl Check<'_> {
             Err(self.doc.error(key, format!("must be {what}, found {v}")))
         }
     }
-    fn opt_positive(&self, key: &str, v: Option<f64>) -> Result<()> {
+    pub(crate) fn opt_positive(&self, key: &str, v: Option<f64>) -> Result<()> {
         v.map_or(Ok(()), |v| self.positive(key, v))
     }
-    fn opt_non_negative(&self, key: &str, v: Option<f64>) -> Result<()> {
+    pub(crate) fn opt_non_negative(&self, key: &str, v: Option<f64>) -> Result<()> {
         v.map_or(Ok(()), |v| self.non_negative(key, v))
     }
-    fn vec_finite(&self, key: &str, v: &[f64]) -> Result<()> {
+    pub(crate) fn opt_finite(&self, key: &str, v: Option<f64>) -> Result<()> {
+        v.map_or(Ok(()), |v| self.finite(key, v))
+    }
+    /// Strictly between `lo` and `hi` degrees.
+    pub(crate) fn open_deg(&self, key: &str, v: f64, lo: f64, hi: f64) -> Result<()> {
+        self.finite(key, v)?;
+        if v > lo && v < hi {
+            Ok(())
+        } else {
+            Err(self.doc.error(
+                key,
+                format!("must lie strictly between {lo} and {hi} degrees, found {v}"),
+            ))
+        }
+    }
+    pub(crate) fn vec_finite(&self, key: &str, v: &[f64]) -> Result<()> {
         v.iter().try_for_each(|x| self.finite(key, *x))
     }
 }

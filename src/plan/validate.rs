@@ -5,7 +5,7 @@
 //! derived quantities the planners compute.
 
 use super::{als::Als, kind_phrase, Pattern, MAX_PULSES};
-use crate::campaign::{Doc, Platform, PlatformKind, Segment};
+use crate::campaign::{Check, Doc, Platform, PlatformKind, Segment};
 use crate::error::Result;
 
 /// Every platform key and whether this platform gives it.
@@ -108,7 +108,7 @@ pub fn numbers(doc: &Doc, p: &Platform) -> Result<()> {
         PlatformKind::Spaceborne => {
             c.opt_positive("platform.ground_speed_m_s", p.ground_speed_m_s)?;
             if let Some(t) = &p.track {
-                c.segment("platform.track", t)?;
+                segment(&c, "platform.track", t)?;
             }
             if let Some(beams) = &p.beams {
                 if beams.is_empty() {
@@ -125,13 +125,13 @@ pub fn numbers(doc: &Doc, p: &Platform) -> Result<()> {
                 }
             }
             if let Some(a) = p.off_nadir_deg {
-                c.open("platform.off_nadir_deg", a, -90.0, 90.0)?;
+                c.open_deg("platform.off_nadir_deg", a, -90.0, 90.0)?;
             }
             Ok(())
         }
         PlatformKind::Track => {
             if let Some(t) = &p.track {
-                c.segment("platform.track", t)?;
+                segment(&c, "platform.track", t)?;
             }
             c.opt_positive("platform.along_track_step_m", p.along_track_step_m)?;
             if let (Some(t), Some(step)) = (&p.track, p.along_track_step_m) {
@@ -203,7 +203,7 @@ fn als(c: &Check, p: &Platform) -> Result<()> {
     let key = "platform.scanner.scan_angle_deg";
     let [lo, hi] = s.scan_angle_deg;
     for a in [lo, hi] {
-        c.open(key, a, -90.0, 90.0)?;
+        c.open_deg(key, a, -90.0, 90.0)?;
     }
     if lo >= hi {
         return Err(doc.error(
@@ -234,7 +234,7 @@ fn als(c: &Check, p: &Platform) -> Result<()> {
         return Err(doc.error("platform.lines", "the list of flight lines is empty"));
     }
     for (i, l) in lines.iter().enumerate() {
-        c.segment(&format!("platform.lines[{i}]"), l)?;
+        segment(c, &format!("platform.lines[{i}]"), l)?;
     }
     // Every key is present and sane here, so the planner's derived quantities exist.
     let a = Als::new(p).map_err(|e| doc.error("platform", e))?;
@@ -289,59 +289,18 @@ pub fn size(doc: &Doc, p: &Platform) -> Result<()> {
     Ok(())
 }
 
-struct Check<'a> {
-    doc: &'a Doc,
-}
-
-impl Check<'_> {
-    fn finite(&self, key: &str, v: f64) -> Result<()> {
-        if v.is_finite() {
-            Ok(())
-        } else {
-            Err(self
-                .doc
-                .error(key, format!("must be a finite number, found {v}")))
-        }
+/// A segment's ends are finite and distinct.
+fn segment(c: &Check, key: &str, s: &Segment) -> Result<()> {
+    c.vec_finite(&format!("{key}.start"), &s.start)?;
+    c.vec_finite(&format!("{key}.end"), &s.end)?;
+    if s.start == s.end {
+        return Err(c.doc.error(
+            &format!("{key}.end"),
+            format!(
+                "must differ from start ({:?}): a line needs a direction",
+                s.start
+            ),
+        ));
     }
-    fn opt_finite(&self, key: &str, v: Option<f64>) -> Result<()> {
-        v.map_or(Ok(()), |v| self.finite(key, v))
-    }
-    fn opt_positive(&self, key: &str, v: Option<f64>) -> Result<()> {
-        let Some(v) = v else { return Ok(()) };
-        self.finite(key, v)?;
-        if v > 0.0 {
-            Ok(())
-        } else {
-            Err(self.doc.error(key, format!("must be positive, found {v}")))
-        }
-    }
-    /// Strictly between `lo` and `hi`.
-    fn open(&self, key: &str, v: f64, lo: f64, hi: f64) -> Result<()> {
-        self.finite(key, v)?;
-        if v > lo && v < hi {
-            Ok(())
-        } else {
-            Err(self.doc.error(
-                key,
-                format!("must lie strictly between {lo} and {hi} degrees, found {v}"),
-            ))
-        }
-    }
-    fn vec_finite(&self, key: &str, v: &[f64]) -> Result<()> {
-        v.iter().try_for_each(|x| self.finite(key, *x))
-    }
-    fn segment(&self, key: &str, s: &Segment) -> Result<()> {
-        self.vec_finite(&format!("{key}.start"), &s.start)?;
-        self.vec_finite(&format!("{key}.end"), &s.end)?;
-        if s.start == s.end {
-            return Err(self.doc.error(
-                &format!("{key}.end"),
-                format!(
-                    "must differ from start ({:?}): a line needs a direction",
-                    s.start
-                ),
-            ));
-        }
-        Ok(())
-    }
+    Ok(())
 }

@@ -14,6 +14,7 @@ fn quick_bench_reports_falling_error() {
         "| method | rays for rRMSE ≤ 5% | rRMSE | wall s | rays/s | effective paths/ray |"
     ));
     assert!(text.contains("| footprint m | forward | backward | bdpt |"));
+    assert!(text.contains("median R² by rays:"));
     assert!(
         text.lines().any(|l| l.starts_with("| 1 | ")),
         "no Table 2 row"

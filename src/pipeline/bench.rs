@@ -101,6 +101,8 @@ pub struct Row {
     pub paths_per_ray: f64,
     /// (rays, median rRMSE) along the ladder.
     pub curve: Vec<(u64, f64)>,
+    /// (rays, median R² against the reference) along the ladder.
+    pub r2: Vec<(u64, f64)>,
 }
 
 fn gedi(footprint_diameter_m: f64, fov_mrad: f64, altitude: f64) -> Instrument {
@@ -129,6 +131,28 @@ pub fn rrmse(w: &[f32], reference: &[f32]) -> f64 {
         / n;
     let mean = bins.iter().map(|&i| reference[i] as f64).sum::<f64>() / n;
     mse.sqrt() / mean
+}
+
+/// Coefficient of determination of a waveform against the reference, over the same bins as
+/// [`rrmse`]: 1 − Σ(w − r)² / Σ(r − r̄)².
+pub fn r_squared(w: &[f32], reference: &[f32]) -> f64 {
+    let peak = reference.iter().cloned().fold(0.0f32, f32::max) as f64;
+    let bins: Vec<usize> = (0..reference.len())
+        .filter(|&i| reference[i] as f64 > 1e-3 * peak)
+        .collect();
+    if bins.len() < 2 {
+        return f64::NAN;
+    }
+    let mean = bins.iter().map(|&i| reference[i] as f64).sum::<f64>() / bins.len() as f64;
+    let ss_res: f64 = bins
+        .iter()
+        .map(|&i| (w[i] as f64 - reference[i] as f64).powi(2))
+        .sum();
+    let ss_tot: f64 = bins
+        .iter()
+        .map(|&i| (reference[i] as f64 - mean).powi(2))
+        .sum();
+    1.0 - ss_res / ss_tot
 }
 
 struct Bench<'a> {
@@ -429,6 +453,7 @@ fn ladder(b: &Bench, reference: &Waveform, method: Method, seeds: u64, max_rays:
         rays_per_second: f64::NAN,
         paths_per_ray: f64::NAN,
         curve: Vec::new(),
+        r2: Vec::new(),
     };
     let mut rays = 100u64;
     let mut step = 0;
@@ -436,9 +461,11 @@ fn ladder(b: &Bench, reference: &Waveform, method: Method, seeds: u64, max_rays:
         let mut errs = Vec::new();
         let mut secs = Vec::new();
         let mut paths = Vec::new();
+        let mut r2 = Vec::new();
         for s in 0..seeds {
             let (w, t) = b.run(method, rays, 17 + s);
             errs.push(rrmse(&w.laser_photons, &reference.laser_photons));
+            r2.push(r_squared(&w.laser_photons, &reference.laser_photons));
             secs.push(t);
             paths.push(w.paths_per_ray as f64);
         }
@@ -448,6 +475,7 @@ fn ladder(b: &Bench, reference: &Waveform, method: Method, seeds: u64, max_rays:
             100.0 * e
         );
         row.curve.push((rays, e));
+        row.r2.push((rays, median(&mut r2)));
         if e <= 0.05 {
             let t = median(&mut secs);
             row.rays = Some(rays);
@@ -522,19 +550,33 @@ fn report(
             }
         }
     }
-    let _ = writeln!(s, "\nmedian rRMSE by rays:\n");
-    let _ = writeln!(
-        s,
-        "| rays | {} |",
-        rows.iter()
-            .map(|r| format!("{:?}", r.method).to_lowercase())
-            .collect::<Vec<_>>()
-            .join(" | ")
+    s += &ladder_table(
+        "median rRMSE by rays",
+        rows,
+        |r| &r.curve,
+        |v| format!("{:.2}%", 100.0 * v),
     );
+    s += &ladder_table("median R² by rays", rows, |r| &r.r2, |v| format!("{v:.4}"));
+    s
+}
+
+/// One column per method of a figure along the ray ladder.
+fn ladder_table(
+    title: &str,
+    rows: &[Row],
+    column: impl Fn(&Row) -> &[(u64, f64)],
+    cell: impl Fn(f64) -> String,
+) -> String {
+    let mut s = format!("\n{title}:\n\n");
+    let names: Vec<String> = rows
+        .iter()
+        .map(|r| format!("{:?}", r.method).to_lowercase())
+        .collect();
+    let _ = writeln!(s, "| rays | {} |", names.join(" | "));
     let _ = writeln!(s, "| ---: |{}", " ---: |".repeat(rows.len()));
     let mut all: Vec<u64> = rows
         .iter()
-        .flat_map(|r| r.curve.iter().map(|c| c.0))
+        .flat_map(|r| column(r).iter().map(|c| c.0))
         .collect();
     all.sort();
     all.dedup();
@@ -542,10 +584,10 @@ fn report(
         let cells: Vec<String> = rows
             .iter()
             .map(|r| {
-                r.curve
+                column(r)
                     .iter()
                     .find(|c| c.0 == n)
-                    .map(|c| format!("{:.2}%", 100.0 * c.1))
+                    .map(|c| cell(c.1))
                     .unwrap_or_default()
             })
             .collect();

@@ -4,23 +4,8 @@
 mod common;
 
 use common::*;
-use lidarsim::pipeline::{self, RunOptions};
 use lidarsim::products::las::read_las;
-use std::path::{Path, PathBuf};
-
-fn run_campaign(dir: &Path, text: &str) -> PathBuf {
-    let path = write(dir, "campaign.yaml", text);
-    let out = dir.join("run");
-    pipeline::run(
-        &path,
-        &RunOptions {
-            out: Some(out.clone()),
-            ..Default::default()
-        },
-    )
-    .unwrap_or_else(|e| panic!("{e}"));
-    out
-}
+use std::path::Path;
 
 fn json(path: &Path) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
@@ -94,7 +79,7 @@ fn plane_points_have_the_plane_height_and_the_closed_form_reflectance() {
             c.bin,
             h = c.h
         );
-        let out = run_campaign(&dir, &text);
+        let out = run_campaign(&dir, &text, None);
         let points = read_las(&out.join("points.las")).unwrap();
         let waveforms =
             lidarsim::pipeline::parquet::read_waveforms(&out.join("waveforms/part-00000.parquet"))
@@ -187,7 +172,7 @@ fn boxes_leave_a_coverage_gap_that_grows_with_scan_angle() {
         "name: boxes\nmaterials:\n  soil: { reflectance: 0.3 }\n  roof: { reflectance: 0.4 }\nobjects:\n  - plane: { z: 0, extent: [[-10, -60], [80, 60]], material: soil, class: ground }\n  - mesh: { file: boxes.obj, material: roof, class: building }\n",
     );
     let text = "name: boxes\nscene: scene.yaml\nseed: 9\nwavelength_nm: 1064\ninstrument:\n  kind: discrete_return\n  pulse_energy_j: 0.0001\n  pulse_fwhm_ns: 3.0\n  footprint_half_angle_mrad: 0.25\n  fov_half_angle_mrad: 0.5\n  receiver_area_m2: 0.01\n  bin_ns: 0.5\n  max_returns: 4\n  detection_threshold_photons: 5\nplatform:\n  kind: als\n  altitude_m: 120\n  speed_m_s: 30\n  prf_hz: 100000\n  lines: [ { start: [5, 0], end: [70, 0] } ]\n  scanner: { pattern: line, scan_angle_deg: [-24, 24], look_angle_step_deg: 0.2, along_track_step_m: 0.4 }\nsimulation: { method: forward, rays_per_pulse: 8, max_order: 1 }\nproducts: { points: true, dsm: { resolution_m: 1.0 } }\n";
-    let out = run_campaign(&dir, text);
+    let out = run_campaign(&dir, text, None);
     let report = json(&out.join("dsm/report.json"));
     let bins = report["by_scan_angle"].as_array().unwrap();
     let gap = |lo: f64, hi: f64| {
@@ -250,7 +235,7 @@ fn plane_dsm_bias_is_under_a_centimetre() {
         "name: plane\nscene: {}\nseed: 2\nwavelength_nm: 1064\ninstrument:\n  kind: discrete_return\n  pulse_energy_j: 0.00001\n  pulse_fwhm_ns: 4.0\n  footprint_half_angle_mrad: 0.3\n  fov_half_angle_mrad: 0.5\n  receiver_area_m2: 0.01\n  bin_ns: 1.0\n  max_returns: 4\n  detection_threshold_photons: 5\nplatform:\n  kind: als\n  altitude_m: 300\n  speed_m_s: 30\n  prf_hz: 100000\n  lines: [ {{ start: [-40, 0], end: [40, 0] }} ]\n  scanner: {{ pattern: line, scan_angle_deg: [-15, 15], look_angle_step_deg: 0.3, along_track_step_m: 1.0 }}\nsimulation: {{ method: forward, rays_per_pulse: 16, max_order: 1 }}\nproducts: {{ points: true, dsm: {{ resolution_m: 2.0 }} }}\n",
         scene.display()
     );
-    let out = run_campaign(&dir, &text);
+    let out = run_campaign(&dir, &text, None);
     let r = json(&out.join("dsm/report.json"));
     println!("plane DSM: {}", r);
     assert!(r["bias_m"].as_f64().unwrap().abs() < 0.01);

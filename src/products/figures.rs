@@ -150,8 +150,18 @@ fn colour_bar(
     Ok(())
 }
 
-type MapChart<'a, 'b> =
+type Chart<'a, 'b> =
     ChartContext<'a, BitMapBackend<'b>, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
+
+/// The series' legend, boxed, in the chart's corner.
+fn legend<'a, 'b: 'a>(chart: &mut Chart<'a, 'b>, path: &Path) -> Result<()> {
+    chart
+        .configure_series_labels()
+        .border_style(BLACK)
+        .background_style(WHITE.mix(0.8))
+        .draw()
+        .map_err(|e| fail(path, e))
+}
 
 /// A map in scene coordinates (x, y in metres), with its axes drawn.
 fn map_chart<'a, 'b>(
@@ -160,7 +170,7 @@ fn map_chart<'a, 'b>(
     title: &str,
     x: std::ops::Range<f64>,
     y: std::ops::Range<f64>,
-) -> Result<MapChart<'a, 'b>> {
+) -> Result<Chart<'a, 'b>> {
     let mut chart = ChartBuilder::on(area)
         .caption(title, ("sans-serif", 18))
         .margin(10)
@@ -282,12 +292,7 @@ pub fn dsm_error_vs_angle(path: &Path, report: &DsmReport) -> Result<()> {
                 .draw_series(pts.iter().map(|&p| Circle::new(p, 3, colour.filled())))
                 .map_err(|e| fail(path, e))?;
         }
-        chart
-            .configure_series_labels()
-            .border_style(BLACK)
-            .background_style(WHITE.mix(0.8))
-            .draw()
-            .map_err(|e| fail(path, e))?;
+        legend(&mut chart, path)?;
 
         let mut cov = ChartBuilder::on(&bottom)
             .margin(10)
@@ -462,12 +467,7 @@ pub fn waveforms(path: &Path, list: &[WaveformFigure]) -> Result<()> {
                     .label("sum of fits")
                     .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], RED));
             }
-            chart
-                .configure_series_labels()
-                .border_style(BLACK)
-                .background_style(WHITE.mix(0.8))
-                .draw()
-                .map_err(|e| fail(path, e))?;
+            legend(&mut chart, path)?;
         }
         Ok(())
     })

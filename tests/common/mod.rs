@@ -83,8 +83,8 @@ pub fn campaign(
     )
 }
 
-/// Runs a campaign text through the library pipeline and reads its waveforms back.
-pub fn run(dir: &Path, campaign_text: &str, threads: Option<usize>) -> Vec<Waveform> {
+/// Runs a campaign text through the library pipeline into `dir/run`; returns that folder.
+pub fn run_campaign(dir: &Path, campaign_text: &str, threads: Option<usize>) -> PathBuf {
     let path = write(dir, "campaign.yaml", campaign_text);
     let out = dir.join("run");
     pipeline::run(
@@ -96,6 +96,12 @@ pub fn run(dir: &Path, campaign_text: &str, threads: Option<usize>) -> Vec<Wavef
         },
     )
     .unwrap_or_else(|e| panic!("{e}"));
+    out
+}
+
+/// Runs a campaign text through the library pipeline and reads its waveforms back.
+pub fn run(dir: &Path, campaign_text: &str, threads: Option<usize>) -> Vec<Waveform> {
+    let out = run_campaign(dir, campaign_text, threads);
     parquet::read_waveforms(&out.join("waveforms/part-00000.parquet")).unwrap()
 }
 

@@ -5,9 +5,11 @@
 
 pub mod error;
 pub mod fsutil;
+pub mod rng;
 
 pub mod campaign;
 pub mod cli;
+pub mod generate;
 pub mod pipeline;
 pub mod plan;
 pub mod products;

@@ -312,11 +312,10 @@ pub struct Loaded {
 }
 
 impl Loaded {
-    /// Reads, parses and validates a campaign file.
-    pub fn read(path: &Path) -> Result<Loaded> {
-        let doc = Doc::read(path)?;
-        let campaign: Campaign = doc.parse()?;
-        campaign.validate(&doc)?;
+    /// A parsed campaign and its file, once its scene file is found. The campaign's own keys
+    /// are checked by [`Campaign::validate`], its platform by `plan::validate` (which needs
+    /// the planners' geometry): `plan::read_campaign` does all three.
+    pub fn new(doc: Doc, campaign: Campaign) -> Result<Loaded> {
         let scene_path = doc.resolve(&campaign.scene);
         if !scene_path.is_file() {
             return Err(doc.error(
@@ -519,51 +518,7 @@ impl Campaign {
                 c.positive("products.dsm.resolution_m", d.resolution_m)?;
             }
         }
-        self.validate_platform(doc, &c)
-    }
-
-    fn validate_platform(&self, doc: &Doc, c: &Check) -> Result<()> {
-        let p = &self.platform;
-        crate::plan::validate::keys(doc, p)?;
-        if p.kind == PlatformKind::Static {
-            let pulses = p.pulses.as_ref().ok_or_else(|| {
-                doc.error(
-                    "platform",
-                    "a static platform needs `pulses:`, a list of { position, direction }",
-                )
-            })?;
-            if pulses.is_empty() {
-                return Err(doc.error("platform.pulses", "the list of pulses is empty"));
-            }
-            for (k, pulse) in pulses.iter().enumerate() {
-                c.vec_finite(&format!("platform.pulses[{k}].position"), &pulse.position)?;
-                match (&pulse.direction, pulse.zenith_deg, pulse.azimuth_deg) {
-                    (Some(d), None, None) => {
-                        let key = format!("platform.pulses[{k}].direction");
-                        c.vec_finite(&key, d)?;
-                        if (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt() < 1e-12 {
-                            return Err(doc.error(&key, "must not be the zero vector"));
-                        }
-                    }
-                    (None, z, a) => {
-                        if let Some(z) = z {
-                            c.finite(&format!("platform.pulses[{k}].zenith_deg"), z)?;
-                        }
-                        if let Some(a) = a {
-                            c.finite(&format!("platform.pulses[{k}].azimuth_deg"), a)?;
-                        }
-                    }
-                    (Some(_), _, _) => {
-                        return Err(doc.error(
-                            &format!("platform.pulses[{k}].direction"),
-                            "give either `direction` or `zenith_deg`/`azimuth_deg`, not both",
-                        ))
-                    }
-                }
-            }
-        }
-        crate::plan::validate::numbers(doc, p)?;
-        crate::plan::validate::size(doc, p)
+        Ok(())
     }
 }
 

@@ -1,6 +1,5 @@
 //! Command line: `lidarsim run`, `lidarsim check`.
 
-use crate::campaign::Loaded;
 use crate::error::{Error, Result};
 use crate::pipeline::{self, bench, RunOptions};
 use crate::plan;
@@ -211,7 +210,7 @@ fn dispatch(cli: Cli) -> Result<()> {
                     leaves,
                 },
         } => {
-            use crate::scene::generate::{generate_with_summary, GenerateOptions, SceneKind};
+            use crate::generate::{generate_with_summary, GenerateOptions, SceneKind};
             let kind: SceneKind = kind.parse()?;
             let size_m = match size.as_deref() {
                 None => None,
@@ -302,7 +301,7 @@ fn require_file(path: &std::path::Path) -> Result<()> {
 
 fn check(path: &std::path::Path) -> Result<()> {
     require_file(path)?;
-    let loaded = Loaded::read(path)?;
+    let loaded = crate::plan::read_campaign(path)?;
     let c = &loaded.campaign;
     let pulses = plan::plan(c)?;
     let t = Instant::now();

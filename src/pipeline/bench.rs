@@ -7,7 +7,7 @@
 
 use crate::campaign::{Instrument, Method, MisHeuristic, SunSelection};
 use crate::error::{Error, Result};
-use crate::scene::generate::{canopy, Canopy};
+use crate::generate::{canopy, Canopy};
 use crate::scene::Scene;
 use crate::sensor::{pulse_sigma_s, Gate, Laser, Receiver, SunSource};
 use crate::transport::{simulate_pulse, PulseSetup};

@@ -4,8 +4,8 @@
 //! note in the table, when they are absent.
 
 use crate::error::Result;
+use crate::generate::{generate_with_summary, GenerateOptions, SceneKind};
 use crate::pipeline::{self, RunOptions};
-use crate::scene::generate::{generate_with_summary, GenerateOptions, SceneKind};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Instant;

@@ -131,7 +131,7 @@ fn fingerprint(parts: &[&[u8]]) -> String {
 
 /// Runs a campaign file into its run folder (each combination of a sweep into a sub-folder).
 pub fn run(campaign_path: &Path, opts: &RunOptions) -> Result<RunSummary> {
-    let loaded = Loaded::read(campaign_path)?;
+    let loaded = plan::read_campaign(campaign_path)?;
     let out = opts
         .out
         .clone()
@@ -262,7 +262,7 @@ fn run_sweep(
                 format!("a combination does not make a valid campaign: {e}"),
             )
         })?;
-        campaign.validate(&loaded.doc).map_err(|e| {
+        plan::check_campaign(&loaded.doc, &campaign).map_err(|e| {
             Error::msg(format!(
                 "{e} (in the sweep combination {})",
                 names.join(", ")

@@ -28,7 +28,7 @@ mod tests;
 
 pub use als::Pattern;
 
-use crate::campaign::{Campaign, Platform, PlatformKind, Segment};
+use crate::campaign::{Campaign, Doc, Loaded, Platform, PlatformKind, Segment};
 use crate::error::{Error, Result};
 use glam::{DVec2, DVec3};
 
@@ -93,6 +93,20 @@ pub fn inclusive_steps(extent: f64, step: f64) -> u64 {
 /// Whether `extent` is a whole number of `step`s, within the tolerance.
 pub fn is_multiple(extent: f64, step: f64) -> bool {
     snapped_ratio(extent, step).1
+}
+
+/// Reads a campaign file and checks all of it: its own keys, its platform, its scene file.
+pub fn read_campaign(path: &std::path::Path) -> Result<Loaded> {
+    let doc = Doc::read(path)?;
+    let campaign: Campaign = doc.parse()?;
+    check_campaign(&doc, &campaign)?;
+    Loaded::new(doc, campaign)
+}
+
+/// Checks a campaign's own keys, then its platform.
+pub fn check_campaign(doc: &Doc, campaign: &Campaign) -> Result<()> {
+    campaign.validate(doc)?;
+    validate::platform(doc, &campaign.platform)
 }
 
 /// The pulses of a campaign, in emission order (`id` = index).

@@ -29,7 +29,7 @@ fn validate(platform: &str) -> Result<()> {
         path: PathBuf::from("campaign.yaml"),
         text: text(platform),
     };
-    campaign(platform).validate(&doc)
+    super::check_campaign(&doc, &campaign(platform))
 }
 
 fn error(platform: &str) -> String {
@@ -463,6 +463,6 @@ fn als_paper_campaign_file_plans_160392() {
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("pipelines/als_paper.yaml");
     let doc = Doc::read(&path).unwrap();
     let c: Campaign = doc.parse().unwrap();
-    c.validate(&doc).unwrap();
+    super::check_campaign(&doc, &c).unwrap();
     assert_eq!(plan(&c).unwrap().len(), 160_392);
 }

@@ -1,4 +1,4 @@
-//! Checks of a campaign's `platform:` block, called from `Campaign::validate`.
+//! Checks of a campaign's `platform:` block ([`platform`]), after `Campaign::validate`.
 //!
 //! It lives here, beside the planners, because the checks that matter most (a line too
 //! short for one scan line, a step larger than its range, a plan too big) need the same
@@ -7,6 +7,52 @@
 use super::{als::Als, kind_phrase, Pattern, MAX_PULSES};
 use crate::campaign::{Check, Doc, Platform, PlatformKind, Segment};
 use crate::error::Result;
+
+/// Checks a campaign's `platform:` block: the keys its kind takes, the static pulses, the
+/// numbers and the size of the plan.
+pub fn platform(doc: &Doc, p: &Platform) -> Result<()> {
+    let c = &Check { doc };
+    keys(doc, p)?;
+    if p.kind == PlatformKind::Static {
+        let pulses = p.pulses.as_ref().ok_or_else(|| {
+            doc.error(
+                "platform",
+                "a static platform needs `pulses:`, a list of { position, direction }",
+            )
+        })?;
+        if pulses.is_empty() {
+            return Err(doc.error("platform.pulses", "the list of pulses is empty"));
+        }
+        for (k, pulse) in pulses.iter().enumerate() {
+            c.vec_finite(&format!("platform.pulses[{k}].position"), &pulse.position)?;
+            match (&pulse.direction, pulse.zenith_deg, pulse.azimuth_deg) {
+                (Some(d), None, None) => {
+                    let key = format!("platform.pulses[{k}].direction");
+                    c.vec_finite(&key, d)?;
+                    if (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt() < 1e-12 {
+                        return Err(doc.error(&key, "must not be the zero vector"));
+                    }
+                }
+                (None, z, a) => {
+                    if let Some(z) = z {
+                        c.finite(&format!("platform.pulses[{k}].zenith_deg"), z)?;
+                    }
+                    if let Some(a) = a {
+                        c.finite(&format!("platform.pulses[{k}].azimuth_deg"), a)?;
+                    }
+                }
+                (Some(_), _, _) => {
+                    return Err(doc.error(
+                        &format!("platform.pulses[{k}].direction"),
+                        "give either `direction` or `zenith_deg`/`azimuth_deg`, not both",
+                    ))
+                }
+            }
+        }
+    }
+    numbers(doc, p)?;
+    size(doc, p)
+}
 
 /// Every platform key and whether this platform gives it.
 fn given(p: &Platform) -> [(&'static str, bool); 17] {

@@ -212,7 +212,7 @@ pub fn read_las(path: &Path) -> Result<Vec<Point>> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::products::rng::SplitMix64;
+    use crate::rng::SplitMix64;
 
     fn sample(n: usize) -> Vec<Point> {
         let mut r = SplitMix64::new(11);

@@ -8,4 +8,3 @@ pub mod photons;
 pub mod plot;
 pub mod points;
 pub mod returns;
-pub mod rng;

@@ -3,7 +3,7 @@
 use crate::error::{Error, Result};
 use crate::fsutil::write_atomic;
 use crate::plan::Pulse;
-use crate::products::rng::SplitMix64;
+use crate::rng::SplitMix64;
 use crate::C;
 use arrow_array::{ArrayRef, Float64Array, RecordBatch, UInt64Array, UInt8Array};
 use arrow_schema::{DataType, Field, Schema};

@@ -763,7 +763,7 @@ fn cholesky_solve(a: &mut [f64], b: &mut [f64], n: usize) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::products::rng::SplitMix64;
+    use crate::rng::SplitMix64;
 
     #[derive(Debug)]
     struct Truth {

@@ -11,7 +11,6 @@
 mod bvh;
 mod config;
 pub mod dsm;
-pub mod generate;
 mod load;
 mod mesh;
 mod table;
@@ -25,6 +24,7 @@ use bvh::{make_ray, Blas, WatertightRay, BACKOFF};
 use glam::{DVec3, Vec3, Vec3A};
 use obvhs::cwbvh::CwBvh;
 use obvhs::ray::RayHit;
+use std::collections::BTreeMap;
 use std::path::Path;
 
 /// Class of a surface, used by products to label returns with the truth.
@@ -419,4 +419,44 @@ impl Scene {
             memory_bytes: memory as u64,
         }
     }
+}
+
+/// Leaf area index of a loaded scene, from its geometry: the one-sided area of leaf facets
+/// (vegetation facets whose material transmits at the wavelength the scene was loaded at),
+/// each instance's scale² included, over the horizontal (projected) area of the ground
+/// facets. `None` when the scene has no ground. Overlapping ground objects would be counted
+/// twice.
+pub fn leaf_area_index(scene: &Scene) -> Option<f64> {
+    // (mesh, first material slot) -> (leaf area, projected ground area) at scale 1
+    let mut per_object: BTreeMap<(u32, u32), (f64, f64)> = BTreeMap::new();
+    let (mut leaf, mut ground) = (0.0f64, 0.0f64);
+    for inst in &scene.instances {
+        let (l, g) = *per_object
+            .entry((inst.mesh, inst.surfaces))
+            .or_insert_with(|| {
+                let blas = &scene.meshes[inst.mesh as usize];
+                let (mut l, mut g) = (0.0f64, 0.0f64);
+                for (t, &slot) in blas.tris.iter().zip(&blas.slots) {
+                    let s = &scene.surfaces
+                        [scene.slot_surfaces[(inst.surfaces + slot) as usize] as usize];
+                    let is_leaf = s.class == SurfaceClass::Vegetation && s.transmittance > 0.0;
+                    let is_ground = s.class == SurfaceClass::Ground;
+                    if !(is_leaf || is_ground) {
+                        continue;
+                    }
+                    let (a, b, c) = (t[0].as_dvec3(), t[1].as_dvec3(), t[2].as_dvec3());
+                    let n = (b - a).cross(c - a);
+                    if is_leaf {
+                        l += 0.5 * n.length();
+                    } else {
+                        g += 0.5 * n.z.abs();
+                    }
+                }
+                (l, g)
+            });
+        let s2 = 1.0 / (inst.inv_scale as f64 * inst.inv_scale as f64);
+        leaf += l * s2;
+        ground += g * s2;
+    }
+    (ground > 0.0).then(|| leaf / ground)
 }

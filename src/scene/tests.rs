@@ -1,4 +1,5 @@
 use super::*;
+use crate::rng::Rand;
 use std::path::PathBuf;
 
 /// A fresh folder for one test's files.
@@ -899,7 +900,7 @@ fn rami_orchard() {
     let hits: u64 = (0..rays)
         .into_par_iter()
         .map(|i| {
-            let mut rng = Lcg(i.wrapping_mul(0x9E3779B97F4A7C15) ^ 0xABCDEF);
+            let mut rng = Rand::new(i ^ 0xABCDEF);
             let o = DVec3::new(rng.range(-54.0, 54.0), rng.range(-52.0, 52.0), 10.0);
             let z = -rng.range(0.2, 1.0);
             let phi = rng.range(0.0, std::f64::consts::TAU);
@@ -920,22 +921,6 @@ fn rami_orchard() {
 fn scene_is_send_and_sync() {
     fn check<T: Send + Sync>() {}
     check::<Scene>();
-}
-
-/// Small deterministic generator for the cross-check below.
-struct Lcg(u64);
-
-impl Lcg {
-    fn next(&mut self) -> f64 {
-        self.0 = self
-            .0
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        (self.0 >> 11) as f64 / (1u64 << 53) as f64
-    }
-    fn range(&mut self, a: f64, b: f64) -> f64 {
-        a + (b - a) * self.next()
-    }
 }
 
 /// Closest hit by brute force in f64 over every instance and triangle: (t, instance, triangle,
@@ -979,7 +964,7 @@ fn brute_force(
 #[test]
 fn two_level_tracing_matches_brute_force() {
     let d = tmp("bruteforce");
-    let mut rng = Lcg(12345);
+    let mut rng = Rand::new(12345);
     let mut obj = String::from("o soup\n");
     let mut tris = Vec::new();
     for k in 0..300 {
@@ -1113,7 +1098,7 @@ fn bundled_scenes_load() {
     if p.exists() {
         // From the centre every direction meets the wall at about 10 m.
         let s = Scene::load(&p, 1064.0).unwrap();
-        let mut rng = Lcg(7);
+        let mut rng = Rand::new(7);
         for _ in 0..2000 {
             let z = rng.range(-1.0, 1.0);
             let phi = rng.range(0.0, std::f64::consts::TAU);

@@ -27,14 +27,12 @@
 //! forward keeps the receiver sub-path to its aperture point (strategies t ≤ 1), backward the
 //! light sub-path to the laser (s = 1). So the three methods cannot drift apart.
 
-pub mod rng;
-
 use crate::campaign::{Method, MisHeuristic};
+use crate::rng::Rng;
 use crate::scene::{FacetId, Scene, Surface};
 use crate::sensor::{Frame, Gate, Laser, Receiver, SunSource};
 use glam::DVec3;
 use rayon::prelude::*;
-use rng::Rng;
 use std::f64::consts::{FRAC_1_PI, PI};
 
 /// Rays per independent random stream and per unit of parallel work.

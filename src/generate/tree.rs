@@ -5,7 +5,7 @@
 //! Coordinates are written with 4 decimals (0.1 mm) and every figure reported (triangles,
 //! leaf area) is computed from the rounded values, i.e. from the geometry as a reader sees it.
 
-use super::Rand;
+use crate::rng::Rand;
 use glam::DVec3;
 use std::f64::consts::{FRAC_PI_2, PI};
 use std::fmt::Write as _;

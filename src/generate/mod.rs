@@ -4,7 +4,6 @@
 //! - [`generate`] / [`generate_with_summary`] write a [`SceneKind`]: a forest after the RAMI-IV
 //!   Järvselja birch stand (1029 trees of 7 species on a sloping hectare, over 10^8 facets
 //!   once instanced), an orchard after the RAMI-V Wellington Citrus Orchard, or flat soil.
-//! - [`leaf_area_index`] measures the leaf area index of any loaded scene from its geometry.
 //! - [`canopy`] is the older, simpler crown generator the benchmark uses.
 //!
 //! The same kind, seed and options give byte-identical files: every random number comes from
@@ -23,8 +22,7 @@ mod tree;
 
 pub use tree::LeafAngle;
 
-use super::{Scene, SurfaceClass};
-use std::collections::BTreeMap;
+use crate::rng::Rand;
 
 /// Which procedural scene to write.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -277,62 +275,6 @@ pub fn generate_with_summary(
         SceneKind::Forest => stand::forest(seed, out_dir, &o),
         SceneKind::Orchard => stand::orchard(seed, out_dir, &o),
         SceneKind::Flat => stand::flat(seed, out_dir, &o),
-    }
-}
-
-/// Leaf area index of a loaded scene, from its geometry: the one-sided area of leaf facets
-/// (vegetation facets whose material transmits at the wavelength the scene was loaded at),
-/// each instance's scale² included, over the horizontal (projected) area of the ground
-/// facets. `None` when the scene has no ground. Overlapping ground objects would be counted
-/// twice.
-pub fn leaf_area_index(scene: &Scene) -> Option<f64> {
-    // (mesh, first material slot) -> (leaf area, projected ground area) at scale 1
-    let mut per_object: BTreeMap<(u32, u32), (f64, f64)> = BTreeMap::new();
-    let (mut leaf, mut ground) = (0.0f64, 0.0f64);
-    for inst in &scene.instances {
-        let (l, g) = *per_object
-            .entry((inst.mesh, inst.surfaces))
-            .or_insert_with(|| {
-                let blas = &scene.meshes[inst.mesh as usize];
-                let (mut l, mut g) = (0.0f64, 0.0f64);
-                for (t, &slot) in blas.tris.iter().zip(&blas.slots) {
-                    let s = &scene.surfaces
-                        [scene.slot_surfaces[(inst.surfaces + slot) as usize] as usize];
-                    let is_leaf = s.class == SurfaceClass::Vegetation && s.transmittance > 0.0;
-                    let is_ground = s.class == SurfaceClass::Ground;
-                    if !(is_leaf || is_ground) {
-                        continue;
-                    }
-                    let (a, b, c) = (t[0].as_dvec3(), t[1].as_dvec3(), t[2].as_dvec3());
-                    let n = (b - a).cross(c - a);
-                    if is_leaf {
-                        l += 0.5 * n.length();
-                    } else {
-                        g += 0.5 * n.z.abs();
-                    }
-                }
-                (l, g)
-            });
-        let s2 = 1.0 / (inst.inv_scale as f64 * inst.inv_scale as f64);
-        leaf += l * s2;
-        ground += g * s2;
-    }
-    (ground > 0.0).then(|| leaf / ground)
-}
-
-/// xorshift64*: a tiny deterministic generator, so that the files do not depend on any
-/// random-number crate's version.
-struct Rand(u64);
-
-impl Rand {
-    fn new(seed: u64) -> Rand {
-        Rand(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1)
-    }
-    fn next(&mut self) -> f64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        (self.0.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 11) as f64 / (1u64 << 53) as f64
     }
 }
 

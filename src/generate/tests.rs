@@ -1,5 +1,5 @@
 use super::*;
-use crate::scene::parse_instances;
+use crate::scene::{leaf_area_index, parse_instances, Scene, SurfaceClass};
 use glam::DVec3;
 use std::time::Instant;
 

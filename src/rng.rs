@@ -1,18 +1,63 @@
-//! A small deterministic generator for photon counting and for tests.
+//! Every random number of the program, from three small generators written here so that no
+//! file depends on a random-number crate's version. Each result derives from the campaign's
+//! seed and the identity of what it is for (a pulse, a chunk of rays, a part of a scene),
+//! never from which thread ran it: the files are the same whatever the thread count.
 //!
-//! Products must be reproducible from (seed, pulse id) alone, independent of thread
-//! scheduling, so each pulse gets its own stream; SplitMix64 is enough for that (no
-//! cryptographic or long-period needs) and avoids a dependency.
+//! Three generators, not one, because each is part of what its files contain: changing one
+//! changes every simulated waveform (`Rng`), photon record (`SplitMix64`) or generated
+//! scene (`Rand`).
 
-/// SplitMix64 (Steele, Lea & Flood 2014).
-#[derive(Clone, Debug)]
-pub struct SplitMix64(u64);
-
+/// The SplitMix64 finaliser (Steele, Lea & Flood 2014): scatters the bits of a seed.
 fn mix(mut z: u64) -> u64 {
-    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
     z ^ (z >> 31)
 }
+
+/// One SplitMix64 step from `z`, used to scatter seeds.
+pub fn splitmix64(z: u64) -> u64 {
+    mix(z.wrapping_add(0x9E37_79B9_7F4A_7C15))
+}
+
+/// The transport's generator, one stream per (seed, pulse, chunk of rays): xoshiro256** (Blackman and Vigna), seeded through SplitMix64.
+#[derive(Clone, Debug)]
+pub struct Rng {
+    s: [u64; 4],
+}
+
+impl Rng {
+    pub fn new(seed: u64, stream: u64, chunk: u64) -> Rng {
+        let mut x =
+            splitmix64(seed ^ splitmix64(stream ^ splitmix64(chunk.wrapping_add(0x1234_5678))));
+        let mut s = [0u64; 4];
+        for v in &mut s {
+            x = splitmix64(x);
+            *v = x;
+        }
+        Rng { s }
+    }
+
+    pub fn next_u64(&mut self) -> u64 {
+        let result = self.s[1].wrapping_mul(5).rotate_left(7).wrapping_mul(9);
+        let t = self.s[1] << 17;
+        self.s[2] ^= self.s[0];
+        self.s[3] ^= self.s[1];
+        self.s[1] ^= self.s[2];
+        self.s[0] ^= self.s[3];
+        self.s[2] ^= t;
+        self.s[3] = self.s[3].rotate_left(45);
+        result
+    }
+
+    /// Uniform in [0, 1) with 53 random bits.
+    pub fn uniform(&mut self) -> f64 {
+        (self.next_u64() >> 11) as f64 * (1.0 / (1u64 << 53) as f64)
+    }
+}
+
+/// Photon counting's generator, one stream per (seed, pulse): SplitMix64.
+#[derive(Clone, Debug)]
+pub struct SplitMix64(u64);
 
 impl SplitMix64 {
     pub fn new(seed: u64) -> Self {
@@ -21,7 +66,7 @@ impl SplitMix64 {
 
     /// A stream for one pulse: mixing the id first keeps neighbouring ids uncorrelated.
     pub fn for_pulse(seed: u64, pulse_id: u64) -> Self {
-        SplitMix64(mix(seed ^ mix(pulse_id.wrapping_add(0x9e37_79b9_7f4a_7c15))))
+        SplitMix64(mix(seed ^ splitmix64(pulse_id)))
     }
 
     pub fn next_u64(&mut self) -> u64 {
@@ -92,6 +137,31 @@ pub fn ln_factorial(k: u64) -> f64 {
     x * x.ln() - x
         + 0.5 * (2.0 * std::f64::consts::PI * x).ln()
         + inv * (1.0 / 12.0 - inv2 * (1.0 / 360.0 - inv2 / 1260.0))
+}
+
+/// Scene generation's generator: xorshift64*.
+pub struct Rand(u64);
+
+impl Rand {
+    pub fn new(seed: u64) -> Rand {
+        Rand(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1)
+    }
+    pub fn next(&mut self) -> f64 {
+        self.0 ^= self.0 >> 12;
+        self.0 ^= self.0 << 25;
+        self.0 ^= self.0 >> 27;
+        (self.0.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 11) as f64 / (1u64 << 53) as f64
+    }
+    /// Uniform in [a, b).
+    pub fn range(&mut self, a: f64, b: f64) -> f64 {
+        a + (b - a) * self.next()
+    }
+}
+
+/// Seeds independent generators for independent parts of a scene (splitmix64 of the seed and
+/// the stream number), so that a part does not change when another one draws more numbers.
+pub fn stream(seed: u64, k: u64) -> Rand {
+    Rand::new(splitmix64(seed ^ k.wrapping_mul(0xD1B5_4A32_D192_ED03)))
 }
 
 #[cfg(test)]

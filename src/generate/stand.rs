@@ -1,8 +1,9 @@
 //! Stand layouts (forest, orchard, flat ground), their materials and scene files.
 
 use super::tree::{self, fmt4, LeafAngle, Profile, TreeShape};
-use super::{write_file, GeneratedSummary, Rand, SceneKind, TemplateSummary};
+use super::{write_file, GeneratedSummary, SceneKind, TemplateSummary};
 use crate::error::{Error, Result};
+use crate::rng::{stream, Rand};
 use rayon::prelude::*;
 use std::f64::consts::PI;
 use std::fmt::Write as _;
@@ -308,16 +309,6 @@ fn material_line(yaml: &mut String, o: &Optics) {
         let _ = write!(yaml, ", transmittance: {{ 532: {t1}, 1064: {t2} }}");
     }
     let _ = writeln!(yaml, " }}   # {}", o.source);
-}
-
-/// Seeds independent generators for independent parts of a scene (splitmix64 of the seed and
-/// the stream number), so that a part does not change when another one draws more numbers.
-fn stream(seed: u64, k: u64) -> Rand {
-    let mut z = seed ^ k.wrapping_mul(0xD1B5_4A32_D192_ED03);
-    z = z.wrapping_add(0x9E37_79B9_7F4A_7C15);
-    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    Rand::new(z ^ (z >> 31))
 }
 
 fn round4(v: f64) -> f64 {

@@ -5,10 +5,14 @@
 
 pub mod error;
 pub mod fsutil;
+pub mod parquet_io;
+pub mod progress;
 pub mod rng;
 
+pub mod bench;
 pub mod campaign;
 pub mod cli;
+pub mod compare;
 pub mod generate;
 pub mod pipeline;
 pub mod plan;

@@ -7,8 +7,8 @@ use common::*;
 #[test]
 fn quick_bench_reports_falling_error() {
     let dir = tmp("bench_quick");
-    let opts = lidarsim::pipeline::bench::quick_options(&dir);
-    let text = lidarsim::pipeline::bench::run(&opts).unwrap();
+    let opts = lidarsim::bench::quick_options(&dir);
+    let text = lidarsim::bench::run(&opts).unwrap();
     println!("{text}");
     assert!(text.contains(
         "| method | rays for rRMSE ≤ 5% | rRMSE | wall s | rays/s | effective paths/ray |"
@@ -59,7 +59,7 @@ fn quick_bench_reports_falling_error() {
 /// orchard rows skipped with a reason when the RAMI scene is not where they look.
 #[test]
 fn campaign_rows_are_measured_and_missing_data_is_skipped() {
-    use lidarsim::pipeline::bench_campaigns as bc;
+    use lidarsim::bench::campaigns as bc;
     let dir = tmp("bench_campaigns");
     let scene = plane_scene(&dir, 0.3, 60.0);
     let text = bc::mabel_campaign(&scene, 532, true, 2.0, 50).replace(

@@ -219,7 +219,7 @@ fn sweep_runs_every_combination_with_one_scene_load() {
     }
     // a higher platform: the same energy arrives later and weaker (∝ 1/H²)
     let w = |alt: &str| {
-        lidarsim::pipeline::parquet::read_waveforms(&out.join(format!(
+        lidarsim::waveform::file::read_waveforms(&out.join(format!(
             "altitude_m={alt}_fov_half_angle_mrad=1.0/waveforms/part-00000.parquet"
         )))
         .unwrap()

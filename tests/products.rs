@@ -82,7 +82,7 @@ fn plane_points_have_the_plane_height_and_the_closed_form_reflectance() {
         let out = run_campaign(&dir, &text, None);
         let points = read_las(&out.join("points.las")).unwrap();
         let waveforms =
-            lidarsim::pipeline::parquet::read_waveforms(&out.join("waveforms/part-00000.parquet"))
+            lidarsim::waveform::file::read_waveforms(&out.join("waveforms/part-00000.parquet"))
                 .unwrap();
         assert_eq!(points.len(), 3, "case {k}: one return per pulse");
         let expected = plane_energy(&inst, c.rho, c.h) * PI_ * c.h * c.h / (c.area * inst.energy);

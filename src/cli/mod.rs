@@ -1,7 +1,8 @@
 //! Command line: `lidarsim run`, `lidarsim check`.
 
 use crate::error::{Error, Result};
-use crate::pipeline::{self, bench, RunOptions};
+use crate::bench;
+use crate::pipeline::{self, RunOptions};
 use crate::plan;
 use crate::scene::Scene;
 use clap::{Parser, Subcommand};
@@ -179,7 +180,7 @@ fn dispatch(cli: Cli) -> Result<()> {
         }
         Command::Check { campaign } => check(&campaign),
         Command::Compare { runs, csv, plots } => {
-            use crate::pipeline::compare;
+            use crate::compare;
             let mut rows = Vec::new();
             for r in &runs {
                 for dir in compare::expand(r)? {

@@ -18,6 +18,7 @@
 //! millionth of a step), so that 100/0.1 counts as 1000 steps despite rounding.
 
 mod als;
+mod pulses_file;
 mod spaceborne;
 mod tls;
 mod track;
@@ -27,6 +28,8 @@ pub mod validate;
 mod tests;
 
 pub use als::Pattern;
+
+pub use pulses_file::write_pulses;
 
 use crate::campaign::{Campaign, Doc, Loaded, Platform, PlatformKind, Segment};
 use crate::error::{Error, Result};

@@ -4,7 +4,6 @@
 //! and is compiled in, so no system font library is needed.
 
 use crate::error::{Error, Result};
-use crate::products::dsm::{DsmReport, Grid};
 use crate::products::returns::Component;
 use plotters::coord::types::RangedCoordf64;
 use plotters::coord::Shift;
@@ -22,11 +21,15 @@ fn register_font() {
     });
 }
 
-type Area<'a> = DrawingArea<BitMapBackend<'a>, Shift>;
+pub(crate) type Area<'a> = DrawingArea<BitMapBackend<'a>, Shift>;
 
 /// Draws a PNG under a temporary name (ending in .png, which the backend needs) and moves it
 /// into place, so a crash never leaves half a figure under the final name.
-fn png(path: &Path, size: (u32, u32), draw: impl FnOnce(&Area) -> Result<()>) -> Result<()> {
+pub(crate) fn png(
+    path: &Path,
+    size: (u32, u32),
+    draw: impl FnOnce(&Area) -> Result<()>,
+) -> Result<()> {
     register_font();
     if let Some(dir) = path.parent() {
         std::fs::create_dir_all(dir)
@@ -50,7 +53,7 @@ fn png(path: &Path, size: (u32, u32), draw: impl FnOnce(&Area) -> Result<()>) ->
 }
 
 /// Axis labels: short, with an exponent when the values are large or small.
-fn short(v: &f64) -> String {
+pub(crate) fn short(v: &f64) -> String {
     let a = v.abs();
     if a == 0.0 {
         "0".into()
@@ -62,7 +65,7 @@ fn short(v: &f64) -> String {
     }
 }
 
-fn fail(path: &Path, e: impl std::fmt::Display) -> Error {
+pub(crate) fn fail(path: &Path, e: impl std::fmt::Display) -> Error {
     Error::file(path, format!("cannot draw the figure: {e}"))
 }
 
@@ -114,7 +117,7 @@ pub fn ramp(t: f64) -> RGBColor {
 }
 
 /// A vertical colour bar from `lo` to `hi` with its label.
-fn colour_bar(
+pub(crate) fn colour_bar(
     area: &Area,
     path: &Path,
     lo: f64,
@@ -150,11 +153,11 @@ fn colour_bar(
     Ok(())
 }
 
-type Chart<'a, 'b> =
+pub(crate) type Chart<'a, 'b> =
     ChartContext<'a, BitMapBackend<'b>, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
 
 /// The series' legend, boxed, in the chart's corner.
-fn legend<'a, 'b: 'a>(chart: &mut Chart<'a, 'b>, path: &Path) -> Result<()> {
+pub(crate) fn legend<'a, 'b: 'a>(chart: &mut Chart<'a, 'b>, path: &Path) -> Result<()> {
     chart
         .configure_series_labels()
         .border_style(BLACK)
@@ -164,7 +167,7 @@ fn legend<'a, 'b: 'a>(chart: &mut Chart<'a, 'b>, path: &Path) -> Result<()> {
 }
 
 /// A map in scene coordinates (x, y in metres), with its axes drawn.
-fn map_chart<'a, 'b>(
+pub(crate) fn map_chart<'a, 'b>(
     area: &'a Area<'b>,
     path: &Path,
     title: &str,
@@ -189,132 +192,6 @@ fn map_chart<'a, 'b>(
         .draw()
         .map_err(|e| fail(path, e))?;
     Ok(chart)
-}
-
-/// `error_map.png`: first-return DSM minus reference per cell, north up, with a colour bar.
-pub fn dsm_error_map(
-    path: &Path,
-    reference: &[f64],
-    measured: &[f64],
-    grid: &Grid,
-    title: &str,
-) -> Result<()> {
-    let aspect = (grid.ny.max(1) as f64 / grid.nx.max(1) as f64).clamp(0.25, 4.0);
-    let (w, h) = (760u32, (80.0 + 640.0 * aspect).round() as u32);
-    png(path, (w, h), |root| {
-        let (left, right) = root.split_horizontally(w - 110);
-        let (x0, y0) = (grid.x0, grid.y0);
-        let (x1, y1) = (
-            x0 + grid.cell * grid.nx as f64,
-            y0 + grid.cell * grid.ny as f64,
-        );
-        let mut chart = map_chart(&left, path, title, x0..x1, y0..y1)?;
-        chart
-            .draw_series((0..grid.ny).flat_map(|j| {
-                (0..grid.nx).map(move |i| {
-                    let k = grid.nx * j + i;
-                    let c = cell_colour(
-                        reference.get(k).copied().unwrap_or(f64::NAN),
-                        measured.get(k).copied().unwrap_or(f64::NAN),
-                    );
-                    let (a, b) = (x0 + grid.cell * i as f64, y0 + grid.cell * j as f64);
-                    Rectangle::new([(a, b), (a + grid.cell, b + grid.cell)], c.filled())
-                })
-            }))
-            .map_err(|e| fail(path, e))?;
-        colour_bar(
-            &right,
-            path,
-            -MAP_SATURATION_M,
-            MAP_SATURATION_M,
-            "error (m)",
-            |v| diverging(v / MAP_SATURATION_M),
-        )
-    })
-}
-
-/// `error_vs_scan_angle.png`: bias and RMSE (top) and coverage (bottom) per |scan angle| bin.
-pub fn dsm_error_vs_angle(path: &Path, report: &DsmReport) -> Result<()> {
-    png(path, (800, 640), |root| {
-        let (top, bottom) = root.split_vertically(380);
-        let bins = &report.by_scan_angle;
-        let centre = |b: &crate::products::dsm::AngleBin| 0.5 * (b.bin_deg_lo + b.bin_deg_hi);
-        let xmax = bins.last().map_or(1.0, |b| b.bin_deg_hi).max(1.0);
-        let finite = |v: f64| v.is_finite().then_some(v);
-        let vals: Vec<f64> = bins
-            .iter()
-            .flat_map(|b| [finite(b.bias_m), finite(b.rmse_m)])
-            .flatten()
-            .collect();
-        let (lo, hi) = vals
-            .iter()
-            .fold((0.0f64, 0.0f64), |(a, b), &v| (a.min(v), b.max(v)));
-        let pad = 0.1 * (hi - lo).max(1e-3);
-        let mut chart = ChartBuilder::on(&top)
-            .caption(
-                format!(
-                    "DSM error against scan angle ({} m cells)",
-                    report.resolution_m
-                ),
-                ("sans-serif", 18),
-            )
-            .margin(10)
-            .x_label_area_size(35)
-            .y_label_area_size(65)
-            .build_cartesian_2d(0.0..xmax, (lo - pad)..(hi + pad))
-            .map_err(|e| fail(path, e))?;
-        chart
-            .configure_mesh()
-            .x_desc("|scan angle| (deg)")
-            .y_desc("DSM − reference (m)")
-            .x_label_formatter(&short)
-            .y_label_formatter(&short)
-            .draw()
-            .map_err(|e| fail(path, e))?;
-        for (name, colour, get) in [
-            (
-                "bias",
-                BLUE,
-                (|b: &crate::products::dsm::AngleBin| b.bias_m) as fn(&_) -> f64,
-            ),
-            ("RMSE", RED, |b| b.rmse_m),
-        ] {
-            let pts: Vec<(f64, f64)> = bins
-                .iter()
-                .filter_map(|b| finite(get(b)).map(|v| (centre(b), v)))
-                .collect();
-            chart
-                .draw_series(LineSeries::new(pts.clone(), colour.stroke_width(2)))
-                .map_err(|e| fail(path, e))?
-                .label(name)
-                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], colour));
-            chart
-                .draw_series(pts.iter().map(|&p| Circle::new(p, 3, colour.filled())))
-                .map_err(|e| fail(path, e))?;
-        }
-        legend(&mut chart, path)?;
-
-        let mut cov = ChartBuilder::on(&bottom)
-            .margin(10)
-            .x_label_area_size(40)
-            .y_label_area_size(65)
-            .build_cartesian_2d(0.0..xmax, 0.0..105.0)
-            .map_err(|e| fail(path, e))?;
-        cov.configure_mesh()
-            .x_desc("|scan angle| of the pulses aimed at the cell (deg)")
-            .y_desc("coverage (%)")
-            .draw()
-            .map_err(|e| fail(path, e))?;
-        let pts: Vec<(f64, f64)> = bins
-            .iter()
-            .filter_map(|b| finite(b.coverage).map(|v| (centre(b), 100.0 * v)))
-            .collect();
-        cov.draw_series(LineSeries::new(pts.clone(), GREEN.stroke_width(2)))
-            .map_err(|e| fail(path, e))?;
-        cov.draw_series(pts.iter().map(|&p| Circle::new(p, 3, GREEN.filled())))
-            .map_err(|e| fail(path, e))?;
-        Ok(())
-    })
 }
 
 /// A point of the top view: position and apparent reflectance.
@@ -492,24 +369,6 @@ mod tests {
     #[test]
     fn figures_are_png_files() {
         let d = std::env::temp_dir().join(format!("lidarsim-fig-{}", std::process::id()));
-        let grid = Grid {
-            x0: 0.0,
-            y0: 0.0,
-            cell: 2.0,
-            nx: 5,
-            ny: 3,
-        };
-        let reference = vec![0.0; 15];
-        let measured: Vec<f64> = (0..15)
-            .map(|k| {
-                if k == 4 {
-                    f64::NAN
-                } else {
-                    k as f64 * 0.1 - 0.5
-                }
-            })
-            .collect();
-        dsm_error_map(&d.join("map.png"), &reference, &measured, &grid, "t").unwrap();
         let pts: Vec<TopPoint> = (0..100)
             .map(|k| TopPoint {
                 x: k as f64,
@@ -538,7 +397,7 @@ mod tests {
             }],
         )
         .unwrap();
-        for f in ["map.png", "top.png", "wf.png"] {
+        for f in ["top.png", "wf.png"] {
             let b = std::fs::read(d.join(f)).unwrap();
             assert_eq!(&b[..8], b"\x89PNG\r\n\x1a\n", "{f}");
             assert!(b.len() > 2000, "{f}: {} bytes", b.len());

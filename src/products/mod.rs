@@ -7,4 +7,6 @@ pub mod las;
 pub mod photons;
 pub mod plot;
 pub mod points;
+pub mod report;
 pub mod returns;
+pub mod stage;

@@ -1,15 +1,11 @@
 //! Photon counting (section 2.5): detection events drawn from a waveform, and photons.parquet.
 
-use crate::error::{Error, Result};
-use crate::fsutil::write_atomic;
+use crate::error::Result;
+use crate::parquet_io::{batch, write_batch};
 use crate::plan::Pulse;
 use crate::rng::SplitMix64;
 use crate::C;
-use arrow_array::{ArrayRef, Float64Array, RecordBatch, UInt64Array, UInt8Array};
-use arrow_schema::{DataType, Field, Schema};
-use parquet::arrow::ArrowWriter;
-use parquet::basic::{Compression, ZstdLevel};
-use parquet::file::properties::WriterProperties;
+use arrow_array::{ArrayRef, Float64Array, UInt64Array, UInt8Array};
 use std::path::Path;
 use std::sync::Arc;
 
@@ -149,34 +145,14 @@ pub fn write_photons(path: &Path, rows: &[PhotonRow]) -> Result<()> {
             Arc::new(UInt8Array::from_iter_values(rows.iter().map(|r| r.source))),
         ),
     ];
-    let fields: Vec<Field> = columns
-        .iter()
-        .map(|(n, a)| Field::new(*n, a.data_type().clone(), false))
-        .collect();
-    debug_assert!(fields[6].data_type() == &DataType::UInt8);
-    let batch = RecordBatch::try_new(
-        Arc::new(Schema::new(fields)),
-        columns.into_iter().map(|(_, a)| a).collect(),
-    )
-    .map_err(|e| Error::file(path, format!("cannot build photon table: {e}")))?;
-    let props = WriterProperties::builder()
-        .set_compression(Compression::ZSTD(ZstdLevel::default()))
-        .set_created_by(format!("lidarsim {}", env!("CARGO_PKG_VERSION")))
-        .build();
-    write_atomic(path, |file| {
-        let err = |e: parquet::errors::ParquetError| {
-            Error::file(path, format!("cannot write Parquet: {e}"))
-        };
-        let mut w = ArrowWriter::try_new(file, batch.schema(), Some(props)).map_err(err)?;
-        w.write(&batch).map_err(err)?;
-        w.close().map_err(err)?;
-        Ok(())
-    })
+    write_batch(path, batch(columns))
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use arrow_array::RecordBatch;
+    use arrow_schema::DataType;
     use glam::DVec3;
 
     #[test]

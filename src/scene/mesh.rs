@@ -8,7 +8,7 @@ use std::collections::HashMap;
 use std::io::{BufReader, Cursor, Read};
 use std::path::Path;
 
-use super::table::Grid;
+use super::table::HeightGrid;
 
 /// Where a triangle's material comes from: its OBJ group (or PLY file stem) and usemtl name.
 #[derive(Clone, Debug, PartialEq, Eq, Hash)]
@@ -436,7 +436,7 @@ pub(crate) fn plane(path_for_errors: &Path, z: f64, a: [f64; 2], b: [f64; 2]) ->
 /// Two triangles per grid cell, front side up; row i at y0 + i·cell, column j at x0 + j·cell.
 pub(crate) fn heightfield(
     path: &Path,
-    grid: &Grid,
+    grid: &HeightGrid,
     cell_m: f64,
     origin: [f64; 2],
 ) -> Result<MeshData> {

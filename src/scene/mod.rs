@@ -10,12 +10,12 @@
 
 mod bvh;
 mod config;
-pub mod dsm;
 mod load;
 mod mesh;
 mod table;
 #[cfg(test)]
 mod tests;
+pub mod top_surface;
 
 pub use table::{parse_instances, InstanceRow};
 

@@ -97,14 +97,14 @@ fn parse_number(path: &Path, line: usize, col: usize, field: &str) -> Result<f64
 }
 
 /// A grid of z values, rows in file order (row 0 first).
-pub struct Grid {
+pub struct HeightGrid {
     pub rows: usize,
     pub cols: usize,
     pub z: Vec<f64>,
 }
 
 /// Parses a heightfield: one row of z values per line, commas or white space between them.
-pub fn parse_grid(path: &Path, text: &str) -> Result<Grid> {
+pub fn parse_grid(path: &Path, text: &str) -> Result<HeightGrid> {
     let mut z = Vec::new();
     let mut cols = 0;
     let mut rows = 0;
@@ -147,5 +147,5 @@ pub fn parse_grid(path: &Path, text: &str) -> Result<Grid> {
             format!("a heightfield needs at least 2 rows and 2 columns of heights, found {rows} × {cols}"),
         ));
     }
-    Ok(Grid { rows, cols, z })
+    Ok(HeightGrid { rows, cols, z })
 }

@@ -5,6 +5,8 @@
 //! is spread over the output bins through the pulse's CDF, so the convolved waveform does not
 //! depend on where a path's time falls inside its bin.
 
+pub mod file;
+
 use crate::sensor::Gate;
 use crate::transport::Tally;
 use std::f64::consts::PI;

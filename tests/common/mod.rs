@@ -2,7 +2,8 @@
 //! closed forms of ../shared/spec/physics.md computed by quadrature.
 #![allow(dead_code)]
 
-use lidarsim::pipeline::{self, parquet, RunOptions};
+use lidarsim::pipeline::{self, RunOptions};
+use lidarsim::waveform::file as parquet;
 use lidarsim::waveform::Waveform;
 use std::f64::consts::PI;
 use std::path::{Path, PathBuf};

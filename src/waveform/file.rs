@@ -1,103 +1,16 @@
-//! Parquet files of the run folder (outputs.md): pulses and waveforms.
+//! Waveform part files of a run folder (outputs.md): `waveforms/part-NNNNN.parquet`, one row
+//! per pulse.
 
+use super::Waveform;
 use crate::error::{Error, Result};
-use crate::fsutil::write_atomic;
-use crate::plan::Pulse;
-use crate::waveform::Waveform;
-use arrow_array::builder::{Float32Builder, Float64Builder, ListBuilder};
-use arrow_array::{ArrayRef, Float32Array, Float64Array, RecordBatch, UInt32Array, UInt64Array};
-use arrow_schema::{DataType, Field, Schema};
-use parquet::arrow::ArrowWriter;
-use parquet::basic::{Compression, ZstdLevel};
-use parquet::file::properties::WriterProperties;
+use crate::parquet_io::{batch, list_f32, list_f64, write_batch};
+use arrow_array::{Float32Array, Float64Array, UInt32Array, UInt64Array};
 use std::path::Path;
 use std::sync::Arc;
 
-fn props() -> WriterProperties {
-    WriterProperties::builder()
-        .set_compression(Compression::ZSTD(ZstdLevel::default()))
-        .set_created_by(format!("lidarsim {}", env!("CARGO_PKG_VERSION")))
-        .build()
-}
-
-fn write_batch(path: &Path, batch: RecordBatch) -> Result<()> {
-    write_atomic(path, |file| {
-        let err = |e: parquet::errors::ParquetError| {
-            Error::file(path, format!("cannot write Parquet: {e}"))
-        };
-        let mut w = ArrowWriter::try_new(file, batch.schema(), Some(props())).map_err(err)?;
-        w.write(&batch).map_err(err)?;
-        w.close().map_err(err)?;
-        Ok(())
-    })
-}
-
-fn list_f32(rows: impl Iterator<Item = Vec<f32>>) -> ArrayRef {
-    let mut b = ListBuilder::new(Float32Builder::new()).with_field(Field::new(
-        "item",
-        DataType::Float32,
-        false,
-    ));
-    for r in rows {
-        b.values().append_slice(&r);
-        b.append(true);
-    }
-    Arc::new(b.finish())
-}
-
-fn list_f64(rows: impl Iterator<Item = Vec<f64>>) -> ArrayRef {
-    let mut b = ListBuilder::new(Float64Builder::new()).with_field(Field::new(
-        "item",
-        DataType::Float64,
-        false,
-    ));
-    for r in rows {
-        b.values().append_slice(&r);
-        b.append(true);
-    }
-    Arc::new(b.finish())
-}
-
-fn batch(columns: Vec<(&str, ArrayRef)>) -> RecordBatch {
-    let fields: Vec<Field> = columns
-        .iter()
-        .map(|(n, a)| Field::new(*n, a.data_type().clone(), a.null_count() > 0))
-        .collect();
-    RecordBatch::try_new(
-        Arc::new(Schema::new(fields)),
-        columns.into_iter().map(|(_, a)| a).collect(),
-    )
-    .expect("columns of one batch have equal lengths")
-}
-
-pub fn write_pulses(path: &Path, pulses: &[Pulse]) -> Result<()> {
-    let f64col = |f: fn(&Pulse) -> f64| -> ArrayRef {
-        Arc::new(Float64Array::from_iter_values(pulses.iter().map(f)))
-    };
-    let b = batch(vec![
-        (
-            "pulse_id",
-            Arc::new(UInt64Array::from_iter_values(pulses.iter().map(|p| p.id))),
-        ),
-        ("gps_time_s", f64col(|p| p.gps_time_s)),
-        ("origin_x", f64col(|p| p.origin.x)),
-        ("origin_y", f64col(|p| p.origin.y)),
-        ("origin_z", f64col(|p| p.origin.z)),
-        ("dir_x", f64col(|p| p.direction.x)),
-        ("dir_y", f64col(|p| p.direction.y)),
-        ("dir_z", f64col(|p| p.direction.z)),
-        (
-            "scan_angle_deg",
-            Arc::new(Float32Array::from_iter_values(
-                pulses.iter().map(|p| p.scan_angle_deg),
-            )),
-        ),
-        (
-            "line",
-            Arc::new(UInt32Array::from_iter_values(pulses.iter().map(|p| p.line))),
-        ),
-    ]);
-    write_batch(path, b)
+/// The path of part `k` inside a run folder.
+pub fn part_name(k: usize) -> String {
+    format!("waveforms/part-{k:05}.parquet")
 }
 
 pub fn write_waveforms(path: &Path, w: &[Waveform]) -> Result<()> {

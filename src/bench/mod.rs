@@ -5,6 +5,8 @@
 //! many rays, then, for each method, the fewest rays (on a 1-2-5 ladder) whose waveforms reach
 //! rRMSE ≤ 5% against it (median over several seeds), with their wall time.
 
+pub mod campaigns;
+
 use crate::campaign::{Instrument, Method, MisHeuristic, SunSelection};
 use crate::error::{Error, Result};
 use crate::generate::{canopy, Canopy};
@@ -220,11 +222,11 @@ impl Bench<'_> {
 
 /// Runs the benchmark and returns the markdown report.
 pub fn run(opts: &BenchOptions) -> Result<String> {
-    crate::pipeline::bench_campaigns::reset_peak_memory();
+    campaigns::reset_peak_memory();
     // full: the generated forest (the paper's stand size); quick: a lighter canopy
     let spec = opts.canopy.clone();
     let (scene_path, size, what) = if opts.full {
-        let (path, size) = crate::pipeline::bench_campaigns::forest_scene(&opts.dir, true)?;
+        let (path, size) = campaigns::forest_scene(&opts.dir, true)?;
         (path, size, format!("generated forest (`lidarsim scene generate forest --seed 2`) on {size} m × {size} m"))
     } else {
         let path = canopy(&opts.dir.join("canopy"), &spec)?;
@@ -268,7 +270,7 @@ pub fn run(opts: &BenchOptions) -> Result<String> {
         .into_iter()
         .map(|m| ladder(&b, &reference, m, opts.seeds, opts.max_rays))
         .collect();
-    let single_pulse_peak_mb = crate::pipeline::bench_campaigns::peak_memory_mb();
+    let single_pulse_peak_mb = campaigns::peak_memory_mb();
     // The sun in the same paths: wall time at the same rays per pulse, sun at 50° zenith.
     let sun_spec = |selection| crate::campaign::Sun {
         zenith_deg: 50.0,
@@ -336,23 +338,23 @@ pub fn run(opts: &BenchOptions) -> Result<String> {
 
     if opts.campaigns {
         let planned =
-            crate::pipeline::bench_campaigns::plan(&opts.dir, &opts.rami_scene, opts.full)?;
+            campaigns::plan(&opts.dir, &opts.rami_scene, opts.full)?;
         let (mut rows, mut skipped) = (Vec::new(), Vec::new());
         for p in planned {
             match p {
-                crate::pipeline::bench_campaigns::Planned::Run { name, what, text } => {
+                campaigns::Planned::Run { name, what, text } => {
                     eprintln!("lidarsim bench: campaign {name}");
-                    rows.push(crate::pipeline::bench_campaigns::run_row(
+                    rows.push(campaigns::run_row(
                         &opts.dir, &name, &what, &text,
                     )?);
                 }
-                crate::pipeline::bench_campaigns::Planned::Skipped { name, why } => {
+                campaigns::Planned::Skipped { name, why } => {
                     eprintln!("lidarsim bench: campaign {name} skipped: {why}");
                     skipped.push((name, why));
                 }
             }
         }
-        text += &crate::pipeline::bench_campaigns::table(&rows, &skipped);
+        text += &campaigns::table(&rows, &skipped);
     }
     Ok(text)
 }

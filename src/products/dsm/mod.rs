@@ -8,11 +8,14 @@
 //! grow with the angle. A cell no pulse was aimed at takes the |scan angle| of the point
 //! that set its DSM value (its highest first return; among equal heights the smallest angle).
 
+mod figures;
+
 use crate::error::{Error, Result};
 use crate::fsutil::write_text_atomic;
 use crate::plan::Pulse;
-use crate::products::figures;
-pub use crate::scene::dsm::Grid;
+use crate::products::points::Point;
+pub use crate::scene::top_surface::Grid;
+use crate::scene::Scene;
 use serde::Serialize;
 use std::path::Path;
 
@@ -239,6 +242,69 @@ pub fn write_report(
             report.resolution_m, report.bias_m, report.rmse_m
         ),
     )
+}
+
+/// The DSM error product of a run: reference DSM from the scene's own surfaces, first-return
+/// DSM from the points, on one grid over the scanned area; `dsm/report.json` and plots.
+pub fn write_dsm(
+    scene: &Scene,
+    out: &Path,
+    points: &[Point],
+    pulses: &[Pulse],
+    res: f64,
+) -> Result<Vec<String>> {
+    let firsts: Vec<DsmPoint> = points
+        .iter()
+        .map(|p| DsmPoint {
+            x: p.x,
+            y: p.y,
+            z: p.z,
+            scan_angle_deg: p.scan_angle_deg as f64,
+            first: p.return_number == 1,
+        })
+        .collect();
+    if !firsts.iter().any(|p| p.first) {
+        crate::progress::log("dsm: no first returns, no DSM");
+        return Ok(Vec::new());
+    }
+    // the grid covers the scanned area (the first returns) within the scene
+    let (slo, shi) = scene.bounds();
+    let (mut lo, mut hi) = (glam::DVec3::splat(f64::MAX), glam::DVec3::splat(f64::MIN));
+    for p in firsts.iter().filter(|p| p.first) {
+        lo = lo.min(glam::DVec3::new(p.x, p.y, p.z));
+        hi = hi.max(glam::DVec3::new(p.x, p.y, p.z));
+    }
+    let (lo, hi) = (lo.max(slo), hi.min(shi));
+    let grid = Grid::covering(
+        glam::DVec3::new(lo.x, lo.y, slo.z),
+        glam::DVec3::new(hi.x, hi.y, shi.z),
+        res,
+    );
+    let reference = scene.top_surface_grid(&grid);
+    let (measured, angles) = first_return_dsm_with_angle(&firsts, &grid);
+    // pulses are aimed at the ground: the 5th percentile of the reference heights
+    let mut heights: Vec<f64> = reference
+        .iter()
+        .copied()
+        .filter(|z| z.is_finite())
+        .collect();
+    heights.sort_by(f64::total_cmp);
+    let ground = heights.get(heights.len() / 20).copied().unwrap_or(slo.z);
+    let aim = aim_angles(pulses, &grid, ground);
+    let report = compare(&reference, &measured, &aim, &angles, &grid);
+    write_report(&out.join("dsm"), &report, &reference, &measured, &grid)?;
+    crate::progress::log(&format!(
+        "dsm: bias {:+.3} m, RMSE {:.3} m, coverage {:.1}% over {} cells of {res} m",
+        report.bias_m,
+        report.rmse_m,
+        100.0 * report.coverage,
+        report.cells
+    ));
+    Ok(vec![
+        "dsm/report.json".into(),
+        "dsm/error_vs_scan_angle.png".into(),
+        "dsm/error_map.png".into(),
+    ])
 }
 
 #[cfg(test)]

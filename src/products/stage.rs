@@ -4,14 +4,16 @@
 use crate::campaign::{InstrumentKind, Loaded};
 use crate::error::{Error, Result};
 use crate::fsutil::write_text_atomic;
-use crate::pipeline::parquet;
 use crate::plan::Pulse;
 use crate::products::figures::{self, TopPoint, WaveformFigure};
 use crate::products::las::write_las;
 use crate::products::photons::{count_photons, photon_rows, write_photons, PhotonRow};
 use crate::products::points::{points_on_axis, Point, PointConfig};
 use crate::products::returns::{decompose, Component, Decomposition};
+use crate::progress::{log, progress};
+use crate::scene::Scene;
 use crate::sensor::pulse_sigma_s;
+use crate::waveform::file::{part_name, read_waveforms};
 use crate::waveform::Waveform;
 use rayon::prelude::*;
 use std::path::Path;
@@ -218,6 +220,7 @@ pub fn photon_events(loaded: &Loaded, pulses: &[Pulse], waveforms: &[Waveform]) 
 /// Runs the products stage; returns the files written (relative to `out`) and a note.
 pub fn run(
     loaded: &Loaded,
+    scene: &Scene,
     out: &Path,
     pulses: &[Pulse],
     parts: usize,
@@ -227,11 +230,11 @@ pub fn run(
     // tens of kilobytes, and a campaign millions of them
     let (mut points, mut rows, mut examples, mut seen) =
         (Vec::new(), Vec::new(), Examples::default(), 0usize);
-    let bar = super::progress(pulses.len() as u64, "products");
+    let bar = progress(pulses.len() as u64, "products");
     let start = std::time::Instant::now();
     let every = parts.div_ceil(10).max(1);
     for k in 0..parts {
-        let part = parquet::read_waveforms(&out.join(super::part_name(k)))?;
+        let part = read_waveforms(&out.join(part_name(k)))?;
         if part.iter().any(|w| w.pulse_id as usize >= pulses.len()) {
             return Err(Error::msg(format!(
                 "{}: waveforms of pulses that were not planned: run again without --resume",
@@ -250,7 +253,7 @@ pub fn run(
         bar.inc(part.len() as u64);
         if bar.is_hidden() && (k + 1) % every == 0 && k + 1 < parts {
             let rate = seen as f64 / start.elapsed().as_secs_f64().max(1e-9);
-            super::log(&format!(
+            log(&format!(
                 "products: {}/{} parts, {rate:.0} pulses/s, {:.0} s left",
                 k + 1,
                 parts,
@@ -295,7 +298,7 @@ pub fn run(
             "unclassified": classes[0].1, "ground": classes[1].1, "vegetation": classes[2].1, "building": classes[3].1
         });
         if let Some(res) = want.dsm {
-            let dsm_outputs = super::dsm_stage(loaded, out, &points, pulses, res)?;
+            let dsm_outputs = crate::products::dsm::write_dsm(scene, out, &points, pulses, res)?;
             outputs.extend(dsm_outputs);
         }
     }

@@ -250,7 +250,8 @@ pub fn run_row(dir: &Path, name: &str, what: &str, text: &str) -> Result<Campaig
         }
     }
     if result.is_empty() {
-        let waves = pipeline::parquet::read_waveforms(&run.join(pipeline::part_name(0)))?;
+        let waves =
+            crate::waveform::file::read_waveforms(&run.join(crate::waveform::file::part_name(0)))?;
         if let Some(w) = waves.first() {
             let _ = write!(
                 result,

@@ -1,0 +1,87 @@
+//! `manifest.json`: per stage, its status, the fingerprint of its inputs, its outputs and
+//! wall time; what `--resume` trusts.
+
+use super::Stage;
+use crate::error::Result;
+use crate::fsutil::write_text_atomic;
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+use std::path::Path;
+use std::time::Instant;
+
+#[derive(Clone, Debug, Default, Serialize, Deserialize, PartialEq)]
+pub struct StageRecord {
+    pub status: String,
+    pub fingerprint: String,
+    pub outputs: Vec<String>,
+    pub wall_time_s: f64,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub note: Option<String>,
+}
+
+#[derive(Clone, Debug, Default, Serialize, Deserialize, PartialEq)]
+pub struct Manifest {
+    pub tool_version: String,
+    pub campaign: String,
+    pub stages: BTreeMap<String, StageRecord>,
+}
+
+impl Manifest {
+    pub(super) fn read(path: &Path) -> Option<Manifest> {
+        serde_json::from_str(&std::fs::read_to_string(path).ok()?).ok()
+    }
+
+    pub(super) fn done(&self, stage: Stage, fingerprint: &str) -> bool {
+        self.stages
+            .get(stage.name())
+            .is_some_and(|r| r.status == "done" && r.fingerprint == fingerprint)
+    }
+}
+
+/// FNV-1a, 64 bits: a fingerprint that is stable across platforms and tool builds.
+pub(super) fn fnv(h: &mut u64, bytes: &[u8]) {
+    for b in bytes {
+        *h ^= *b as u64;
+        *h = h.wrapping_mul(0x100_0000_01b3);
+    }
+}
+
+pub(super) fn fingerprint(parts: &[&[u8]]) -> String {
+    let mut h = 0xcbf2_9ce4_8422_2325u64;
+    for p in parts {
+        fnv(&mut h, &(p.len() as u64).to_le_bytes());
+        fnv(&mut h, p);
+    }
+    format!("{h:016x}")
+}
+
+pub(super) fn record(
+    m: &mut Manifest,
+    stage: Stage,
+    fp: &str,
+    outputs: Vec<String>,
+    t: Instant,
+    note: Option<String>,
+) {
+    m.stages.insert(
+        stage.name().into(),
+        StageRecord {
+            status: "done".into(),
+            fingerprint: fp.into(),
+            outputs,
+            wall_time_s: (t.elapsed().as_secs_f64() * 1000.0).round() / 1000.0,
+            note,
+        },
+    );
+}
+
+/// A stage redone makes every later stage stale.
+pub(super) fn invalidate_after(m: &mut Manifest, stage: Stage) {
+    for s in Stage::ALL.into_iter().filter(|s| *s > stage) {
+        m.stages.remove(s.name());
+    }
+}
+
+pub(super) fn save(path: &Path, m: &Manifest) -> Result<()> {
+    write_text_atomic(path, &serde_json::to_string_pretty(m).unwrap_or_default())
+}

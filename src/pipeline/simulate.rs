@@ -1,0 +1,161 @@
+//! The simulate stage: pulses in parts of [`PART_PULSES`], each part written when complete,
+//! with per-pulse timing beside it.
+
+use super::PART_PULSES;
+use crate::campaign::Loaded;
+use crate::error::Result;
+use crate::fsutil::write_text_atomic;
+use crate::plan::Pulse;
+use crate::progress::{log, progress};
+use crate::scene::Scene;
+use crate::sensor::{pulse_sigma_s, Gate, Laser, Receiver, SunSource};
+use crate::transport::{simulate_pulse, PulseSetup};
+use crate::waveform::file::{part_name, write_waveforms};
+use crate::waveform::{self, Radiometry, Waveform};
+use indicatif::ProgressBar;
+use rayon::prelude::*;
+use std::io::IsTerminal;
+use std::path::Path;
+use std::time::Instant;
+
+/// Simulates the given parts, each written when complete. Pulses within a part and each
+/// pulse's ray chunks run in parallel. Returns (rays traced, parts written).
+pub(super) fn simulate_parts(
+    loaded: &Loaded,
+    scene: &Scene,
+    pulses: &[Pulse],
+    todo: &[usize],
+    out: &Path,
+) -> Result<(u64, usize)> {
+    let total: usize = todo
+        .iter()
+        .map(|&k| part_range(k, pulses.len()).len())
+        .sum();
+    let bar = progress(total as u64, "simulating");
+    let t = Instant::now();
+    let mut rays = 0u64;
+    let mut done_pulses = 0usize;
+    let terminal = std::io::stderr().is_terminal();
+    for (i, &k) in todo.iter().enumerate() {
+        let range = part_range(k, pulses.len());
+        let (waveforms, secs) = simulate(loaded, scene, &pulses[range], &bar);
+        write_waveforms(&out.join(part_name(k)), &waveforms)?;
+        write_pulse_stats(
+            &out.join(format!("waveforms/part-{k:05}.stats.csv")),
+            &waveforms,
+            &secs,
+        )?;
+        rays += waveforms.iter().map(|w| w.rays as u64).sum::<u64>();
+        done_pulses += waveforms.len();
+        let elapsed = t.elapsed().as_secs_f64();
+        let rate = done_pulses as f64 / elapsed;
+        if !terminal {
+            log(&format!(
+                "simulate: part {} ({}/{} parts) done, {:.0} pulses/s, {:.0} s left",
+                k,
+                i + 1,
+                todo.len(),
+                rate,
+                (total - done_pulses) as f64 / rate
+            ));
+        }
+    }
+    bar.finish_and_clear();
+    let secs = t.elapsed().as_secs_f64();
+    if done_pulses > 0 {
+        log(&format!(
+            "simulated {done_pulses} pulses, {rays} rays in {secs:.2} s ({:.1} pulses/s, {:.3e} rays/s)",
+            done_pulses as f64 / secs,
+            rays as f64 / secs
+        ));
+    }
+    Ok((rays, todo.len()))
+}
+
+pub(super) fn part_range(k: usize, n: usize) -> std::ops::Range<usize> {
+    k * PART_PULSES..((k + 1) * PART_PULSES).min(n)
+}
+
+/// Per-pulse counters beside the waveforms: effective paths per ray and time per ray. Kept
+/// out of the waveform files, which must not depend on timing.
+pub(super) fn write_pulse_stats(path: &Path, waveforms: &[Waveform], secs: &[f64]) -> Result<()> {
+    let mut text = String::from("pulse_id,rays,paths_per_ray,seconds,seconds_per_ray\n");
+    for (w, s) in waveforms.iter().zip(secs) {
+        text.push_str(&format!(
+            "{},{},{},{:.6},{:.4e}\n",
+            w.pulse_id,
+            w.rays,
+            w.paths_per_ray,
+            s,
+            s / w.rays.max(1) as f64
+        ));
+    }
+    write_text_atomic(path, &text)
+}
+
+/// Simulates pulses: pulses and each pulse's ray chunks run in parallel. Returns the
+/// waveforms and each pulse's wall time (with the threads it shared).
+pub fn simulate(
+    loaded: &Loaded,
+    scene: &Scene,
+    pulses: &[Pulse],
+    bar: &ProgressBar,
+) -> (Vec<Waveform>, Vec<f64>) {
+    let c = &loaded.campaign;
+    let inst = &c.instrument;
+    let sigma = pulse_sigma_s(inst);
+    let hv = crate::photon_energy_j(c.wavelength_nm);
+    let bounds = scene.bounds();
+    let sun = c
+        .sun
+        .as_ref()
+        .map(|s| SunSource::new(s, inst.bandwidth_nm.unwrap_or(0.0), bounds));
+    let radiometry = Radiometry {
+        pulse_energy_j: inst.pulse_energy_j,
+        receiver_area_m2: inst.receiver_area_m2,
+        fov_half_angle: inst.fov_half_angle_mrad * 1e-3,
+        sun: sun.map(|s| (s.band_irradiance, s.cos_zenith)),
+    };
+    pulses
+        .par_iter()
+        .map(|p| {
+            let gate = Gate::for_pulse(inst, p.origin, p.direction, bounds);
+            let sub_bins = waveform::sub_bins_per_bin(gate.dt, sigma);
+            let sun = sun.map(|s| s.for_gate(inst.pulse_energy_j, gate.dt * gate.bins as f64));
+            let setup = PulseSetup {
+                scene,
+                laser: Laser::new(inst, p.origin, p.direction),
+                receiver: Receiver::new(inst, p.origin, p.direction),
+                gate,
+                sub_bins,
+                method: c.simulation.method,
+                heuristic: c.simulation.mis,
+                sun,
+                max_order: c.simulation.max_order,
+                seed: c.seed,
+                pulse_id: p.id,
+            };
+            let t = Instant::now();
+            let tally = simulate_pulse(&setup, c.simulation.rays_per_pulse);
+            let secs = t.elapsed().as_secs_f64();
+            bar.inc(1);
+            (
+                waveform::waveform(p.id, &tally, &gate, sub_bins, sigma, hv, &radiometry),
+                secs,
+            )
+        })
+        .unzip()
+}
+
+/// Rays per second on this machine for this campaign, measured on up to 8 pulses spread
+/// over the plan with at most 1000 rays each: the basis of `lidarsim check`'s time estimate.
+pub fn probe_rays_per_second(loaded: &Loaded, scene: &Scene, pulses: &[Pulse]) -> f64 {
+    let n = pulses.len().min(8);
+    let sample: Vec<Pulse> = (0..n).map(|i| pulses[i * pulses.len() / n]).collect();
+    let mut probe = loaded.clone();
+    probe.campaign.simulation.rays_per_pulse = probe.campaign.simulation.rays_per_pulse.min(1000);
+    let t = Instant::now();
+    let (w, _) = simulate(&probe, scene, &sample, &ProgressBar::hidden());
+    let rays: u64 = w.iter().map(|w| w.rays as u64).sum();
+    rays as f64 / t.elapsed().as_secs_f64().max(1e-9)
+}

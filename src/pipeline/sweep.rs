@@ -1,0 +1,253 @@
+//! `sweep:`: one sub-run per combination of values, in sub-folders named after them, sharing
+//! one scene load; `sweep.csv`, `sweep.json` and plots against a single swept key.
+
+use super::{run_single, RunOptions, RunSummary, SceneCache};
+use crate::campaign::{Campaign, Loaded};
+use crate::error::{Error, Result};
+use crate::fsutil::write_text_atomic;
+use crate::plan;
+use crate::progress::log;
+use crate::waveform::file::read_waveforms;
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+/// One sub-run per combination of the sweep's values, in sub-folders named after them.
+pub(super) fn run_sweep(
+    loaded: &Loaded,
+    sweep: &BTreeMap<String, Vec<serde_yaml::Value>>,
+    out: &Path,
+    opts: &RunOptions,
+) -> Result<RunSummary> {
+    // combinations vary the keys in the order the file gives them
+    let mut keys: Vec<&String> = sweep.keys().collect();
+    // (a dotted key is one YAML key here, so look for its text after `sweep:`)
+    let sweep_at = loaded.doc.text.find("sweep:").unwrap_or(0);
+    keys.sort_by_key(|k| {
+        loaded.doc.text[sweep_at..]
+            .find(k.as_str())
+            .unwrap_or(usize::MAX)
+    });
+    for k in &keys {
+        if sweep[*k].is_empty() {
+            return Err(loaded
+                .doc
+                .error(&format!("sweep.{k}"), "the list of values is empty"));
+        }
+    }
+    let mut combos: Vec<Vec<&serde_yaml::Value>> = vec![vec![]];
+    for k in &keys {
+        combos = combos
+            .into_iter()
+            .flat_map(|c| {
+                sweep[*k].iter().map(move |v| {
+                    let mut c = c.clone();
+                    c.push(v);
+                    c
+                })
+            })
+            .collect();
+    }
+    let mut cache = SceneCache::default();
+    let mut total = RunSummary {
+        out: out.to_path_buf(),
+        pulses: 0,
+        rays: 0,
+        seconds: 0.0,
+        parts_done: 0,
+        complete: true,
+    };
+    let mut runs = Vec::new();
+    let mut rows: Vec<(Vec<serde_yaml::Value>, RunTotals)> = Vec::new();
+    for combo in combos {
+        let mut tree =
+            serde_yaml::to_value(&loaded.campaign).map_err(|e| Error::msg(e.to_string()))?;
+        let mut names = Vec::new();
+        for (k, v) in keys.iter().zip(&combo) {
+            set_path(&mut tree, k, (*v).clone())
+                .map_err(|m| loaded.doc.error(&format!("sweep.{k}"), m))?;
+            let value = serde_yaml::to_string(v)
+                .unwrap_or_default()
+                .trim()
+                .to_string();
+            names.push(format!("{}={}", k.rsplit('.').next().unwrap_or(k), value));
+        }
+        if let serde_yaml::Value::Mapping(m) = &mut tree {
+            m.remove("sweep");
+        }
+        let campaign: Campaign = serde_yaml::from_value(tree).map_err(|e| {
+            loaded.doc.error(
+                "sweep",
+                format!("a combination does not make a valid campaign: {e}"),
+            )
+        })?;
+        plan::check_campaign(&loaded.doc, &campaign).map_err(|e| {
+            Error::msg(format!(
+                "{e} (in the sweep combination {})",
+                names.join(", ")
+            ))
+        })?;
+        let sub = Loaded {
+            campaign,
+            doc: loaded.doc.clone(),
+            scene_path: loaded.scene_path.clone(),
+        };
+        let name = names.join("_").replace(['/', '\\', ' '], "-");
+        log(&format!("sweep: {name}"));
+        let s = run_single(&sub, &out.join(&name), opts, &mut cache)?;
+        total.pulses += s.pulses;
+        total.rays += s.rays;
+        total.seconds += s.seconds;
+        total.parts_done += s.parts_done;
+        total.complete &= s.complete;
+        if s.complete {
+            rows.push((
+                combo.iter().map(|v| (*v).clone()).collect(),
+                RunTotals::read(&out.join(&name))?,
+            ));
+        }
+        runs.push(name);
+    }
+    write_sweep_summary(out, &keys, &rows)?;
+    let index = serde_json::json!({ "tool_version": env!("CARGO_PKG_VERSION"), "campaign": loaded.campaign.name, "sweep": runs });
+    write_text_atomic(
+        &out.join("sweep.json"),
+        &serde_json::to_string_pretty(&index).unwrap_or_default(),
+    )?;
+    Ok(total)
+}
+
+/// Means over a run's pulses of what a sweep compares.
+#[derive(Clone, Debug, Default)]
+pub struct RunTotals {
+    pub pulses: usize,
+    pub received_energy_j: f64,
+    pub solar_photons_per_bin: f64,
+    pub brf_fov_solar: f64,
+    pub brf_footprint_laser: f64,
+}
+
+impl RunTotals {
+    pub fn read(run: &Path) -> Result<RunTotals> {
+        let mut t = RunTotals::default();
+        let dir = run.join("waveforms");
+        let mut files: Vec<PathBuf> = std::fs::read_dir(&dir)
+            .map_err(|e| Error::file(&dir, e))?
+            .flatten()
+            .map(|e| e.path())
+            .filter(|p| p.extension().is_some_and(|e| e == "parquet"))
+            .collect();
+        files.sort();
+        for f in files {
+            for w in read_waveforms(&f)? {
+                t.pulses += 1;
+                t.received_energy_j += w.received_energy_j;
+                t.solar_photons_per_bin += w.solar_photons_per_bin as f64;
+                t.brf_fov_solar += w.brf_fov_solar as f64;
+                t.brf_footprint_laser += w.brf_footprint_laser as f64;
+            }
+        }
+        let n = t.pulses.max(1) as f64;
+        t.received_energy_j /= n;
+        t.solar_photons_per_bin /= n;
+        t.brf_fov_solar /= n;
+        t.brf_footprint_laser /= n;
+        Ok(t)
+    }
+}
+
+/// `sweep.csv`, one row per combination, and with a single numeric swept key, plots of the
+/// signal and the BRFs against it.
+pub(super) fn write_sweep_summary(
+    out: &Path,
+    keys: &[&String],
+    rows: &[(Vec<serde_yaml::Value>, RunTotals)],
+) -> Result<()> {
+    let mut csv = keys
+        .iter()
+        .map(|k| k.as_str())
+        .collect::<Vec<_>>()
+        .join(",");
+    csv += ",pulses,received_energy_j,solar_photons_per_bin,brf_fov_solar,brf_footprint_laser\n";
+    for (vals, t) in rows {
+        let v: Vec<String> = vals
+            .iter()
+            .map(|v| {
+                serde_yaml::to_string(v)
+                    .unwrap_or_default()
+                    .trim()
+                    .to_string()
+            })
+            .collect();
+        csv += &format!(
+            "{},{},{:.6e},{:.6e},{:.6},{:.6}\n",
+            v.join(","),
+            t.pulses,
+            t.received_energy_j,
+            t.solar_photons_per_bin,
+            t.brf_fov_solar,
+            t.brf_footprint_laser
+        );
+    }
+    write_text_atomic(&out.join("sweep.csv"), &csv)?;
+    if keys.len() != 1 || rows.len() < 2 {
+        return Ok(());
+    }
+    let xs: Option<Vec<f64>> = rows.iter().map(|(v, _)| v[0].as_f64()).collect();
+    let Some(xs) = xs else { return Ok(()) };
+    let key = keys[0].as_str();
+    let series = |name: &str, f: &dyn Fn(&RunTotals) -> f64| crate::products::plot::Series {
+        name: name.into(),
+        points: xs.iter().zip(rows).map(|(x, (_, t))| (*x, f(t))).collect(),
+    };
+    let svg = crate::products::plot::line_plot(
+        "Received laser energy",
+        key,
+        "J per pulse",
+        &[series("laser", &|t| t.received_energy_j)],
+    );
+    write_text_atomic(&out.join("sweep_energy.svg"), &svg)?;
+    if rows.iter().any(|(_, t)| t.solar_photons_per_bin > 0.0) {
+        let svg = crate::products::plot::line_plot(
+            "Solar background",
+            key,
+            "solar photons per bin",
+            &[series("N_SN", &|t| t.solar_photons_per_bin)],
+        );
+        write_text_atomic(&out.join("sweep_solar.svg"), &svg)?;
+        let svg = crate::products::plot::line_plot(
+            "Scene BRF",
+            key,
+            "BRF",
+            &[
+                series("field of view, solar (Eq. 20)", &|t| t.brf_fov_solar),
+                series("footprint, laser", &|t| t.brf_footprint_laser),
+            ],
+        );
+        write_text_atomic(&out.join("sweep_brf.svg"), &svg)?;
+    }
+    Ok(())
+}
+
+/// Sets the value at a dotted key path (`platform.altitude_m`) in a YAML tree.
+pub(super) fn set_path(
+    tree: &mut serde_yaml::Value,
+    key: &str,
+    value: serde_yaml::Value,
+) -> std::result::Result<(), String> {
+    let mut node = tree;
+    let parts: Vec<&str> = key.split('.').collect();
+    for (i, p) in parts.iter().enumerate() {
+        let map = node
+            .as_mapping_mut()
+            .ok_or_else(|| format!("`{}` is not a section", parts[..i].join(".")))?;
+        let k = serde_yaml::Value::String(p.to_string());
+        if i + 1 == parts.len() {
+            map.insert(k, value);
+            return Ok(());
+        }
+        node = map
+            .entry(k)
+            .or_insert_with(|| serde_yaml::Value::Mapping(Default::default()));
+    }
+    Err("empty key".into())
+}

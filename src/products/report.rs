@@ -1,0 +1,137 @@
+//! `report.md`: what ran, on what, how fast, and what came back, with the products' figures.
+
+use crate::campaign::Loaded;
+use crate::error::{Error, Result};
+use crate::plan::Pulse;
+use crate::scene::Scene;
+use crate::waveform::file::read_waveforms;
+use std::path::Path;
+
+/// `report.md`: what ran, on what, how fast, and what came back.
+pub fn report(
+    loaded: &Loaded,
+    scene: &Scene,
+    pulses: &[Pulse],
+    out: &Path,
+    simulate_s: f64,
+) -> Result<String> {
+    let c = &loaded.campaign;
+    let mut received = Vec::new();
+    let mut multiple = 0.0;
+    let mut rays = 0u64;
+    let mut paths = 0.0;
+    let (mut solar, mut brf_fov, mut brf_fp) = (0.0, 0.0, 0.0);
+    for f in std::fs::read_dir(out.join("waveforms"))
+        .map_err(|e| Error::file(out, e))?
+        .flatten()
+    {
+        let p = f.path();
+        if p.extension().is_some_and(|e| e == "parquet") {
+            for w in read_waveforms(&p)? {
+                received.push(w.received_energy_j);
+                multiple += w.received_energy_j - w.order_energy_j.first().copied().unwrap_or(0.0);
+                rays += w.rays as u64;
+                paths += w.paths_per_ray as f64 * w.rays as f64;
+                solar += w.solar_photons_per_bin as f64;
+                brf_fov += w.brf_fov_solar as f64;
+                brf_fp += w.brf_footprint_laser as f64;
+            }
+        }
+    }
+    let total: f64 = received.iter().sum();
+    let sim = simulate_s;
+    let s = scene.stats();
+    let mut text = format!("# Run report: {}\n\n", c.name);
+    text += &format!(
+        "| | |\n| --- | --- |\n| scene | {} ({} instances, {} triangles) |\n| instrument | {:?}, {} nm, {} J, footprint {} mrad, field of view {} mrad |\n| method | {:?}, {} rays per pulse, max order {} |\n| pulses | {} |\n| rays | {} |\n| simulation wall time | {:.2} s ({:.1} pulses/s) |\n| effective paths per ray | {:.2} |\n| mean received energy per pulse | {:.4e} J |\n| multiple scattering share | {:.1}% |\n",
+        scene.name,
+        s.instances,
+        s.instanced_triangles,
+        c.instrument.kind,
+        c.wavelength_nm,
+        c.instrument.pulse_energy_j,
+        c.instrument.footprint_half_angle_mrad,
+        c.instrument.fov_half_angle_mrad,
+        c.simulation.method,
+        c.simulation.rays_per_pulse,
+        c.simulation.max_order,
+        pulses.len(),
+        rays,
+        sim,
+        if sim > 0.0 { pulses.len() as f64 / sim } else { 0.0 },
+        paths / rays.max(1) as f64,
+        total / received.len().max(1) as f64,
+        if total > 0.0 { 100.0 * multiple / total } else { 0.0 },
+    );
+    let n = received.len().max(1) as f64;
+    text += &format!(
+        "| scene BRF in the footprint, from the laser (π/ΔΩ)(Q_r/Q_e) | {:.4} |\n",
+        brf_fp / n
+    );
+    if let Some(sun) = &c.sun {
+        text += &format!(
+            "| sun | zenith {}°, azimuth {}° |\n| solar photons per bin | {:.4} |\n| scene BRF in the field of view, from the sun (Eq. 20) | {:.4} |\n",
+            sun.zenith_deg, sun.azimuth_deg, solar / n, brf_fov / n
+        );
+    }
+    text += &products_section(out);
+    Ok(text)
+}
+
+/// The products part of report.md: figures from products.json and dsm/report.json, and the
+/// plots beside them.
+fn products_section(out: &Path) -> String {
+    let read = |p: &Path| -> Option<serde_json::Value> {
+        serde_json::from_str(&std::fs::read_to_string(p).ok()?).ok()
+    };
+    let mut text = String::new();
+    let Some(p) = read(&out.join("products.json")) else {
+        return text;
+    };
+    let num = |v: &serde_json::Value| v.as_f64().map_or("–".to_string(), |x| format!("{x:.3}"));
+    if p.get("points").is_some() {
+        let by = &p["points_by_class"];
+        text += &format!(
+            "\n## Discrete returns (points.las)\n\n| | |\n| --- | --- |\n| points | {} |\n| points per pulse | {} |\n| pulse density | {} per m² |\n| ground / vegetation / building / unclassified | {} / {} / {} / {} |\n",
+            p["points"], num(&p["points_per_pulse"]), num(&p["pulse_density_per_m2"]),
+            by["ground"], by["vegetation"], by["building"], by["unclassified"]
+        );
+        for (f, what) in [
+            (
+                "points_top.png",
+                "Points from above, coloured by apparent reflectance",
+            ),
+            ("waveforms.png", "Waveforms with their fitted components"),
+        ] {
+            if out.join(f).exists() {
+                text += &format!("\n{what}:\n\n![{what}]({f})\n");
+            }
+        }
+    }
+    if let Some(d) = read(&out.join("dsm/report.json")) {
+        text += &format!(
+            "\n## DSM error ({} m cells)\n\n| bias | RMSE | MAE | coverage | cells |\n| --- | --- | --- | --- | --- |\n| {} m | {} m | {} m | {} | {} |\n\n| \\|scan angle\\| (°) | cells | coverage | bias (m) | RMSE (m) |\n| --- | --- | --- | --- | --- |\n",
+            d["resolution_m"], num(&d["bias_m"]), num(&d["rmse_m"]), num(&d["mae_m"]),
+            num(&d["coverage"]), d["cells"]
+        );
+        for b in d["by_scan_angle"].as_array().into_iter().flatten() {
+            text += &format!(
+                "| {}–{} | {} | {} | {} | {} |\n",
+                b["bin_deg_lo"],
+                b["bin_deg_hi"],
+                b["cells_surfaced"],
+                num(&b["coverage"]),
+                num(&b["bias_m"]),
+                num(&b["rmse_m"])
+            );
+        }
+        text += "\n![DSM error map](dsm/error_map.png)\n\n![DSM error and coverage against scan angle](dsm/error_vs_scan_angle.png)\n";
+    }
+    if let Some(ph) = p.get("photons") {
+        text += &format!(
+            "\n## Photon counting (photons.parquet)\n\n| total | laser | solar | dark | laser per shot |\n| --- | --- | --- | --- | --- |\n| {} | {} | {} | {} | {} |\n",
+            ph["total"], ph["laser"], ph["solar"], ph["dark"], num(&ph["laser_per_shot"])
+        );
+    }
+    text
+}

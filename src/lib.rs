@@ -19,6 +19,8 @@ pub mod plan;
 pub mod products;
 pub mod scene;
 pub mod sensor;
+#[doc(hidden)]
+pub mod testdata;
 pub mod transport;
 pub mod waveform;
 

@@ -4,20 +4,8 @@
 
 mod common;
 use common::*;
-use std::path::PathBuf;
 
-fn rami_dir() -> Option<PathBuf> {
-    let d = repo().join("../shared/data/rami-wco");
-    if d.join("CISI1/foliage.ply").is_file() {
-        Some(d)
-    } else {
-        println!(
-            "SKIPPED: RAMI data not found at {} (see README, Scenes)",
-            d.display()
-        );
-        None
-    }
-}
+use lidarsim::testdata::rami_dir;
 
 /// Face count from a PLY header, read here independently of the simulator's reader.
 fn ply_faces(path: &std::path::Path) -> u64 {

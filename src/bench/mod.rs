@@ -337,16 +337,13 @@ pub fn run(opts: &BenchOptions) -> Result<String> {
     }
 
     if opts.campaigns {
-        let planned =
-            campaigns::plan(&opts.dir, &opts.rami_scene, opts.full)?;
+        let planned = campaigns::plan(&opts.dir, &opts.rami_scene, opts.full)?;
         let (mut rows, mut skipped) = (Vec::new(), Vec::new());
         for p in planned {
             match p {
                 campaigns::Planned::Run { name, what, text } => {
                     eprintln!("lidarsim bench: campaign {name}");
-                    rows.push(campaigns::run_row(
-                        &opts.dir, &name, &what, &text,
-                    )?);
+                    rows.push(campaigns::run_row(&opts.dir, &name, &what, &text)?);
                 }
                 campaigns::Planned::Skipped { name, why } => {
                     eprintln!("lidarsim bench: campaign {name} skipped: {why}");

@@ -1,7 +1,7 @@
 //! Command line: `lidarsim run`, `lidarsim check`.
 
-use crate::error::{Error, Result};
 use crate::bench;
+use crate::error::{Error, Result};
 use crate::pipeline::{self, RunOptions};
 use crate::plan;
 use crate::scene::Scene;

@@ -166,6 +166,82 @@ fn clean_temp_files(dir: &Path) {
     }
 }
 
+/// A run folder while its stages run: its manifest and what the command asked for.
+struct RunFolder<'a> {
+    out: &'a Path,
+    opts: &'a RunOptions,
+    manifest_path: PathBuf,
+    manifest: Manifest,
+}
+
+impl<'a> RunFolder<'a> {
+    /// Creates the folder, or takes it over with its manifest when resuming or sharding.
+    fn open(loaded: &Loaded, out: &'a Path, opts: &'a RunOptions) -> Result<RunFolder<'a>> {
+        std::fs::create_dir_all(out)
+            .map_err(|e| Error::file(out, format!("cannot create run folder: {e}")))?;
+        let manifest_path = out.join("manifest.json");
+        // shards share the folder with each other: they keep what is there, like a resume
+        let keep = opts.resume || opts.shard.is_some();
+        let mut manifest = if keep {
+            Manifest::read(&manifest_path).unwrap_or_default()
+        } else {
+            Manifest::default()
+        };
+        if keep {
+            // another shard may be writing beside a shard: only a plain resume, alone on the
+            // folder, removes temporary files (left by a crash or a kill)
+            if opts.shard.is_none() {
+                clean_temp_files(out);
+            }
+        } else {
+            for name in ["waveforms", "pulses.parquet", "manifest.json", "report.md"] {
+                let p = out.join(name);
+                let _ = if p.is_dir() {
+                    std::fs::remove_dir_all(&p)
+                } else {
+                    std::fs::remove_file(&p)
+                };
+            }
+        }
+        manifest.tool_version = env!("CARGO_PKG_VERSION").to_string();
+        manifest.campaign = loaded.campaign.name.clone();
+        Ok(RunFolder {
+            out,
+            opts,
+            manifest_path,
+            manifest,
+        })
+    }
+
+    fn wanted(&self, stage: Stage) -> bool {
+        self.opts.stages.as_ref().is_none_or(|v| v.contains(&stage))
+    }
+
+    /// Whether `stage` ran to the end on inputs with this fingerprint.
+    fn done(&self, stage: Stage, fp: &str) -> bool {
+        self.manifest.done(stage, fp)
+    }
+
+    /// Records a stage that ran (`note`: what is left to do, if anything), makes every later
+    /// stage stale and saves the manifest.
+    fn finish(
+        &mut self,
+        stage: Stage,
+        fp: &str,
+        outputs: Vec<String>,
+        t: Instant,
+        note: Option<String>,
+        status: &str,
+    ) -> Result<()> {
+        record(&mut self.manifest, stage, fp, outputs, t, note);
+        if let Some(r) = self.manifest.stages.get_mut(stage.name()) {
+            r.status = status.into();
+        }
+        invalidate_after(&mut self.manifest, stage);
+        save(&self.manifest_path, &self.manifest)
+    }
+}
+
 fn run_single(
     loaded: &Loaded,
     out: &Path,
@@ -173,70 +249,12 @@ fn run_single(
     cache: &mut SceneCache,
 ) -> Result<RunSummary> {
     let start = Instant::now();
-    let c = &loaded.campaign;
-    std::fs::create_dir_all(out)
-        .map_err(|e| Error::file(out, format!("cannot create run folder: {e}")))?;
-    let manifest_path = out.join("manifest.json");
-    // shards share the folder with each other: they keep what is there, like a resume
-    let keep = opts.resume || opts.shard.is_some();
-    let mut manifest = if keep {
-        Manifest::read(&manifest_path).unwrap_or_default()
-    } else {
-        Manifest::default()
-    };
-    if keep {
-        // another shard may be writing beside a shard: only a plain resume, alone on the
-        // folder, removes temporary files (left by a crash or a kill)
-        if opts.shard.is_none() {
-            clean_temp_files(out);
-        }
-    } else {
-        for name in ["waveforms", "pulses.parquet", "manifest.json", "report.md"] {
-            let p = out.join(name);
-            let _ = if p.is_dir() {
-                std::fs::remove_dir_all(&p)
-            } else {
-                std::fs::remove_file(&p)
-            };
-        }
-    }
-    manifest.tool_version = env!("CARGO_PKG_VERSION").to_string();
-    manifest.campaign = c.name.clone();
-    let before = manifest.clone();
-    let wanted = |s: Stage| opts.stages.as_ref().is_none_or(|v| v.contains(&s));
-
+    let mut run = RunFolder::open(loaded, out, opts)?;
+    let before = run.manifest.clone();
     let resolved = loaded.resolved_yaml();
     write_text_atomic(&out.join("campaign.resolved.yaml"), &resolved)?;
     let fp_plan = fingerprint(&[resolved.as_bytes(), env!("CARGO_PKG_VERSION").as_bytes()]);
-
-    // plan: cheap and deterministic, so the pulses are always planned in memory; the file is
-    // written only when the stage is not already done
-    let t = Instant::now();
-    let pulses = plan_with_progress(c)?;
-    if wanted(Stage::Plan) && !manifest.done(Stage::Plan, &fp_plan) {
-        plan::write_pulses(&out.join("pulses.parquet"), &pulses)?;
-        record(
-            &mut manifest,
-            Stage::Plan,
-            &fp_plan,
-            vec!["pulses.parquet".into()],
-            t,
-            None,
-        );
-        save(&manifest_path, &manifest)?;
-        log(&format!(
-            "plan: {} pulses in {:.2} s",
-            pulses.len(),
-            t.elapsed().as_secs_f64()
-        ));
-    } else if !manifest.done(Stage::Plan, &fp_plan) {
-        return Err(Error::msg(format!(
-            "{}: stage plan has not run: include it in --stages",
-            out.display()
-        )));
-    } else {
-        log("plan: up to date");
-    }
+    let pulses = plan_stage(&mut run, &loaded.campaign, &fp_plan)?;
 
     let mut summary = RunSummary {
         out: out.to_path_buf(),
@@ -247,78 +265,21 @@ fn run_single(
         complete: true,
     };
     let later = [Stage::Simulate, Stage::Products, Stage::Report];
-    if !later.iter().any(|s| wanted(*s)) {
+    if !later.iter().any(|s| run.wanted(*s)) {
         summary.seconds = start.elapsed().as_secs_f64();
         return Ok(summary);
     }
 
-    let scene = cache.get(&loaded.scene_path, c.wavelength_nm)?;
-    let mut scene_bytes = Vec::new();
-    for f in &scene.files {
-        let bytes = std::fs::read(f).map_err(|e| Error::file(f, format!("cannot read: {e}")))?;
-        scene_bytes.push(bytes);
-    }
-    let mut inputs: Vec<&[u8]> = vec![fp_plan.as_bytes()];
-    inputs.extend(scene_bytes.iter().map(|b| b.as_slice()));
-    let fp_sim = fingerprint(&inputs);
-
-    // simulate
-    let parts = pulses.len().div_ceil(PART_PULSES);
-    let part_files: Vec<String> = (0..parts).map(part_name).collect();
-    if wanted(Stage::Simulate) && !manifest.done(Stage::Simulate, &fp_sim) {
-        let t = Instant::now();
-        let wf_dir = out.join("waveforms");
-        let marker = wf_dir.join("fingerprint");
-        let stale = std::fs::read_to_string(&marker)
-            .map(|s| s.trim() != fp_sim)
-            .unwrap_or(true);
-        if stale && opts.shard.is_none() && wf_dir.exists() {
-            let _ = std::fs::remove_dir_all(&wf_dir);
-        }
-        write_text_atomic(&marker, &fp_sim)?;
-        let todo: Vec<usize> = (0..parts)
-            .filter(|k| opts.shard.is_none_or(|(i, n)| k % n == i))
-            .filter(|&k| !out.join(part_name(k)).is_file())
-            .collect();
-        let (rays, done) = simulate_parts(loaded, scene, &pulses, &todo, out)?;
+    let scene = cache.get(&loaded.scene_path, loaded.campaign.wavelength_nm)?;
+    let fp_sim = simulate_fingerprint(&fp_plan, scene)?;
+    if run.wanted(Stage::Simulate) && !run.done(Stage::Simulate, &fp_sim) {
+        let (rays, parts_done) = simulate_stage(&mut run, loaded, scene, &pulses, &fp_sim)?;
         summary.rays = rays;
-        summary.parts_done = done;
-        let missing = (0..parts)
-            .filter(|&k| !out.join(part_name(k)).is_file())
-            .count();
-        if missing == 0 {
-            record(
-                &mut manifest,
-                Stage::Simulate,
-                &fp_sim,
-                part_files.clone(),
-                t,
-                None,
-            );
-        } else {
-            let note =
-                format!("{missing} of {parts} parts missing: run again with --resume to finish");
-            record(
-                &mut manifest,
-                Stage::Simulate,
-                &fp_sim,
-                part_files.clone(),
-                t,
-                Some(note.clone()),
-            );
-            manifest
-                .stages
-                .get_mut("simulate")
-                .expect("recorded")
-                .status = "partial".into();
-            log(&format!("simulate: {note}"));
-        }
-        invalidate_after(&mut manifest, Stage::Simulate);
-        save(&manifest_path, &manifest)?;
-    } else if manifest.done(Stage::Simulate, &fp_sim) {
+        summary.parts_done = parts_done;
+    } else if run.done(Stage::Simulate, &fp_sim) {
         log("simulate: up to date");
     }
-    if !manifest.done(Stage::Simulate, &fp_sim) {
+    if !run.done(Stage::Simulate, &fp_sim) {
         summary.complete = false;
         summary.seconds = start.elapsed().as_secs_f64();
         return Ok(summary);
@@ -326,62 +287,132 @@ fn run_single(
 
     // products: discrete returns, photon counts and the DSM error, from the waveforms
     let fp_products = fingerprint(&[fp_sim.as_bytes(), b"products"]);
-    if wanted(Stage::Products) && !manifest.done(Stage::Products, &fp_products) {
+    if run.wanted(Stage::Products) && !run.done(Stage::Products, &fp_products) {
         let t = Instant::now();
+        let parts = pulses.len().div_ceil(PART_PULSES);
         let (outputs, note) = products::stage::run(loaded, scene, out, &pulses, parts)?;
         log(&format!(
             "products: {} in {:.2} s",
             outputs.join(", "),
             t.elapsed().as_secs_f64()
         ));
-        record(
-            &mut manifest,
-            Stage::Products,
-            &fp_products,
-            outputs,
-            t,
-            (!note.is_empty()).then_some(note),
-        );
-        invalidate_after(&mut manifest, Stage::Products);
-        save(&manifest_path, &manifest)?;
+        let note = (!note.is_empty()).then_some(note);
+        run.finish(Stage::Products, &fp_products, outputs, t, note, "done")?;
     }
 
-    // report
     let fp_report = fingerprint(&[fp_products.as_bytes(), b"report"]);
-    if wanted(Stage::Report)
-        && manifest.done(Stage::Products, &fp_products)
-        && !manifest.done(Stage::Report, &fp_report)
+    if run.wanted(Stage::Report)
+        && run.done(Stage::Products, &fp_products)
+        && !run.done(Stage::Report, &fp_report)
     {
         let t = Instant::now();
-        let simulate_s = manifest
+        let simulate_s = run
+            .manifest
             .stages
             .get("simulate")
             .map(|r| r.wall_time_s)
             .unwrap_or(0.0);
         let text = products::report::report(loaded, scene, &pulses, out, simulate_s)?;
         write_text_atomic(&out.join("report.md"), &text)?;
-        record(
-            &mut manifest,
+        run.finish(
             Stage::Report,
             &fp_report,
             vec!["report.md".into()],
             t,
             None,
-        );
-        save(&manifest_path, &manifest)?;
+            "done",
+        )?;
     }
-    if manifest == before {
+    if run.manifest == before {
         log("nothing to do: every stage is up to date");
     }
-    summary.complete = opts.stages.is_some() || manifest.done(Stage::Report, &fp_report);
+    summary.complete = opts.stages.is_some() || run.done(Stage::Report, &fp_report);
     summary.seconds = start.elapsed().as_secs_f64();
     Ok(summary)
 }
 
-fn plan_with_progress(c: &Campaign) -> Result<Vec<Pulse>> {
+/// The plan stage. Planning is cheap and deterministic, so the pulses are always planned in
+/// memory; `pulses.parquet` is written only when the stage is not already done.
+fn plan_stage(run: &mut RunFolder, c: &Campaign, fp: &str) -> Result<Vec<Pulse>> {
+    let t = Instant::now();
     let pulses = plan::plan(c)?;
     if pulses.is_empty() {
         return Err(Error::msg("the platform plans no pulses"));
     }
+    if run.wanted(Stage::Plan) && !run.done(Stage::Plan, fp) {
+        plan::write_pulses(&run.out.join("pulses.parquet"), &pulses)?;
+        run.finish(
+            Stage::Plan,
+            fp,
+            vec!["pulses.parquet".into()],
+            t,
+            None,
+            "done",
+        )?;
+        log(&format!(
+            "plan: {} pulses in {:.2} s",
+            pulses.len(),
+            t.elapsed().as_secs_f64()
+        ));
+    } else if !run.done(Stage::Plan, fp) {
+        return Err(Error::msg(format!(
+            "{}: stage plan has not run: include it in --stages",
+            run.out.display()
+        )));
+    } else {
+        log("plan: up to date");
+    }
     Ok(pulses)
+}
+
+/// The simulate stage's fingerprint: the plan's and every scene file's bytes.
+fn simulate_fingerprint(fp_plan: &str, scene: &Scene) -> Result<String> {
+    let mut scene_bytes = Vec::new();
+    for f in &scene.files {
+        let bytes = std::fs::read(f).map_err(|e| Error::file(f, format!("cannot read: {e}")))?;
+        scene_bytes.push(bytes);
+    }
+    let mut inputs: Vec<&[u8]> = vec![fp_plan.as_bytes()];
+    inputs.extend(scene_bytes.iter().map(|b| b.as_slice()));
+    Ok(fingerprint(&inputs))
+}
+
+/// The simulate stage: the parts this invocation owns (all, or its shard's) that are not
+/// written yet. Returns (rays traced, parts written).
+fn simulate_stage(
+    run: &mut RunFolder,
+    loaded: &Loaded,
+    scene: &Scene,
+    pulses: &[Pulse],
+    fp: &str,
+) -> Result<(u64, usize)> {
+    let (out, shard) = (run.out, run.opts.shard);
+    let t = Instant::now();
+    let parts = pulses.len().div_ceil(PART_PULSES);
+    let part_files: Vec<String> = (0..parts).map(part_name).collect();
+    let wf_dir = out.join("waveforms");
+    let marker = wf_dir.join("fingerprint");
+    let stale = std::fs::read_to_string(&marker)
+        .map(|s| s.trim() != fp)
+        .unwrap_or(true);
+    if stale && shard.is_none() && wf_dir.exists() {
+        let _ = std::fs::remove_dir_all(&wf_dir);
+    }
+    write_text_atomic(&marker, fp)?;
+    let todo: Vec<usize> = (0..parts)
+        .filter(|k| shard.is_none_or(|(i, n)| k % n == i))
+        .filter(|&k| !out.join(part_name(k)).is_file())
+        .collect();
+    let (rays, done) = simulate_parts(loaded, scene, pulses, &todo, out)?;
+    let missing = (0..parts)
+        .filter(|&k| !out.join(part_name(k)).is_file())
+        .count();
+    if missing == 0 {
+        run.finish(Stage::Simulate, fp, part_files, t, None, "done")?;
+    } else {
+        let note = format!("{missing} of {parts} parts missing: run again with --resume to finish");
+        log(&format!("simulate: {note}"));
+        run.finish(Stage::Simulate, fp, part_files, t, Some(note), "partial")?;
+    }
+    Ok((rays, done))
 }

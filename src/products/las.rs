@@ -307,7 +307,7 @@ mod tests {
             .map(|o| o.status.success())
             .unwrap_or(false);
         if !ok {
-            println!("SKIPPED: python3 with laspy is not available");
+            crate::testdata::skip("python3 with laspy is not available (pip install laspy)");
             return;
         }
         let pts = sample(257);

@@ -400,17 +400,16 @@ fn instance_tables() {
 
 #[test]
 fn rami_location_file_loads_as_is() {
-    let p = Path::new("/work/shared/data/rami-wco/CISI1/location.txt");
-    if !p.exists() {
-        println!("skipped: {} not found", p.display());
+    let Some(root) = crate::testdata::rami_dir() else {
         return;
-    }
-    let text = std::fs::read_to_string(p).unwrap();
+    };
+    let p = root.join("CISI1/location.txt");
+    let text = std::fs::read_to_string(&p).unwrap();
     assert!(
         !text.ends_with('\n'),
         "the RAMI file ends without a newline"
     );
-    let rows = parse_instances(p, &text).unwrap();
+    let rows = parse_instances(&p, &text).unwrap();
     assert_eq!(
         rows.len(),
         text.lines().filter(|l| !l.trim().is_empty()).count()
@@ -805,11 +804,9 @@ fn heightfield_and_shared_meshes() {
 
 #[test]
 fn rami_orchard() {
-    let root = Path::new("/work/shared/data/rami-wco");
-    if !root.exists() {
-        println!("skipped: {} not found", root.display());
+    let Some(root) = crate::testdata::rami_dir() else {
         return;
-    }
+    };
     let yaml = fixtures().join("rami_wco_test.yaml");
     let t = std::time::Instant::now();
     let s = Scene::load(&yaml, 1064.0).unwrap();
@@ -1082,10 +1079,7 @@ fn bundled_scenes_load() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes");
     for name in ["plane.yaml", "sphere.yaml", "rami_wco.yaml"] {
         let p = root.join(name);
-        if !p.exists()
-            || (name == "rami_wco.yaml" && !Path::new("/work/shared/data/rami-wco").exists())
-        {
-            println!("skipped: {}", p.display());
+        if name == "rami_wco.yaml" && crate::testdata::rami_dir().is_none() {
             continue;
         }
         for wl in [532.0, 1064.0] {

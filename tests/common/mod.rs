@@ -25,9 +25,7 @@ pub fn write(dir: &Path, name: &str, text: &str) -> PathBuf {
     p
 }
 
-pub fn repo() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-}
+pub use lidarsim::testdata::repo;
 
 /// Instrument block of a campaign, in YAML flow style.
 #[derive(Clone, Debug)]

@@ -1,0 +1,34 @@
+//! For the tests: data they need from outside the repository, and how a test that cannot run
+//! says so. A skip is printed on stderr (cargo shows it), and `LIDARSIM_REQUIRE_DATA=1`, which
+//! `.ci/run` sets where `../shared/` is present, turns every skip into a failure.
+
+use std::path::PathBuf;
+
+/// The repository's folder.
+pub fn repo() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+/// The RAMI orchard's files, `../shared/data/rami-wco` beside the repository, when present;
+/// otherwise the test skips, saying so.
+pub fn rami_dir() -> Option<PathBuf> {
+    let d = repo().join("../shared/data/rami-wco");
+    if d.join("CISI1/foliage.ply").is_file() {
+        Some(d)
+    } else {
+        skip(&format!(
+            "RAMI data not found at {} (README, \"Scenes\")",
+            d.display()
+        ));
+        None
+    }
+}
+
+/// Says on stderr why a test cannot run; fails the test instead when
+/// `LIDARSIM_REQUIRE_DATA=1`.
+pub fn skip(why: &str) {
+    if std::env::var("LIDARSIM_REQUIRE_DATA").is_ok_and(|v| v == "1") {
+        panic!("this test cannot run, and LIDARSIM_REQUIRE_DATA=1 requires it: {why}");
+    }
+    eprintln!("SKIPPED: {why}");
+}

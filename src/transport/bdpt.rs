@@ -1,0 +1,349 @@
+//! One bidirectional sample: a light and a receiver sub-path, joined in every way, each
+//! strategy weighted by [`mis_weight`](super::mis_weight) and tallied by time and order.
+
+use super::bsdf::{bsdf, sample_bsdf};
+use super::mis::{link, mis_weight};
+use super::tally::Accum;
+use super::{Kind, PulseSetup, Rng, Vertex, ROULETTE_AFTER};
+use crate::scene::FacetId;
+use glam::DVec3;
+
+/// Index of the surface class (ground, vegetation, building, other) of the path's first
+/// surface: the one the laser lit, which a return's range points at.
+#[inline]
+pub(super) fn class_of(setup: &PulseSetup, v: &Vertex) -> usize {
+    use crate::scene::SurfaceClass;
+    match setup
+        .scene
+        .surfaces
+        .get(v.surface as usize)
+        .map(|s| s.class)
+    {
+        Some(SurfaceClass::Ground) => 0,
+        Some(SurfaceClass::Vegetation) => 1,
+        Some(SurfaceClass::Building) => 2,
+        _ => 3,
+    }
+}
+
+/// Reusable per-thread buffers.
+#[derive(Default)]
+pub(super) struct Buffers {
+    light: Vec<Vertex>,
+    cam: Vec<Vertex>,
+    scratch: Vec<f64>,
+}
+
+pub(super) fn surface_vertex(hit: &crate::scene::Hit, beta: f64, len: f64) -> Vertex {
+    Vertex {
+        kind: Kind::Surface,
+        p: hit.position,
+        n: hit.normal,
+        surface: hit.surface,
+        facet: hit.facet,
+        beta,
+        len,
+        pdf_fwd: 0.0,
+        pdf_rev: 0.0,
+    }
+}
+
+/// Russian roulette on the albedo just applied: survive with probability a (at least 0.05)
+/// and undo the factor on survival, so the expectation is unchanged.
+#[inline]
+pub(super) fn survives(surfaces: usize, beta: &mut f64, a: f64, rng: &mut Rng) -> bool {
+    if surfaces < ROULETTE_AFTER || a >= 1.0 {
+        return true;
+    }
+    let p = a.max(0.05);
+    if rng.uniform() >= p {
+        return false;
+    }
+    *beta /= p;
+    true
+}
+
+/// Extends a sub-path whose last vertex emits along `dir` with throughput `beta`, up to
+/// `cap` vertices. On a light sub-path (`light`), a segment that crosses the aperture before
+/// any facet is the strategy t = 0 and is scored on the way.
+#[allow(clippy::too_many_arguments)]
+pub(super) fn walk(
+    setup: &PulseSetup,
+    path: &mut Vec<Vertex>,
+    mut dir: DVec3,
+    mut beta: f64,
+    cap: usize,
+    light: bool,
+    rng: &mut Rng,
+    acc: &mut Accum,
+    scratch: &mut Vec<f64>,
+) {
+    let scene = setup.scene;
+    let recv = &setup.receiver;
+    while path.len() < cap {
+        let last = *path.last().expect("a sub-path starts at its end point");
+        let surfaces = path.len() - 1;
+        let hit = scene.intersect(last.p, dir, f64::INFINITY, last.facet);
+        if light && surfaces >= 1 {
+            if let Some(tq) = recv.hit_distance(last.p, dir) {
+                if hit.as_ref().is_none_or(|h| tq < h.t) && recv.accepts(-dir).is_some() {
+                    let mut q =
+                        Vertex::endpoint(Kind::Aperture, last.p + dir * tq, recv.frame.w, 0.0);
+                    q.beta = beta;
+                    q.len = last.len + tq;
+                    path.push(q);
+                    link(setup, path);
+                    let w = mis_weight(setup, path, &[], scratch);
+                    if path[0].kind == Kind::Sun {
+                        acc.add_solar(beta * w);
+                    } else {
+                        acc.add(q.len, beta * w, surfaces, class_of(setup, &path[1]));
+                    }
+                    path.pop();
+                }
+            }
+        }
+        let Some(hit) = hit else { break };
+        path.push(surface_vertex(&hit, beta, last.len + hit.t));
+        link(setup, path);
+        if path.len() >= cap {
+            break;
+        }
+        let surf = &scene.surfaces[hit.surface as usize];
+        let Some((next, a)) = sample_bsdf(surf, hit.normal, -dir, rng) else {
+            break;
+        };
+        beta *= a;
+        if !survives(surfaces + 1, &mut beta, a, rng) {
+            break;
+        }
+        dir = next;
+    }
+}
+
+/// Unweighted estimate f/p of the path light[..s] + cam[..t] (t ≥ 1, s ≥ 1, s + t ≥ 3) and
+/// its length, or None when it carries nothing. Visibility is not tested here.
+pub(super) fn contribution(
+    setup: &PulseSetup,
+    light: &[Vertex],
+    cam: &[Vertex],
+) -> Option<(f64, f64)> {
+    let surfaces = &setup.scene.surfaces;
+    let (s, t) = (light.len(), cam.len());
+    let x = &light[s - 1];
+    let y = &cam[t - 1];
+    let d = y.p - x.p;
+    let r2 = d.length_squared();
+    if r2 == 0.0 {
+        return None;
+    }
+    let r = r2.sqrt();
+    let w = d / r; // from the light side towards the receiver side
+    if s == 1 && x.kind == Kind::Sun {
+        // irradiance E Δλ from a fixed direction: no distance, no falloff
+        let sun = setup.sun?;
+        let towards_prev = (cam[t - 2].p - y.p).normalize();
+        let f_y = bsdf(&surfaces[y.surface as usize], y.n, -sun.dir, towards_prev)
+            * y.n.dot(sun.dir).abs();
+        let c = x.beta * sun.band_irradiance * f_y * y.beta;
+        return (c > 0.0).then_some((c, 0.0));
+    }
+    let f_x = if s == 1 {
+        // the laser: radiant intensity Q_e p_L(ω) per unit solid angle
+        setup.laser.energy * setup.laser.pdf(w)
+    } else {
+        let towards_prev = (light[s - 2].p - x.p).normalize();
+        bsdf(&surfaces[x.surface as usize], x.n, towards_prev, w) * x.n.dot(w).abs()
+    };
+    if f_x == 0.0 {
+        return None;
+    }
+    let f_y = if t == 1 {
+        // a point drawn on the aperture (pdf 1/A): W_e cos θ_q A
+        setup.receiver.accepts(-w)? * setup.receiver.area
+    } else {
+        let towards_prev = (cam[t - 2].p - y.p).normalize();
+        bsdf(&surfaces[y.surface as usize], y.n, -w, towards_prev) * y.n.dot(w).abs()
+    };
+    let c = x.beta * f_x * f_y * y.beta / r2;
+    (c > 0.0).then_some((c, x.len + r + y.len))
+}
+
+/// One sample of the pulse: both sub-paths, then every way of joining them. The order of the
+/// random draws (light, receiver, aperture points of t = 1) is part of the output: keep it.
+pub(super) fn trace_ray(setup: &PulseSetup, rng: &mut Rng, acc: &mut Accum, b: &mut Buffers) {
+    let is_sun = light_subpath(setup, rng, acc, b);
+    receiver_subpath(setup, rng, acc, b);
+    connect_to_lights(setup, acc, b);
+    connect_subpaths(setup, rng, acc, b, is_sun);
+}
+
+/// The light sub-path into `b.light`; true when it starts at the sun.
+///
+/// It starts at one light, the sun with its selection probability q, else the laser; its
+/// contributions are divided by q, which the light end point keeps as its pdf_fwd for the MIS
+/// weights. A receiver vertex, by contrast, is connected to every light (s = 1 strategies need
+/// no choice), which keeps the laser's variance what it is without the sun.
+fn light_subpath(setup: &PulseSetup, rng: &mut Rng, acc: &mut Accum, b: &mut Buffers) -> bool {
+    let (s_cap, _) = setup.caps();
+    let laser = &setup.laser;
+    b.light.clear();
+    let q_sun = setup.sun.map_or(0.0, |s| s.probability);
+    let sun = setup.sun.filter(|_| rng.uniform() < q_sun);
+    if let Some(sun) = sun {
+        let x0 = sun.sample_origin(rng.uniform(), rng.uniform());
+        b.light
+            .push(Vertex::endpoint(Kind::Sun, x0, sun.dir, q_sun));
+        if s_cap > 1 {
+            let beta = sun.band_irradiance * sun.disk_area() / q_sun;
+            walk(
+                setup,
+                &mut b.light,
+                sun.dir,
+                beta,
+                s_cap,
+                true,
+                rng,
+                acc,
+                &mut b.scratch,
+            );
+        }
+    } else {
+        let q_laser = 1.0 - q_sun;
+        b.light.push(Vertex::endpoint(
+            Kind::Laser,
+            laser.position,
+            laser.frame.w,
+            q_laser,
+        ));
+        if s_cap > 1 {
+            let (dir, _) = laser.sample(rng.uniform(), rng.uniform());
+            walk(
+                setup,
+                &mut b.light,
+                dir,
+                laser.energy / q_laser,
+                s_cap,
+                true,
+                rng,
+                acc,
+                &mut b.scratch,
+            );
+        }
+    }
+    sun.is_some()
+}
+
+/// The receiver sub-path into `b.cam` (empty when the method caps it at its aperture point).
+fn receiver_subpath(setup: &PulseSetup, rng: &mut Rng, acc: &mut Accum, b: &mut Buffers) {
+    let (_, t_cap) = setup.caps();
+    let recv = &setup.receiver;
+    b.cam.clear();
+    if t_cap > 1 {
+        let q0 = recv.sample_point(rng.uniform(), rng.uniform());
+        let (dir, w) = recv.sample_direction(rng.uniform(), rng.uniform());
+        b.cam.push(Vertex::endpoint(
+            Kind::Aperture,
+            q0,
+            recv.frame.w,
+            1.0 / recv.area,
+        ));
+        walk(
+            setup,
+            &mut b.cam,
+            dir,
+            recv.area * w,
+            t_cap,
+            false,
+            rng,
+            acc,
+            &mut b.scratch,
+        );
+    }
+}
+
+/// s = 1: every receiver vertex to the laser, and to the sun when there is one.
+fn connect_to_lights(setup: &PulseSetup, acc: &mut Accum, b: &mut Buffers) {
+    let (laser, scene) = (&setup.laser, setup.scene);
+    let max_order = setup.max_order as usize;
+    let q_sun = setup.sun.map_or(0.0, |s| s.probability);
+    let laser_end = Vertex::endpoint(Kind::Laser, laser.position, laser.frame.w, 1.0 - q_sun);
+    for t in 2..=b.cam.len().min(max_order + 1) {
+        let cam = &b.cam[..t];
+        let y = &cam[t - 1];
+        let laser_light = [laser_end];
+        if let Some((c, length)) = contribution(setup, &laser_light, cam) {
+            if !scene.occluded(laser_end.p, y.p, FacetId::NONE, y.facet) {
+                let w = mis_weight(setup, &laser_light, cam, &mut b.scratch);
+                acc.add(length, c * w, t - 1, class_of(setup, y));
+            }
+        }
+        if let Some(sun) = setup.sun {
+            // the sun's point for this connection is the one up-sun of the vertex
+            let sun_light = [Vertex::endpoint(
+                Kind::Sun,
+                y.p - sun.dir * (4.0 * sun.radius),
+                sun.dir,
+                q_sun,
+            )];
+            if let Some((c, _)) = contribution(setup, &sun_light, cam) {
+                if scene
+                    .intersect(y.p, -sun.dir, f64::INFINITY, y.facet)
+                    .is_none()
+                {
+                    let w = mis_weight(setup, &sun_light, cam, &mut b.scratch);
+                    acc.add_solar(c * w);
+                }
+            }
+        }
+    }
+}
+
+/// s ≥ 2: the light sub-path's vertices to a point drawn on the aperture (t = 1) and to the
+/// receiver sub-path's vertices (t ≥ 2).
+fn connect_subpaths(
+    setup: &PulseSetup,
+    rng: &mut Rng,
+    acc: &mut Accum,
+    b: &mut Buffers,
+    is_sun: bool,
+) {
+    let (_, t_cap) = setup.caps();
+    let (recv, scene) = (&setup.receiver, setup.scene);
+    let max_order = setup.max_order as usize;
+    let mut q = [Vertex::endpoint(
+        Kind::Aperture,
+        recv.center,
+        recv.frame.w,
+        1.0 / recv.area,
+    )];
+    let t_max = if t_cap > 1 { b.cam.len() } else { 1 };
+    for s in 2..=b.light.len() {
+        for t in 1..=t_max {
+            let order = s + t - 2;
+            if order > max_order {
+                continue;
+            }
+            let light = &b.light[..s];
+            let cam: &[Vertex] = if t == 1 {
+                q[0].p = recv.sample_point(rng.uniform(), rng.uniform());
+                &q
+            } else {
+                &b.cam[..t]
+            };
+            let Some((c, length)) = contribution(setup, light, cam) else {
+                continue;
+            };
+            let (x, y) = (&light[s - 1], &cam[t - 1]);
+            if scene.occluded(x.p, y.p, x.facet, y.facet) {
+                continue;
+            }
+            let w = mis_weight(setup, light, cam, &mut b.scratch);
+            if is_sun {
+                acc.add_solar(c * w);
+            } else {
+                acc.add(length, c * w, order, class_of(setup, &light[1]));
+            }
+        }
+    }
+}

@@ -1,0 +1,208 @@
+//! What a pulse's rays add up to: energy per sub-bin and per order, with the sums of squares
+//! over whole rays that standard errors need.
+
+use super::PulseSetup;
+
+/// Received laser energy of one pulse, by time and by scattering order, with the sums of
+/// squares over rays needed for standard errors.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Tally {
+    /// Energy per sub-bin over the gate, J.
+    pub sub: Vec<f64>,
+    /// Σ energy × position within its sub-bin (0..1) per sub-bin: the energy's mean time in
+    /// each sub-bin, so that the pulse convolution puts a return where it was, not at a
+    /// sub-bin centre (up to σ/8 off otherwise, 1.9 cm of range for a 4 ns pulse).
+    pub sub_moment: Vec<f64>,
+    /// Σ over rays of the square of each ray's energy per bin.
+    pub bin_sq: Vec<f64>,
+    /// Energy per bin by the class of the surface the laser lit first (ground, vegetation,
+    /// building, other): the truth a real scanner never knows, for labelling returns.
+    pub class_bins: [Vec<f64>; 4],
+    /// Energy whose time fell outside the gate, J.
+    pub outside: f64,
+    /// Σ over rays of each ray's energy per order (index 0 = order 1).
+    pub order_sum: Vec<f64>,
+    /// Σ over rays of the square of each ray's energy per order.
+    pub order_sq: Vec<f64>,
+    /// Σ over rays of the square of each ray's total energy.
+    pub total_sq: f64,
+    pub rays: u64,
+    /// Connections that carried energy (paths found), over all rays.
+    pub paths: u64,
+    /// Σ over rays of each ray's received solar power, W, and of its square.
+    pub solar_sum: f64,
+    pub solar_sq: f64,
+}
+
+impl Tally {
+    pub(super) fn new(bins: usize, sub_bins: usize, max_order: u32) -> Tally {
+        Tally {
+            sub: vec![0.0; bins * sub_bins],
+            sub_moment: vec![0.0; bins * sub_bins],
+            bin_sq: vec![0.0; bins],
+            class_bins: std::array::from_fn(|_| vec![0.0; bins]),
+            outside: 0.0,
+            order_sum: vec![0.0; max_order as usize],
+            order_sq: vec![0.0; max_order as usize],
+            total_sq: 0.0,
+            rays: 0,
+            paths: 0,
+            solar_sum: 0.0,
+            solar_sq: 0.0,
+        }
+    }
+
+    pub(super) fn merge(&mut self, o: &Tally) {
+        let add = |a: &mut [f64], b: &[f64]| a.iter_mut().zip(b).for_each(|(x, y)| *x += y);
+        add(&mut self.sub, &o.sub);
+        add(&mut self.sub_moment, &o.sub_moment);
+        add(&mut self.bin_sq, &o.bin_sq);
+        for (a, b) in self.class_bins.iter_mut().zip(&o.class_bins) {
+            add(a, b);
+        }
+        add(&mut self.order_sum, &o.order_sum);
+        add(&mut self.order_sq, &o.order_sq);
+        self.outside += o.outside;
+        self.total_sq += o.total_sq;
+        self.rays += o.rays;
+        self.paths += o.paths;
+        self.solar_sum += o.solar_sum;
+        self.solar_sq += o.solar_sq;
+    }
+
+    /// Mean received solar power over the receiver band, W, and its standard error.
+    pub fn solar_power(&self) -> (f64, f64) {
+        (
+            self.solar_sum / self.rays.max(1) as f64,
+            se(self.solar_sum, self.solar_sq, self.rays),
+        )
+    }
+
+    /// Mean received energy per order over the rays, J (the estimate of Q_k).
+    pub fn order_energy(&self) -> Vec<f64> {
+        let n = self.rays.max(1) as f64;
+        self.order_sum.iter().map(|s| s / n).collect()
+    }
+
+    /// Standard error of each order's estimate, J.
+    pub fn order_se(&self) -> Vec<f64> {
+        self.order_sum
+            .iter()
+            .zip(&self.order_sq)
+            .map(|(s, q)| se(*s, *q, self.rays))
+            .collect()
+    }
+
+    pub fn total_energy(&self) -> f64 {
+        self.order_sum.iter().sum::<f64>() / self.rays.max(1) as f64
+    }
+
+    pub fn total_se(&self) -> f64 {
+        se(self.order_sum.iter().sum(), self.total_sq, self.rays)
+    }
+
+    /// Standard error of each bin's impulse energy, J.
+    pub fn bin_se(&self, sub_bins: usize) -> Vec<f64> {
+        self.sub
+            .chunks(sub_bins)
+            .zip(&self.bin_sq)
+            .map(|(c, q)| se(c.iter().sum(), *q, self.rays))
+            .collect()
+    }
+}
+
+/// Standard error of a mean from the sum and sum of squares of n samples.
+pub(super) fn se(sum: f64, sq: f64, n: u64) -> f64 {
+    if n < 2 {
+        return 0.0;
+    }
+    let n = n as f64;
+    let mean = sum / n;
+    ((sq / n - mean * mean).max(0.0) / (n - 1.0)).sqrt()
+}
+
+/// Per-chunk accumulator. A ray's contributions are staged per order and per bin, so that
+/// sums of squares are over whole rays (a ray is one sample of the estimator).
+pub(super) struct Accum {
+    pub(super) tally: Tally,
+    t0: f64,
+    sub_dt: f64,
+    sub_bins: usize,
+    ray_order: Vec<f64>,
+    ray_bin: Vec<f64>,
+    touched_orders: Vec<u32>,
+    touched_bins: Vec<u32>,
+    ray_solar: f64,
+}
+
+impl Accum {
+    pub(super) fn new(setup: &PulseSetup) -> Accum {
+        Accum {
+            tally: Tally::new(setup.gate.bins, setup.sub_bins, setup.max_order),
+            t0: setup.gate.t0,
+            sub_dt: setup.gate.dt / setup.sub_bins as f64,
+            sub_bins: setup.sub_bins,
+            ray_order: vec![0.0; setup.max_order as usize],
+            ray_bin: vec![0.0; setup.gate.bins],
+            touched_orders: Vec::with_capacity(16),
+            touched_bins: Vec::with_capacity(16),
+            ray_solar: 0.0,
+        }
+    }
+
+    /// A solar path carrying `power` watts (the sun is continuous: no time, no bin).
+    pub(super) fn add_solar(&mut self, power: f64) {
+        if power > 0.0 && power.is_finite() {
+            self.ray_solar += power;
+            self.tally.paths += 1;
+        }
+    }
+
+    /// A path of `length` metres and `order` surface interactions carrying `energy` joules.
+    pub(super) fn add(&mut self, length: f64, energy: f64, order: usize, class: usize) {
+        if !(energy > 0.0 && energy.is_finite()) || order == 0 {
+            return;
+        }
+        let x = (length / crate::C - self.t0) / self.sub_dt;
+        if x >= 0.0 && (x as usize) < self.tally.sub.len() {
+            let i = x as usize;
+            self.tally.sub[i] += energy;
+            self.tally.sub_moment[i] += energy * (x - i as f64);
+            let b = i / self.sub_bins;
+            self.tally.class_bins[class][b] += energy;
+            if self.ray_bin[b] == 0.0 {
+                self.touched_bins.push(b as u32);
+            }
+            self.ray_bin[b] += energy;
+        } else {
+            self.tally.outside += energy;
+        }
+        let k = order - 1;
+        if self.ray_order[k] == 0.0 {
+            self.touched_orders.push(k as u32);
+        }
+        self.ray_order[k] += energy;
+        self.tally.paths += 1;
+    }
+
+    pub(super) fn end_ray(&mut self) {
+        let mut total = 0.0;
+        for &k in &self.touched_orders {
+            let x = std::mem::take(&mut self.ray_order[k as usize]);
+            self.tally.order_sum[k as usize] += x;
+            self.tally.order_sq[k as usize] += x * x;
+            total += x;
+        }
+        for &b in &self.touched_bins {
+            let x = std::mem::take(&mut self.ray_bin[b as usize]);
+            self.tally.bin_sq[b as usize] += x * x;
+        }
+        self.touched_orders.clear();
+        self.touched_bins.clear();
+        let x = std::mem::take(&mut self.ray_solar);
+        self.tally.solar_sum += x;
+        self.tally.solar_sq += x * x;
+        self.tally.total_sq += total * total;
+        self.tally.rays += 1;
+    }
+}

@@ -1,0 +1,159 @@
+use super::*;
+use crate::campaign::Instrument;
+
+fn setup_scene(name: &str) -> Scene {
+    let dir = std::env::temp_dir().join(format!("lidarsim-{name}-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("s.yaml");
+    std::fs::write(
+        &path,
+        "name: s\nmaterials:\n  a: { reflectance: 0.4, back_reflectance: 0.2, transmittance: 0.3 }\n  b: { reflectance: 0.7 }\nobjects:\n  - plane: { z: 0, extent: [[0, 0], [1, 1]], material: a }\n  - plane: { z: 1, extent: [[0, 0], [1, 1]], material: b }\n",
+    )
+    .unwrap();
+    Scene::load(&path, 1064.0).unwrap()
+}
+
+fn instrument() -> Instrument {
+    serde_yaml::from_str(
+        "pulse_energy_j: 1\npulse_fwhm_ns: 0\nfootprint_half_angle_mrad: 600\nfov_half_angle_mrad: 700\nreceiver_area_m2: 0.01",
+    )
+    .unwrap()
+}
+
+fn setup<'a>(scene: &'a Scene, method: Method, heuristic: MisHeuristic) -> PulseSetup<'a> {
+    let inst = instrument();
+    let pos = DVec3::new(0.0, 0.0, 10.0);
+    PulseSetup {
+        scene,
+        laser: Laser::new(&inst, pos, -DVec3::Z),
+        receiver: Receiver::new(&inst, pos, -DVec3::Z),
+        gate: Gate {
+            t0: 0.0,
+            dt: 1e-9,
+            bins: 10,
+        },
+        sub_bins: 1,
+        method,
+        heuristic,
+        sun: None,
+        max_order: 12,
+        seed: 1,
+        pulse_id: 0,
+    }
+}
+
+/// A random full path: laser, `order` surface vertices, a point of the aperture. The first
+/// and last surface vertices lie inside the footprint and the field of view.
+fn random_path(st: &PulseSetup, rng: &mut Rng, order: usize) -> Vec<Vertex> {
+    let mut v = vec![Vertex::endpoint(
+        Kind::Laser,
+        st.laser.position,
+        -DVec3::Z,
+        1.0,
+    )];
+    for i in 0..order {
+        let near_axis = i == 0 || i == order - 1;
+        let spread = if near_axis { 2.0 } else { 8.0 };
+        let p = DVec3::new(
+            (rng.uniform() - 0.5) * spread,
+            (rng.uniform() - 0.5) * spread,
+            rng.uniform() * 4.0,
+        );
+        let n = DVec3::new(
+            rng.uniform() - 0.5,
+            rng.uniform() - 0.5,
+            rng.uniform() - 0.5,
+        )
+        .normalize();
+        // material 0 reflects on both sides (differently) and transmits: every path is
+        // possible, so every strategy has a density
+        let mut s = Vertex::endpoint(Kind::Surface, p, n, 0.0);
+        s.surface = 0;
+        v.push(s);
+    }
+    let q = st.receiver.sample_point(rng.uniform(), rng.uniform());
+    v.push(Vertex::endpoint(
+        Kind::Aperture,
+        q,
+        -DVec3::Z,
+        1.0 / st.receiver.area,
+    ));
+    v
+}
+
+fn sub_path(st: &PulseSetup, vs: impl Iterator<Item = Vertex>) -> Vec<Vertex> {
+    let mut out = Vec::new();
+    for v in vs {
+        out.push(v);
+        link(st, &mut out);
+    }
+    out
+}
+
+#[test]
+fn mis_weights_of_a_path_sum_to_one() {
+    let scene = setup_scene("mis-sum");
+    let mut rng = Rng::new(5, 6, 7);
+    let mut scratch = Vec::new();
+    for (method, heuristic) in [
+        (Method::Bdpt, MisHeuristic::Power),
+        (Method::Bdpt, MisHeuristic::Balance),
+        (Method::Forward, MisHeuristic::Power),
+        (Method::Backward, MisHeuristic::Power),
+    ] {
+        let st = setup(&scene, method, heuristic);
+        let (s_cap, t_cap) = st.caps();
+        for trial in 0..400 {
+            let order = 1 + trial % 8;
+            let mut x = random_path(&st, &mut rng, order);
+            // half the paths belong to a light chosen for sub-paths with probability 0.3
+            if trial % 2 == 1 {
+                x[0].pdf_fwd = 0.3;
+            }
+            let nv = x.len();
+            let mut sum = 0.0;
+            let mut strategies = 0;
+            for s in 1..=nv {
+                let t = nv - s;
+                if s > s_cap || t > t_cap {
+                    continue;
+                }
+                let light = sub_path(&st, x[..s].iter().copied());
+                let cam = sub_path(&st, x[s..].iter().rev().copied());
+                let w = mis_weight(&st, &light, &cam, &mut scratch);
+                assert!(
+                    (0.0..=1.0 + 1e-12).contains(&w),
+                    "{method:?} s={s} t={t}: weight {w}"
+                );
+                sum += w;
+                strategies += 1;
+            }
+            assert!(strategies >= 1);
+            assert!(
+                (sum - 1.0).abs() < 1e-9,
+                "{method:?} {heuristic:?} order {order}: weights sum to {sum}"
+            );
+        }
+    }
+}
+
+#[test]
+fn a_wrong_density_breaks_the_sum() {
+    // the check above can fail: perturb one stored density and the sum leaves 1
+    let scene = setup_scene("mis-wrong");
+    let st = setup(&scene, Method::Bdpt, MisHeuristic::Power);
+    let mut rng = Rng::new(1, 2, 3);
+    let mut scratch = Vec::new();
+    let x = random_path(&st, &mut rng, 4);
+    let nv = x.len();
+    let mut sum = 0.0;
+    for s in 1..=nv {
+        let mut light = sub_path(&st, x[..s].iter().copied());
+        let cam = sub_path(&st, x[s..].iter().rev().copied());
+        if s >= 4 {
+            light[1].pdf_rev *= 100.0;
+        }
+        sum += mis_weight(&st, &light, &cam, &mut scratch);
+    }
+    assert!((sum - 1.0).abs() > 1e-6, "{sum}");
+}

@@ -14,14 +14,27 @@ pub fn temp_name(path: &Path) -> PathBuf {
 
 /// Writes a file through `write` under a temporary name, syncs it, then renames it.
 pub fn write_atomic<T>(path: &Path, write: impl FnOnce(File) -> Result<T>) -> Result<T> {
+    write_atomic_at(path, "", |tmp| {
+        let file = File::create(tmp).map_err(|e| Error::io(tmp, "cannot create file", e))?;
+        write(file)
+    })
+}
+
+/// The one way a file reaches its final name: `write` writes the temporary path given to it
+/// (the temporary name, then `suffix`, for writers that choose a format by extension), which
+/// is synced and renamed into place, or removed if anything failed.
+pub fn write_atomic_at<T>(
+    path: &Path,
+    suffix: &str,
+    write: impl FnOnce(&Path) -> Result<T>,
+) -> Result<T> {
     if let Some(dir) = path.parent() {
-        std::fs::create_dir_all(dir)
-            .map_err(|e| Error::file(dir, format!("cannot create folder: {e}")))?;
+        std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, "cannot create folder", e))?;
     }
-    let tmp = temp_name(path);
-    let file =
-        File::create(&tmp).map_err(|e| Error::file(&tmp, format!("cannot create file: {e}")))?;
-    let out = match write(file) {
+    let mut tmp = temp_name(path).into_os_string();
+    tmp.push(suffix);
+    let tmp = PathBuf::from(tmp);
+    let out = match write(&tmp) {
         Ok(v) => v,
         Err(e) => {
             let _ = std::fs::remove_file(&tmp);
@@ -31,14 +44,57 @@ pub fn write_atomic<T>(path: &Path, write: impl FnOnce(File) -> Result<T>) -> Re
     if let Ok(f) = File::open(&tmp) {
         let _ = f.sync_all();
     }
-    std::fs::rename(&tmp, path)
-        .map_err(|e| Error::file(path, format!("cannot move file into place: {e}")))?;
+    if let Err(e) = std::fs::rename(&tmp, path) {
+        let _ = std::fs::remove_file(&tmp);
+        return Err(Error::io(path, "cannot move file into place", e));
+    }
     Ok(out)
 }
 
 pub fn write_text_atomic(path: &Path, text: &str) -> Result<()> {
     write_atomic(path, |mut f| {
         f.write_all(text.as_bytes())
-            .map_err(|e| Error::file(path, format!("cannot write: {e}")))
+            .map_err(|e| Error::io(path, "cannot write", e))
     })
+}
+
+/// Writes a CSV table (RFC 4180: a field with a comma, quote or line break is quoted) under
+/// a temporary name, then renames it: every CSV a user reads goes through here.
+pub fn write_csv_atomic<R, F>(path: &Path, header: &[&str], rows: R) -> Result<()>
+where
+    R: IntoIterator<Item = Vec<F>>,
+    F: AsRef<[u8]>,
+{
+    let bad = |e: csv::Error| Error::data(path, format!("cannot encode CSV: {e}"));
+    let mut w = csv::Writer::from_writer(Vec::new());
+    w.write_record(header).map_err(bad)?;
+    for row in rows {
+        w.write_record(row).map_err(bad)?;
+    }
+    let bytes = w
+        .into_inner()
+        .map_err(|e| Error::data(path, format!("cannot encode CSV: {e}")))?;
+    write_atomic(path, |mut f| {
+        f.write_all(&bytes)
+            .map_err(|e| Error::io(path, "cannot write", e))
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn csv_fields_are_quoted_only_when_needed() {
+        let dir = std::env::temp_dir().join(format!("lidarsim_csv_{}", std::process::id()));
+        let path = dir.join("t.csv");
+        let rows = vec![
+            vec!["plain".to_string(), "1.5".to_string()],
+            vec!["a,b".to_string(), "say \"hi\"".to_string()],
+        ];
+        write_csv_atomic(&path, &["run", "value"], rows).unwrap();
+        let text = std::fs::read_to_string(&path).unwrap();
+        assert_eq!(text, "run,value\nplain,1.5\n\"a,b\",\"say \"\"hi\"\"\"\n");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
 }

@@ -22,3 +22,18 @@ pub fn progress(len: u64, what: &str) -> ProgressBar {
 pub fn log(line: &str) {
     eprintln!("lidarsim: {line}");
 }
+
+/// Peak resident memory of this process since it started or since the last
+/// [`reset_peak_rss`], bytes (Linux: VmHWM of /proc/self/status; None elsewhere).
+pub fn peak_rss_bytes() -> Option<u64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kb: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kb * 1024)
+}
+
+/// Resets the peak-memory mark to the current resident size, so that each measured piece of
+/// work reports its own peak (Linux >= 4.0: writing 5 to clear_refs).
+pub fn reset_peak_rss() {
+    let _ = std::fs::write("/proc/self/clear_refs", "5");
+}

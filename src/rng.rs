@@ -146,7 +146,8 @@ impl Rand {
     pub fn new(seed: u64) -> Rand {
         Rand(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1)
     }
-    pub fn next(&mut self) -> f64 {
+    /// Uniform in [0, 1).
+    pub fn uniform(&mut self) -> f64 {
         self.0 ^= self.0 >> 12;
         self.0 ^= self.0 << 25;
         self.0 ^= self.0 >> 27;
@@ -154,7 +155,7 @@ impl Rand {
     }
     /// Uniform in [a, b).
     pub fn range(&mut self, a: f64, b: f64) -> f64 {
-        a + (b - a) * self.next()
+        a + (b - a) * self.uniform()
     }
 }
 

@@ -189,7 +189,16 @@ fn empty_mesh() {
         obj.display()
     );
     let (code, err, _) = check("empty_mesh", CAMPAIGN, &s);
-    assert_one_message(code, &err, &["empty.obj", "no triangles"]);
+    // the mesh file, and the scene key that names it
+    assert_one_message(
+        code,
+        &err,
+        &[
+            "empty.obj",
+            "no triangles",
+            "scene.yaml: objects[1].mesh.file",
+        ],
+    );
 }
 
 #[test]
@@ -223,7 +232,16 @@ fn instance_row_with_wrong_column_count() {
         dir.join("trees.csv").display()
     );
     let (code, err, _) = check("csv_columns", CAMPAIGN, &s);
-    assert_one_message(code, &err, &["trees.csv:4:", "columns", "6"]);
+    assert_one_message(
+        code,
+        &err,
+        &[
+            "trees.csv:4:",
+            "columns",
+            "6",
+            "scene.yaml: objects[1].mesh.instances",
+        ],
+    );
 }
 
 #[test]
@@ -278,4 +296,33 @@ fn sun_selection_probability_without_fixed_selection() {
     let c = c.replace("selection: power", "selection: sometimes");
     let (code, err, _) = check("sun_selection_kind", &c, SCENE);
     assert_one_message(code, &err, &["campaign.yaml:21:", "sun.selection"]);
+}
+
+/// A swept value the campaign rejects is reported at its entry under `sweep:` (line and
+/// key), before any combination runs.
+#[test]
+fn bad_sweep_value_is_located_at_its_sweep_entry() {
+    let dir = tmp("bad_sweep");
+    write(&dir, "scene.yaml", SCENE);
+    let text = format!("{CAMPAIGN}sweep:\n  instrument.pulse_energy_j: [0.001, -2]\n");
+    let path = write(&dir, "campaign.yaml", &text);
+    let out = dir.join("run");
+    let (code, _out, err) = lidarsim(&[
+        "run",
+        path.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    let line = text.lines().count();
+    assert_one_message(
+        code,
+        &err,
+        &[&format!(
+            "campaign.yaml:{line}:3: sweep.instrument.pulse_energy_j: value -2"
+        )],
+    );
+    assert!(
+        !out.join("pulse_energy_j=0.001").exists(),
+        "a combination ran before the check"
+    );
 }

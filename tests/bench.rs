@@ -62,9 +62,21 @@ fn campaign_rows_are_measured_and_missing_data_is_skipped() {
     use lidarsim::bench::campaigns as bc;
     let dir = tmp("bench_campaigns");
     let scene = plane_scene(&dir, 0.3, 60.0);
-    let text = bc::mabel_campaign(&scene, 532, true, 2.0, 50).replace(
-        "start: [-51, -49], end: [47, 49]",
-        "start: [-20, 0], end: [20, 0]",
+    // the bench's own MABEL file, shortened to a 40 m track at 2 m steps over a plane
+    let campaigns = lidarsim::testdata::repo().join("pipelines/bench");
+    let mut short: serde_yaml::Mapping = serde_yaml::from_str(
+        "{platform.track: {start: [-20, 0], end: [20, 0]}, platform.along_track_step_m: 2.0, \
+         simulation.rays_per_pulse: 50}",
+    )
+    .unwrap();
+    let text = bc::campaign_text(&campaigns, "mabel_532_sun", &short, &scene).unwrap();
+    assert!(text.contains("rays_per_pulse: 50"), "{text}");
+    // an override through a value that is not a section is an error naming it
+    short.insert("seed.x".into(), 1.into());
+    let e = bc::campaign_text(&campaigns, "mabel_532_sun", &short, &scene).unwrap_err();
+    assert!(
+        e.to_string().contains("seed.x: `seed` is not a section"),
+        "{e}"
     );
     let row = bc::run_row(&dir, "mabel_plane", "plane track", &text).unwrap();
     assert_eq!(row.pulses, 20);
@@ -74,7 +86,7 @@ fn campaign_rows_are_measured_and_missing_data_is_skipped() {
     if std::path::Path::new("/proc/self/status").exists() {
         assert!(row.peak_mb.unwrap() > 1.0);
     }
-    let planned = bc::plan(&dir, &dir.join("no_such_rami.yaml"), false);
+    let planned = bc::plan(&dir, &campaigns, &dir.join("no_such_rami.yaml"), false);
     // the forest row generates a small forest: only check the orchard rows here
     let skipped: Vec<String> = planned
         .unwrap()
@@ -84,7 +96,7 @@ fn campaign_rows_are_measured_and_missing_data_is_skipped() {
             bc::Planned::Run { .. } => None,
         })
         .collect();
-    assert_eq!(skipped.len(), 3, "{skipped:?}");
+    assert_eq!(skipped.len(), 5, "{skipped:?}");
     assert!(skipped[0].contains("no_such_rami.yaml not found"));
     let table = bc::table(&[row], &[("mabel_532".into(), "absent".into())]);
     assert!(table.contains(

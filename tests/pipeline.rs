@@ -239,7 +239,14 @@ fn bad_shard_and_stage_arguments() {
     for (args, words) in [
         (vec!["--shard", "3/3"], "--shard 3/3"),
         (vec!["--shard", "x"], "expected K/N"),
-        (vec!["--stages", "plan,simulat"], "unknown stage `simulat`"),
+        (
+            vec!["--stages", "plan,simulat"],
+            "invalid value 'simulat' for '--stages",
+        ),
+        (
+            vec!["--stages", "plan,simulat"],
+            "possible values: plan, simulate, products, report",
+        ),
     ] {
         let mut a = vec!["run", camp];
         a.extend(args);

@@ -3,9 +3,12 @@
 //! memory. The orchard rows need the RAMI files (README, "Scenes") and are skipped, with a
 //! note in the table, when they are absent.
 
-use crate::error::Result;
+use crate::error::{Error, Result};
 use crate::generate::{generate_with_summary, GenerateOptions, SceneKind};
+use crate::pipeline::manifest::Manifest;
 use crate::pipeline::{self, RunOptions};
+use crate::products::dsm::DsmReport;
+use crate::products::summary::ProductsSummary;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -41,64 +44,88 @@ pub enum Planned {
     },
 }
 
-/// Peak resident memory since the last [`reset_peak_memory`], MB (Linux: VmHWM).
+/// Peak resident memory since the last reset, MB.
 pub fn peak_memory_mb() -> Option<f64> {
-    let status = std::fs::read_to_string("/proc/self/status").ok()?;
-    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
-    let kb: f64 = line.split_whitespace().nth(1)?.parse().ok()?;
-    Some(kb / 1024.0)
+    crate::progress::peak_rss_bytes().map(|b| b as f64 / (1024.0 * 1024.0))
 }
 
-/// Resets the peak-memory mark, so that each row reports its own peak (Linux ≥ 4.0:
-/// writing 5 to clear_refs resets VmHWM to the current resident size).
-pub fn reset_peak_memory() {
-    let _ = std::fs::write("/proc/self/clear_refs", "5");
-}
+/// The bench's campaigns, in the order of its table: file stem under the campaigns folder
+/// (`pipelines/bench/`), what it measures, and whether it flies over the RAMI orchard.
+pub const CAMPAIGNS: [(&str, &str, bool); 6] = [
+    (
+        "orchard_gedi_sun",
+        "orchard, GEDI-like waveform, sun 50°/180° (section 3.3)",
+        true,
+    ),
+    (
+        "mabel_532",
+        "orchard, MABEL-like photon counting, 532 nm, sun off (section 3.4)",
+        true,
+    ),
+    (
+        "mabel_532_sun",
+        "orchard, MABEL-like photon counting, 532 nm, sun on (section 3.4)",
+        true,
+    ),
+    (
+        "mabel_1064",
+        "orchard, MABEL-like photon counting, 1064 nm, sun off (section 3.4)",
+        true,
+    ),
+    (
+        "mabel_1064_sun",
+        "orchard, MABEL-like photon counting, 1064 nm, sun on (section 3.4)",
+        true,
+    ),
+    (
+        "als_forest",
+        "forest, Riegl VUX-1UAV-like discrete return (section 3.2)",
+        false,
+    ),
+];
 
-/// MABEL at one wavelength (paper Table 1): 20 km, 6 µJ, 0.05 mrad footprint, 0.105 mrad
-/// field of view, 0.083 ns bins, dead time 2.5 ns; QE 12.5 % / 1.5 % and bands 0.03 / 0.4 nm
-/// at 532 / 1064 nm. Table 1 gives no telescope area: MABEL's 0.2 m telescope, 0.0314 m², is
-/// assumed. The track runs from (3, 3) to (101, 101) in the paper's frame, which is (-51, -49)
-/// to (47, 49) in RAMI's, at `step` m: 0.02 m gives the paper's 6929 pulses.
-pub fn mabel_campaign(scene: &Path, wavelength_nm: u32, sun: bool, step: f64, rays: u64) -> String {
-    let (qe, band, irradiance) = if wavelength_nm == 532 {
-        (0.125, 0.03, 1850.0)
-    } else {
-        (0.015, 0.4, 640.0)
-    };
-    let mut s = format!(
-        "name: mabel_{wavelength_nm}{}\nscene: {}\nseed: 11\nwavelength_nm: {wavelength_nm}\ninstrument:\n  kind: photon_counting\n  pulse_energy_j: 6.0e-6\n  pulse_fwhm_ns: 2.0\n  footprint_half_angle_mrad: 0.05\n  fov_half_angle_mrad: 0.105\n  receiver_area_m2: 0.0314\n  bin_ns: 0.083\n  bandwidth_nm: {band}\n  quantum_efficiency: {qe}\n  dead_time_ns: 2.5\n  dark_count_hz: 1000\nplatform:\n  kind: track\n  altitude_m: 20000\n  track: {{ start: [-51, -49], end: [47, 49] }}\n  along_track_step_m: {step}\nsimulation: {{ method: bdpt, rays_per_pulse: {rays}, max_order: 10 }}\n",
-        if sun { "_sun" } else { "" },
-        scene.display()
-    );
-    if sun {
-        let _ = writeln!(
-            s,
-            "sun: {{ zenith_deg: 50, azimuth_deg: 180, irradiance_w_m2_um: {irradiance} }}"
-        );
+/// The keys `pipelines/bench/quick.yaml` replaces in campaign `name` for the quick bench
+/// (dotted paths such as `simulation.rays_per_pulse`); none if it lists no such campaign.
+pub fn quick_overrides(dir: &Path, name: &str) -> Result<serde_yaml::Mapping> {
+    let path = dir.join("quick.yaml");
+    let text = crate::error::read_text(&path)?;
+    let all: serde_yaml::Value =
+        serde_yaml::from_str(&text).map_err(|e| Error::file(&path, format!("not YAML: {e}")))?;
+    match all.get(name) {
+        None => Ok(serde_yaml::Mapping::new()),
+        Some(serde_yaml::Value::Mapping(m)) => Ok(m.clone()),
+        Some(_) => Err(Error::file(
+            &path,
+            format!("{name}: expected a mapping of dotted keys to values"),
+        )),
     }
-    s
 }
 
-/// GEDI over the orchard with the sun at 50° zenith, 180° azimuth (paper section 3.3).
-pub fn orchard_gedi_campaign(scene: &Path, rays: u64) -> String {
-    format!(
-        "name: orchard_gedi_sun\nscene: {}\nseed: 5\nwavelength_nm: 1064\ninstrument:\n  kind: waveform\n  pulse_energy_j: 0.0105\n  pulse_fwhm_ns: 14.0\n  footprint_half_angle_mrad: 0.03\n  fov_half_angle_mrad: 0.3\n  receiver_area_m2: 0.5\n  bin_ns: 1.0\n  bandwidth_nm: 0.8\nplatform:\n  kind: static\n  pulses:\n    - {{ position: [-4, -2, 419000], direction: [0, 0, -1] }}\nsun: {{ zenith_deg: 50, azimuth_deg: 180, irradiance_w_m2_um: 640 }}\nsimulation: {{ method: bdpt, rays_per_pulse: {rays}, max_order: 100 }}\n",
-        scene.display()
-    )
-}
-
-/// The paper's section 3.2 scanner (Riegl VUX-1UAV, Table 1) over a forest of `size` m:
-/// 250 m, scan ±atan(49/250), 0.045° look step, 0.3 m along track, one line through the
-/// middle of `length` m.
-pub fn als_forest_campaign(scene: &Path, size: f64, length: f64, rays: u64) -> String {
-    let y = size / 2.0;
-    let x0 = (size - length).max(0.0) / 2.0;
-    format!(
-        "name: als_forest\nscene: {}\nseed: 3\nwavelength_nm: 1064\ninstrument:\n  kind: discrete_return\n  pulse_energy_j: 0.001\n  pulse_fwhm_ns: 3.0\n  footprint_half_angle_mrad: 0.25\n  fov_half_angle_mrad: 0.375\n  receiver_area_m2: 0.1\n  bin_ns: 0.067\n  max_returns: 4\nplatform:\n  kind: als\n  altitude_m: 250\n  speed_m_s: 4.444444444444445\n  prf_hz: 100000\n  lines: [ {{ start: [{x0}, {y}], end: [{}, {y}] }} ]\n  scanner: {{ pattern: line, scan_angle_deg: [-11.0894, 11.0894], look_angle_step_deg: 0.045, along_track_step_m: 0.3 }}\nsimulation: {{ method: forward, rays_per_pulse: {rays}, max_order: 5 }}\nproducts: {{ points: true, dsm: {{ resolution_m: 2.0 }} }}\n",
-        scene.display(),
-        x0 + length
-    )
+/// The text of campaign `dir/name.yaml` with `overrides` applied (dotted key -> value) and its
+/// scene set to `scene`, ready to be written anywhere (the scene path is absolute).
+pub fn campaign_text(
+    dir: &Path,
+    name: &str,
+    overrides: &serde_yaml::Mapping,
+    scene: &Path,
+) -> Result<String> {
+    let path = dir.join(format!("{name}.yaml"));
+    let text = crate::error::read_text(&path)?;
+    let mut doc: serde_yaml::Value =
+        serde_yaml::from_str(&text).map_err(|e| Error::file(&path, format!("not YAML: {e}")))?;
+    let mut set = |key: &str, value: serde_yaml::Value| {
+        crate::campaign::yaml::set_path(&mut doc, key, value)
+            .map_err(|why| Error::file(&path, format!("{key}: {why}")))
+    };
+    for (k, v) in overrides {
+        let k = k
+            .as_str()
+            .ok_or_else(|| Error::file(&path, "override keys must be dotted key names"))?;
+        set(k, v.clone())?;
+    }
+    set("scene", scene.display().to_string().into())?;
+    serde_yaml::to_string(&doc)
+        .map_err(|e| Error::data(&path, format!("cannot write as YAML: {e}")))
 }
 
 /// Where the bench finds the RAMI orchard scene: `scenes/rami_wco.yaml` under the working
@@ -120,54 +147,46 @@ pub fn find_rami(scene: &Path) -> std::result::Result<PathBuf, String> {
     Ok(scene.canonicalize().unwrap_or_else(|_| scene.to_path_buf()))
 }
 
-/// The bench's campaigns. `full` runs the paper's sizes (6929-pulse tracks, the generated
-/// 1029-tree forest); quick mode a tenth of the track and a 40 m forest.
-pub fn plan(dir: &Path, rami: &Path, full: bool) -> Result<Vec<Planned>> {
+/// The bench's campaigns, read from `campaigns` (`pipelines/bench/`). `full` runs them as
+/// written (the paper's sizes: 6929-pulse tracks, the generated 1029-tree forest); quick mode
+/// applies `quick.yaml` there and flies the ALS line over a 40 m forest.
+pub fn plan(dir: &Path, campaigns: &Path, rami: &Path, full: bool) -> Result<Vec<Planned>> {
+    if !campaigns.join("quick.yaml").exists() {
+        return Err(Error::file(
+            campaigns,
+            "the bench's campaign files are not there: run the bench from the repository's \
+             folder or pass --campaigns pipelines/bench",
+        ));
+    }
+    let rami = find_rami(rami);
     let mut out = Vec::new();
-    match find_rami(rami) {
-        Ok(scene) => {
-            let (step, rays) = if full { (0.02, 1000) } else { (0.2, 200) };
-            out.push(Planned::Run {
-                name: "orchard_gedi_sun".into(),
-                what: "orchard, GEDI-like waveform, sun 50°/180° (section 3.3)".into(),
-                text: orchard_gedi_campaign(&scene, if full { 100_000 } else { 20_000 }),
-            });
-            for wl in [532, 1064] {
-                for sun in [false, true] {
-                    out.push(Planned::Run {
-                        name: format!("mabel_{wl}{}", if sun { "_sun" } else { "" }),
-                        what: format!(
-                            "orchard, MABEL-like photon counting, {wl} nm, sun {} (section 3.4)",
-                            if sun { "on" } else { "off" }
-                        ),
-                        text: mabel_campaign(&scene, wl, sun, step, rays),
+    for (name, what, orchard) in CAMPAIGNS {
+        let (scene, what) = if orchard {
+            match &rami {
+                Ok(scene) => (scene.clone(), what.to_string()),
+                Err(why) => {
+                    out.push(Planned::Skipped {
+                        name: name.into(),
+                        why: why.clone(),
                     });
+                    continue;
                 }
             }
-        }
-        Err(why) => {
-            for name in ["orchard_gedi_sun", "mabel_532", "mabel_1064"] {
-                out.push(Planned::Skipped {
-                    name: name.into(),
-                    why: why.clone(),
-                });
-            }
-        }
+        } else {
+            let (scene, size) = forest_scene(dir, full)?;
+            (scene, format!("{what}, {size} m stand"))
+        };
+        let overrides = if full {
+            serde_yaml::Mapping::new()
+        } else {
+            quick_overrides(campaigns, name)?
+        };
+        out.push(Planned::Run {
+            name: name.into(),
+            what,
+            text: campaign_text(campaigns, name, &overrides, &scene)?,
+        });
     }
-    let (scene, size) = forest_scene(dir, full)?;
-    out.push(Planned::Run {
-        name: "als_forest".into(),
-        what: format!(
-            "forest {size} m, Riegl VUX-1UAV-like discrete return (section 3.2){}",
-            if full { "" } else { ", 10 m of line" }
-        ),
-        text: als_forest_campaign(
-            &scene,
-            size,
-            if full { 98.0 } else { 10.0 },
-            if full { 32 } else { 16 },
-        ),
-    });
     Ok(out)
 }
 
@@ -200,10 +219,10 @@ pub fn run_row(dir: &Path, name: &str, what: &str, text: &str) -> Result<Campaig
     let folder = dir.join(name);
     let _ = std::fs::remove_dir_all(&folder);
     std::fs::create_dir_all(&folder)
-        .map_err(|e| crate::error::Error::file(&folder, format!("cannot create folder: {e}")))?;
+        .map_err(|e| crate::error::Error::io(&folder, "cannot create folder", e))?;
     let path = folder.join("campaign.yaml");
     crate::fsutil::write_text_atomic(&path, text)?;
-    reset_peak_memory();
+    crate::progress::reset_peak_rss();
     let t = Instant::now();
     let summary = pipeline::run(
         &path,
@@ -214,37 +233,31 @@ pub fn run_row(dir: &Path, name: &str, what: &str, text: &str) -> Result<Campaig
     )?;
     let run_s = t.elapsed().as_secs_f64();
     let peak_mb = peak_memory_mb();
-    let read = |p: PathBuf| -> Option<serde_json::Value> {
-        serde_json::from_str(&std::fs::read_to_string(p).ok()?).ok()
-    };
     let run = folder.join("run");
-    let manifest = read(run.join("manifest.json"));
-    let simulate_s = manifest
-        .as_ref()
-        .and_then(|m| m["stages"]["simulate"]["wall_time_s"].as_f64())
+    let simulate_s = Manifest::read(&run.join("manifest.json"))
+        .and_then(|m| m.stages.get("simulate").map(|s| s.wall_time_s))
         .unwrap_or(f64::NAN);
-    let products = read(run.join("products.json"));
     let mut result = String::new();
-    if let Some(p) = &products {
-        if let Some(ph) = p.get("photons") {
+    if let Some(p) = ProductsSummary::read(&run.join("products.json")) {
+        if let Some(ph) = &p.photons {
             let shots = summary.pulses.max(1) as f64;
             let _ = write!(
                 result,
                 "{:.3} laser, {:.3} solar, {:.4} dark photons per shot",
-                ph["laser"].as_f64().unwrap_or(0.0) / shots,
-                ph["solar"].as_f64().unwrap_or(0.0) / shots,
-                ph["dark"].as_f64().unwrap_or(0.0) / shots
+                ph.laser as f64 / shots,
+                ph.solar as f64 / shots,
+                ph.dark as f64 / shots
             );
         }
-        if let Some(pp) = p.get("points_per_pulse").and_then(|v| v.as_f64()) {
-            let _ = write!(result, "{pp:.2} points per pulse");
-            if let Some(d) = read(run.join("dsm/report.json")) {
+        if let Some(pts) = &p.points {
+            let _ = write!(result, "{:.2} points per pulse", pts.points_per_pulse);
+            if let Some(d) = DsmReport::read(&run.join("dsm/report.json")) {
                 let _ = write!(
                     result,
                     ", DSM bias {:+.3} m, RMSE {:.3} m, coverage {:.1}%",
-                    d["bias_m"].as_f64().unwrap_or(f64::NAN),
-                    d["rmse_m"].as_f64().unwrap_or(f64::NAN),
-                    100.0 * d["coverage"].as_f64().unwrap_or(f64::NAN)
+                    d.bias_m,
+                    d.rmse_m,
+                    100.0 * d.coverage
                 );
             }
         }

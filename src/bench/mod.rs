@@ -43,6 +43,8 @@ pub struct BenchOptions {
     pub full: bool,
     /// Scene file of the RAMI orchard for the campaign rows.
     pub rami_scene: PathBuf,
+    /// Folder of the campaign rows' files (`pipelines/bench/`).
+    pub campaigns_dir: PathBuf,
 }
 
 impl Default for BenchOptions {
@@ -60,6 +62,7 @@ impl Default for BenchOptions {
             campaigns: true,
             full: false,
             rami_scene: PathBuf::from("scenes/rami_wco.yaml"),
+            campaigns_dir: PathBuf::from("pipelines/bench"),
         }
     }
 }
@@ -220,25 +223,11 @@ impl Bench<'_> {
     }
 }
 
-/// Runs the benchmark and returns the markdown report.
+/// Runs the benchmark and returns the markdown report: the ladder on one GEDI-like pulse,
+/// the sun's cost, the paper's Table 2, the campaign rows.
 pub fn run(opts: &BenchOptions) -> Result<String> {
-    campaigns::reset_peak_memory();
-    // full: the generated forest (the paper's stand size); quick: a lighter canopy
-    let spec = opts.canopy.clone();
-    let (scene_path, size, what) = if opts.full {
-        let (path, size) = campaigns::forest_scene(&opts.dir, true)?;
-        (path, size, format!("generated forest (`lidarsim scene generate forest --seed 2`) on {size} m × {size} m"))
-    } else {
-        let path = canopy(&opts.dir.join("canopy"), &spec)?;
-        (
-            path,
-            spec.size,
-            format!(
-                "{} crowns ({} templates × {} leaves) on {} m × {} m",
-                spec.trees, spec.templates, spec.leaves, spec.size, spec.size
-            ),
-        )
-    };
+    crate::progress::reset_peak_rss();
+    let (scene_path, size, what) = bench_scene(opts)?;
     let scene = Scene::load(&scene_path, 1064.0)?;
     let stats = scene.stats();
     let altitude = 419_000.0;
@@ -271,47 +260,15 @@ pub fn run(opts: &BenchOptions) -> Result<String> {
         .map(|m| ladder(&b, &reference, m, opts.seeds, opts.max_rays))
         .collect();
     let single_pulse_peak_mb = campaigns::peak_memory_mb();
-    // The sun in the same paths: wall time at the same rays per pulse, sun at 50° zenith.
-    let sun_spec = |selection| crate::campaign::Sun {
-        zenith_deg: 50.0,
-        azimuth_deg: 180.0,
-        irradiance_w_m2_um: 640.0,
-        selection,
-        selection_probability: (selection == SunSelection::Fixed).then_some(0.5),
-    };
-    let gate_s = b.gate.dt * b.gate.bins as f64;
-    let sun_rays = opts.reference_rays / 50;
-    let fixed = SunSource::new(&sun_spec(SunSelection::Fixed), 0.8, scene.bounds());
-    let (mut off, mut on) = (Vec::new(), Vec::new());
-    let mut photons = 0.0;
-    for seed in 0..opts.seeds {
-        off.push(b.run_with_sun(Method::Bdpt, sun_rays, 40 + seed, None).1);
-        let (w, t) = b.run_with_sun(Method::Bdpt, sun_rays, 40 + seed, Some(fixed));
-        on.push(t);
-        photons = w.solar_photons_per_bin as f64;
-    }
-    let (t_off, t_on) = (median(&mut off), median(&mut on));
-    let mut text = report(opts, &what, &stats, &reference, ref_secs, &rows);
+    let mut text = provenance(opts);
+    text += &report(opts, &what, &stats, &reference, ref_secs, &rows);
     if let Some(mb) = single_pulse_peak_mb {
         let _ = writeln!(
             text,
             "\nPeak memory of the single-pulse runs (scene and tracer): {mb:.0} MB."
         );
     }
-    let _ = writeln!(
-        text,
-        "\n### Sun on and off (bdpt, {sun_rays} rays, sun at 50° zenith, 0.8 nm band)\n\n| sun | wall s (median) |\n| --- | ---: |\n| off | {t_off:.3} |\n| on | {t_on:.3} |\n\nRatio {:.2}; {photons:.3} solar photons per bin.",
-        t_on / t_off
-    );
-    let selections: Vec<SelectionRow> = [SunSelection::Fixed, SunSelection::Power]
-        .into_iter()
-        .map(|sel| {
-            let sun = SunSource::new(&sun_spec(sel), 0.8, scene.bounds())
-                .for_gate(b.inst.pulse_energy_j, gate_s);
-            selection_row(&b, &reference, sun, sel, sun_rays, opts.seeds)
-        })
-        .collect();
-    text += &selection_table(&selections, sun_rays);
+    text += &sun_section(opts, &b, &reference);
 
     // the paper's Table 2: rays for rRMSE ≤ 5% at other footprints
     if !opts.table2_footprints.is_empty() {
@@ -335,25 +292,134 @@ pub fn run(opts: &BenchOptions) -> Result<String> {
         }
         text += &table2(&t2, opts.table2_max_rays);
     }
-
     if opts.campaigns {
-        let planned = campaigns::plan(&opts.dir, &opts.rami_scene, opts.full)?;
-        let (mut rows, mut skipped) = (Vec::new(), Vec::new());
-        for p in planned {
-            match p {
-                campaigns::Planned::Run { name, what, text } => {
-                    eprintln!("lidarsim bench: campaign {name}");
-                    rows.push(campaigns::run_row(&opts.dir, &name, &what, &text)?);
-                }
-                campaigns::Planned::Skipped { name, why } => {
-                    eprintln!("lidarsim bench: campaign {name} skipped: {why}");
-                    skipped.push((name, why));
-                }
-            }
-        }
-        text += &campaigns::table(&rows, &skipped);
+        text += &campaigns_section(opts)?;
     }
     Ok(text)
+}
+
+/// Where the figures come from: the command, the commit and the machine, so that a table
+/// quoted elsewhere says what produced it.
+fn provenance(opts: &BenchOptions) -> String {
+    let git = |args: &[&str]| {
+        std::process::Command::new("git")
+            .args(args)
+            .output()
+            .ok()
+            .filter(|o| o.status.success())
+            .map(|o| String::from_utf8_lossy(&o.stdout).trim().to_string())
+    };
+    let commit = match git(&["rev-parse", "--short", "HEAD"]) {
+        Some(c)
+            if git(&["status", "--porcelain", "--untracked-files=no"])
+                .is_some_and(|s| !s.is_empty()) =>
+        {
+            format!("{c} with uncommitted changes")
+        }
+        Some(c) => c,
+        None => "unknown (not run from a git checkout)".into(),
+    };
+    let cpu = std::fs::read_to_string("/proc/cpuinfo")
+        .ok()
+        .and_then(|t| {
+            t.lines()
+                .find(|l| l.starts_with("model name"))
+                .and_then(|l| l.split(':').nth(1))
+                .map(|m| m.trim().to_string())
+        })
+        .unwrap_or_else(|| "unknown CPU".into());
+    let cores = std::thread::available_parallelism().map_or(0, |n| n.get());
+    format!(
+        "Measured by `lidarsim bench{}` (reference {} rays, {} seeds) at commit {commit}, lidarsim {}, on {cpu} ({cores} cores available, {} threads used).\n\n",
+        if opts.full { " --full" } else { "" },
+        opts.reference_rays,
+        opts.seeds,
+        env!("CARGO_PKG_VERSION"),
+        rayon::current_num_threads()
+    )
+}
+
+/// The single pulse's scene: the generated forest (the paper's stand size) with `--full`, a
+/// lighter canopy otherwise. Returns its file, its size (m) and a line describing it.
+fn bench_scene(opts: &BenchOptions) -> Result<(PathBuf, f64, String)> {
+    if opts.full {
+        let (path, size) = campaigns::forest_scene(&opts.dir, true)?;
+        return Ok((
+            path,
+            size,
+            format!("generated forest (`lidarsim scene generate forest --seed 2`) on {size} m × {size} m"),
+        ));
+    }
+    let spec = &opts.canopy;
+    let path = canopy(&opts.dir.join("canopy"), spec)?;
+    Ok((
+        path,
+        spec.size,
+        format!(
+            "{} crowns ({} templates × {} leaves) on {} m × {} m",
+            spec.trees, spec.templates, spec.leaves, spec.size, spec.size
+        ),
+    ))
+}
+
+/// The sun in the same paths: wall time at the same rays per pulse with the sun at 50° zenith
+/// and without, then fixed against by-power light selection.
+fn sun_section(opts: &BenchOptions, b: &Bench, reference: &Waveform) -> String {
+    let sun_spec = |selection| crate::campaign::Sun {
+        zenith_deg: 50.0,
+        azimuth_deg: 180.0,
+        irradiance_w_m2_um: 640.0,
+        selection,
+        selection_probability: (selection == SunSelection::Fixed).then_some(0.5),
+    };
+    let gate_s = b.gate.dt * b.gate.bins as f64;
+    let sun_rays = opts.reference_rays / 50;
+    let fixed = SunSource::new(&sun_spec(SunSelection::Fixed), 0.8, b.scene.bounds());
+    let (mut off, mut on) = (Vec::new(), Vec::new());
+    let mut photons = 0.0;
+    for seed in 0..opts.seeds {
+        off.push(b.run_with_sun(Method::Bdpt, sun_rays, 40 + seed, None).1);
+        let (w, t) = b.run_with_sun(Method::Bdpt, sun_rays, 40 + seed, Some(fixed));
+        on.push(t);
+        photons = w.solar_photons_per_bin as f64;
+    }
+    let (t_off, t_on) = (median(&mut off), median(&mut on));
+    let mut text = String::new();
+    let _ = writeln!(
+        text,
+        "\n### Sun on and off (bdpt, {sun_rays} rays, sun at 50° zenith, 0.8 nm band)\n\n| sun | wall s (median) |\n| --- | ---: |\n| off | {t_off:.3} |\n| on | {t_on:.3} |\n\nRatio {:.2}; {photons:.3} solar photons per bin.",
+        t_on / t_off
+    );
+    let selections: Vec<SelectionRow> = [SunSelection::Fixed, SunSelection::Power]
+        .into_iter()
+        .map(|sel| {
+            let sun = SunSource::new(&sun_spec(sel), 0.8, b.scene.bounds())
+                .for_gate(b.inst.pulse_energy_j, gate_s);
+            selection_row(b, reference, sun, sel, sun_rays, opts.seeds)
+        })
+        .collect();
+    text += &selection_table(&selections, sun_rays);
+    text
+}
+
+/// The campaign rows: each planned campaign run through the pipeline and measured, or the
+/// reason it was skipped.
+fn campaigns_section(opts: &BenchOptions) -> Result<String> {
+    let planned = campaigns::plan(&opts.dir, &opts.campaigns_dir, &opts.rami_scene, opts.full)?;
+    let (mut rows, mut skipped) = (Vec::new(), Vec::new());
+    for p in planned {
+        match p {
+            campaigns::Planned::Run { name, what, text } => {
+                eprintln!("lidarsim bench: campaign {name}");
+                rows.push(campaigns::run_row(&opts.dir, &name, &what, &text)?);
+            }
+            campaigns::Planned::Skipped { name, why } => {
+                eprintln!("lidarsim bench: campaign {name} skipped: {why}");
+                skipped.push((name, why));
+            }
+        }
+    }
+    Ok(campaigns::table(&rows, &skipped))
 }
 
 /// Table 2 of the paper: rays (and wall seconds) each method needs for rRMSE ≤ 5% by

@@ -407,6 +407,8 @@ impl Check<'_> {
 }
 
 impl Campaign {
+    /// Checks every campaign key a value can make wrong, in the file's order. A flat list of
+    /// independent checks, each naming its key: long because the campaign has many keys.
     pub fn validate(&self, doc: &Doc) -> Result<()> {
         let c = Check { doc };
         if self.name.trim().is_empty() || self.name.contains(['/', '\\']) {

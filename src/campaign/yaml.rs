@@ -40,6 +40,21 @@ impl Doc {
         Error::at(&self.path, locate(&self.text, key), key, text)
     }
 
+    /// An error at the entry of `key` in the file's `sweep:` section, whose keys are dotted
+    /// paths written as one YAML key (so [`locate`] cannot walk to them).
+    pub fn sweep_error(&self, key: &str, text: impl fmt::Display) -> Error {
+        let full = format!("sweep.{key}");
+        let Some(sweep_at) = self.text.find("sweep:") else {
+            return self.error(&full, text);
+        };
+        let Some(found) = self.text[sweep_at..].find(key).map(|i| sweep_at + i) else {
+            return self.error(&full, text);
+        };
+        let line = self.text[..found].matches('\n').count() + 1;
+        let col = found - self.text[..found].rfind('\n').map_or(0, |i| i + 1) + 1;
+        Error::at(&self.path, Some((line, col)), &full, text)
+    }
+
     /// Resolves a path named in this file against the file's own folder.
     pub fn resolve(&self, relative: &str) -> PathBuf {
         let p = Path::new(relative);
@@ -258,6 +273,31 @@ impl<'de> Visitor<'de> for SeekVisitor<'_> {
             i += 1;
         }
     }
+}
+
+/// Sets the value at a dotted key path (`platform.altitude_m`) in a YAML tree, making the
+/// sections on the way that do not exist yet (a sweep's or the bench's overrides).
+pub fn set_path(
+    tree: &mut serde_yaml::Value,
+    key: &str,
+    value: serde_yaml::Value,
+) -> std::result::Result<(), String> {
+    let mut node = tree;
+    let parts: Vec<&str> = key.split('.').collect();
+    for (i, p) in parts.iter().enumerate() {
+        let map = node
+            .as_mapping_mut()
+            .ok_or_else(|| format!("`{}` is not a section", parts[..i].join(".")))?;
+        let k = serde_yaml::Value::String(p.to_string());
+        if i + 1 == parts.len() {
+            map.insert(k, value);
+            return Ok(());
+        }
+        node = map
+            .entry(k)
+            .or_insert_with(|| serde_yaml::Value::Mapping(Default::default()));
+    }
+    Err("empty key".into())
 }
 
 #[cfg(test)]

@@ -1,13 +1,14 @@
-//! Command line: `lidarsim run`, `lidarsim check`.
+//! Command line: one function per command, each turning its flags into a call to the stage
+//! or tool that does the work.
+
+mod check;
 
 use crate::bench;
 use crate::error::{Error, Result};
+use crate::generate::{generate_with_summary, GenerateOptions, SceneKind};
 use crate::pipeline::{self, RunOptions};
-use crate::plan;
-use crate::scene::Scene;
-use clap::{Parser, Subcommand};
+use clap::{Args, Parser, Subcommand};
 use std::path::PathBuf;
-use std::time::Instant;
 
 #[derive(Parser, Debug)]
 #[command(name = "lidarsim", version, about = "Physically based LiDAR simulator")]
@@ -19,36 +20,11 @@ pub struct Cli {
 #[derive(Subcommand, Debug)]
 pub enum Command {
     /// Run a campaign into a run folder (default runs/<name>).
-    Run {
-        campaign: PathBuf,
-        #[arg(long)]
-        out: Option<PathBuf>,
-        /// Worker threads (default: all cores). The output does not depend on it.
-        #[arg(long)]
-        threads: Option<usize>,
-        /// Keep completed stages and simulation parts whose inputs are unchanged.
-        #[arg(long)]
-        resume: bool,
-        /// Stages to run, comma-separated: plan,simulate,products,report (default: all).
-        #[arg(long, value_delimiter = ',')]
-        stages: Option<Vec<String>>,
-        /// Simulate only the parts whose index is K modulo N (for N machines sharing a run).
-        #[arg(long, value_name = "K/N")]
-        shard: Option<String>,
-    },
+    Run(RunArgs),
     /// Validate a campaign and its scene; print pulses, facets, instances and memory.
     Check { campaign: PathBuf },
     /// One table of products across runs (a sweep folder stands for its sub-runs).
-    Compare {
-        #[arg(required = true)]
-        runs: Vec<PathBuf>,
-        /// Also write the table as CSV.
-        #[arg(long)]
-        csv: Option<PathBuf>,
-        /// Write plots of DSM error against altitude and pulse rate into this folder.
-        #[arg(long)]
-        plots: Option<PathBuf>,
-    },
+    Compare(CompareArgs),
     /// Procedural scenes.
     Scene {
         #[command(subcommand)]
@@ -58,63 +34,103 @@ pub enum Command {
     /// rRMSE ≤ 5% on a GEDI-like pulse (also by footprint, Table 2), the sun's cost, and whole
     /// campaigns (orchard GEDI with sun, MABEL tracks, ALS over a forest) with pulses/s and
     /// peak memory. Quick by default; prints a markdown table and writes bench.md.
-    Bench {
-        /// Folder for the generated scenes, the campaign runs and bench.md.
-        #[arg(long, default_value = "runs/bench")]
-        out: PathBuf,
-        /// The paper's sizes: 10^7-ray reference, 5 seeds, 6929-pulse tracks, 1029-tree forest.
-        #[arg(long)]
-        full: bool,
-        /// Rays of the reference waveform [quick 10^6, full 10^7].
-        #[arg(long)]
-        reference_rays: Option<u64>,
-        /// Seeds per ray count (median rRMSE) [quick 3, full 5].
-        #[arg(long)]
-        seeds: Option<u64>,
-        /// Scene file of the RAMI orchard (skipped when its data is absent).
-        #[arg(long, default_value = "scenes/rami_wco.yaml")]
-        rami: PathBuf,
-        /// Leave out the campaign rows.
-        #[arg(long)]
-        no_campaigns: bool,
-        #[arg(long)]
-        threads: Option<usize>,
-        /// Field-of-view half angle, mrad.
-        #[arg(long, default_value_t = 0.3)]
-        fov_mrad: f64,
-        /// Crowns in the generated canopy (100 m × 100 m).
-        #[arg(long, default_value_t = 700)]
-        trees: usize,
-    },
+    Bench(BenchArgs),
+}
+
+#[derive(Args, Debug)]
+pub struct RunArgs {
+    campaign: PathBuf,
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Worker threads (default: all cores). The output does not depend on it.
+    #[arg(long)]
+    threads: Option<usize>,
+    /// Keep completed stages and simulation parts whose inputs are unchanged.
+    #[arg(long)]
+    resume: bool,
+    /// Stages to run, comma-separated (default: all).
+    #[arg(long, value_delimiter = ',', value_enum)]
+    stages: Option<Vec<pipeline::Stage>>,
+    /// Simulate only the parts whose index is K modulo N (for N machines sharing a run).
+    #[arg(long, value_name = "K/N")]
+    shard: Option<String>,
+}
+
+#[derive(Args, Debug)]
+pub struct CompareArgs {
+    #[arg(required = true)]
+    runs: Vec<PathBuf>,
+    /// Also write the table as CSV.
+    #[arg(long)]
+    csv: Option<PathBuf>,
+    /// Write plots of DSM error against altitude and pulse rate into this folder.
+    #[arg(long)]
+    plots: Option<PathBuf>,
+}
+
+#[derive(Args, Debug)]
+pub struct BenchArgs {
+    /// Folder for the generated scenes, the campaign runs and bench.md.
+    #[arg(long, default_value = "runs/bench")]
+    out: PathBuf,
+    /// The paper's sizes: 10^7-ray reference, 5 seeds, 6929-pulse tracks, 1029-tree forest.
+    #[arg(long)]
+    full: bool,
+    /// Rays of the reference waveform [quick 10^6, full 10^7].
+    #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
+    reference_rays: Option<u64>,
+    /// Seeds per ray count (median rRMSE) [quick 3, full 5].
+    #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
+    seeds: Option<u64>,
+    /// Scene file of the RAMI orchard (skipped when its data is absent).
+    #[arg(long, default_value = "scenes/rami_wco.yaml")]
+    rami: PathBuf,
+    /// Leave out the campaign rows.
+    #[arg(long)]
+    no_campaigns: bool,
+    /// Folder of the campaign rows' files (one YAML per row, quick.yaml for quick mode).
+    #[arg(long, default_value = "pipelines/bench")]
+    campaigns: PathBuf,
+    #[arg(long)]
+    threads: Option<usize>,
+    /// Field-of-view half angle, mrad, 0 < x < 1500.
+    #[arg(long, default_value_t = 0.3)]
+    fov_mrad: f64,
+    /// Crowns in the generated canopy (100 m × 100 m).
+    #[arg(long, default_value_t = 700, value_parser = clap::value_parser!(u64).range(1..))]
+    trees: u64,
 }
 
 #[derive(Subcommand, Debug)]
 pub enum SceneCommand {
     /// Write a deterministic procedural scene (OBJ templates, instance tables, scene YAML).
-    Generate {
-        /// forest, orchard or flat
-        kind: String,
-        #[arg(long, default_value_t = 1)]
-        seed: u64,
-        /// Output folder (the scene file is OUT/scene.yaml or similar, printed at the end).
-        #[arg(long)]
-        out: PathBuf,
-        /// Trees (forest, orchard).
-        #[arg(long)]
-        trees: Option<usize>,
-        /// Leaf area index to aim for (forest, orchard).
-        #[arg(long)]
-        lai: Option<f64>,
-        /// Scene size in metres, `X` or `X,Y`.
-        #[arg(long, value_delimiter = ',')]
-        size: Option<Vec<f64>>,
-        /// Distinct tree templates.
-        #[arg(long)]
-        templates: Option<usize>,
-        /// Leaves per template.
-        #[arg(long)]
-        leaves: Option<usize>,
-    },
+    Generate(GenerateArgs),
+}
+
+#[derive(Args, Debug)]
+pub struct GenerateArgs {
+    #[arg(value_enum, ignore_case = true)]
+    kind: SceneKind,
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Output folder (the scene file is OUT/scene.yaml or similar, printed at the end).
+    #[arg(long)]
+    out: PathBuf,
+    /// Trees (forest, orchard).
+    #[arg(long)]
+    trees: Option<usize>,
+    /// Leaf area index to aim for (forest, orchard).
+    #[arg(long)]
+    lai: Option<f64>,
+    /// Scene size in metres, `X` or `X,Y`.
+    #[arg(long, value_delimiter = ',')]
+    size: Option<Vec<f64>>,
+    /// Distinct tree templates.
+    #[arg(long)]
+    templates: Option<usize>,
+    /// Leaves per template.
+    #[arg(long)]
+    leaves: Option<usize>,
 }
 
 /// Parses the arguments and runs the command; returns the process exit code.
@@ -127,7 +143,16 @@ pub fn main() -> i32 {
             return code;
         }
     };
-    match dispatch(cli) {
+    let done = match cli.command {
+        Command::Run(args) => run(args),
+        Command::Check { campaign } => check::check(&campaign),
+        Command::Compare(args) => compare(args),
+        Command::Scene {
+            command: SceneCommand::Generate(args),
+        } => generate(args),
+        Command::Bench(args) => bench(args),
+    };
+    match done {
         Ok(()) => 0,
         Err(e) => {
             eprintln!("error: {e}");
@@ -136,142 +161,111 @@ pub fn main() -> i32 {
     }
 }
 
-fn dispatch(cli: Cli) -> Result<()> {
-    match cli.command {
-        Command::Run {
-            campaign,
-            out,
-            threads,
-            resume,
-            stages,
-            shard,
-        } => {
-            require_file(&campaign)?;
-            let stages = stages
-                .map(|v| {
-                    v.iter()
-                        .map(|s| pipeline::Stage::parse(s.trim()))
-                        .collect::<Result<Vec<_>>>()
-                })
-                .transpose()?;
-            let shard = shard.map(|s| parse_shard(&s)).transpose()?;
-            let opts = RunOptions {
-                out,
-                threads,
-                resume,
-                stages,
-                shard,
-            };
-            let s = pipeline::run(&campaign, &opts)?;
-            let state = if s.complete {
-                "complete"
-            } else {
-                "incomplete: run again with --resume"
-            };
-            println!(
-                "wrote {} ({} pulses, {} rays, {} parts simulated, {:.2} s, {state})",
-                s.out.display(),
-                s.pulses,
-                s.rays,
-                s.parts_done,
-                s.seconds
-            );
-            Ok(())
-        }
-        Command::Check { campaign } => check(&campaign),
-        Command::Compare { runs, csv, plots } => {
-            use crate::compare;
-            let mut rows = Vec::new();
-            for r in &runs {
-                for dir in compare::expand(r)? {
-                    rows.push(compare::read_row(&dir)?);
-                }
-            }
-            print!("{}", compare::markdown(&rows));
-            if let Some(path) = csv {
-                crate::fsutil::write_text_atomic(&path, &compare::csv(&rows))?;
-            }
-            if let Some(dir) = plots {
-                for p in compare::plots(&rows, &dir)? {
-                    eprintln!("wrote {}", p.display());
-                }
-            }
-            Ok(())
-        }
-        Command::Scene {
-            command:
-                SceneCommand::Generate {
-                    kind,
-                    seed,
-                    out,
-                    trees,
-                    lai,
-                    size,
-                    templates,
-                    leaves,
-                },
-        } => {
-            use crate::generate::{generate_with_summary, GenerateOptions, SceneKind};
-            let kind: SceneKind = kind.parse()?;
-            let size_m = match size.as_deref() {
-                None => None,
-                Some([x]) => Some([*x, *x]),
-                Some([x, y]) => Some([*x, *y]),
-                Some(_) => return Err(Error::msg("--size: give X or X,Y in metres")),
-            };
-            let opts = GenerateOptions {
-                trees,
-                lai,
-                size_m,
-                templates,
-                leaves,
-                ..GenerateOptions::default()
-            };
-            let s = generate_with_summary(kind, seed, &out, &opts)?;
-            println!(
-                "wrote {} ({} trees, {} templates, {} facets instanced, {} distinct, LAI {:.2}, {:.1} MB)",
-                s.scene.display(),
-                s.trees,
-                s.templates.len(),
-                s.facets,
-                s.distinct_facets,
-                s.lai,
-                s.bytes as f64 / 1e6
-            );
-            Ok(())
-        }
-        Command::Bench {
-            out,
-            full,
-            reference_rays,
-            seeds,
-            rami,
-            no_campaigns,
-            threads,
-            fov_mrad,
-            trees,
-        } => {
-            let mut opts = if full {
-                bench::BenchOptions::full(out)
-            } else {
-                bench::BenchOptions::quick(out)
-            };
-            if let Some(r) = reference_rays {
-                opts.reference_rays = r;
-            }
-            if let Some(s) = seeds {
-                opts.seeds = s;
-            }
-            opts.rami_scene = rami;
-            opts.campaigns = !no_campaigns;
-            opts.fov_mrad = fov_mrad;
-            opts.canopy.trees = trees;
-            let text = pipeline::with_threads(threads, || bench::run(&opts))?;
-            let path = bench::write_report(&opts, &text)?;
-            println!("{text}\n(written to {})", path.display());
-            Ok(())
+fn run(args: RunArgs) -> Result<()> {
+    require_file(&args.campaign)?;
+    let shard = args.shard.map(|s| parse_shard(&s)).transpose()?;
+    let opts = RunOptions {
+        out: args.out,
+        threads: args.threads,
+        resume: args.resume,
+        stages: args.stages,
+        shard,
+    };
+    let s = pipeline::run(&args.campaign, &opts)?;
+    let state = if s.complete {
+        "complete"
+    } else {
+        "incomplete: run again with --resume"
+    };
+    println!(
+        "wrote {} ({} pulses, {} rays, {} parts simulated, {:.2} s, {state})",
+        s.out.display(),
+        s.pulses,
+        s.rays,
+        s.parts_done,
+        s.seconds
+    );
+    Ok(())
+}
+
+fn compare(args: CompareArgs) -> Result<()> {
+    use crate::compare;
+    let mut rows = Vec::new();
+    for r in &args.runs {
+        for dir in compare::expand(r)? {
+            rows.push(compare::read_row(&dir)?);
         }
     }
+    print!("{}", compare::markdown(&rows));
+    if let Some(path) = args.csv {
+        compare::write_csv(&path, &rows)?;
+    }
+    if let Some(dir) = args.plots {
+        for p in compare::plots(&rows, &dir)? {
+            eprintln!("wrote {}", p.display());
+        }
+    }
+    Ok(())
+}
+
+fn generate(args: GenerateArgs) -> Result<()> {
+    let size_m = match args.size.as_deref() {
+        None => None,
+        Some([x]) => Some([*x, *x]),
+        Some([x, y]) => Some([*x, *y]),
+        Some(_) => return Err(Error::msg("--size: give X or X,Y in metres")),
+    };
+    let opts = GenerateOptions {
+        trees: args.trees,
+        lai: args.lai,
+        size_m,
+        templates: args.templates,
+        leaves: args.leaves,
+        ..GenerateOptions::default()
+    };
+    let s = generate_with_summary(args.kind, args.seed, &args.out, &opts)?;
+    println!(
+        "wrote {} ({} trees, {} templates, {} facets instanced, {} distinct, LAI {:.2}, {:.1} MB)",
+        s.scene.display(),
+        s.trees,
+        s.templates.len(),
+        s.facets,
+        s.distinct_facets,
+        s.lai,
+        s.bytes as f64 / 1e6
+    );
+    Ok(())
+}
+
+fn bench(args: BenchArgs) -> Result<()> {
+    let mut opts = if args.full {
+        bench::BenchOptions::full(args.out)
+    } else {
+        bench::BenchOptions::quick(args.out)
+    };
+    if let Some(r) = args.reference_rays {
+        opts.reference_rays = r;
+    }
+    if let Some(s) = args.seeds {
+        opts.seeds = s;
+    }
+    // the field of view is a half angle: it must open and stay below a hemisphere
+    let fov = args.fov_mrad;
+    if !(fov.is_finite() && fov > 0.0 && fov < 1500.0) {
+        return Err(Error::msg(format!(
+            "--fov-mrad {fov}: expected a half angle in mrad with 0 < x < 1500, e.g. 0.3"
+        )));
+    }
+    opts.rami_scene = args.rami;
+    opts.campaigns = !args.no_campaigns;
+    opts.campaigns_dir = args.campaigns;
+    opts.fov_mrad = fov;
+    opts.canopy.trees = usize::try_from(args.trees)
+        .map_err(|_| Error::msg(format!("--trees {}: too many", args.trees)))?;
+    let text = pipeline::with_threads(args.threads, || bench::run(&opts))?;
+    let path = bench::write_report(&opts, &text)?;
+    println!("{text}\n(written to {})", path.display());
+    Ok(())
 }
 
 /// `K/N` with 0 ≤ K < N.
@@ -292,87 +286,10 @@ fn parse_shard(s: &str) -> Result<(usize, usize)> {
     Ok((k, n))
 }
 
-fn require_file(path: &std::path::Path) -> Result<()> {
+pub(crate) fn require_file(path: &std::path::Path) -> Result<()> {
     if path.is_file() {
         Ok(())
     } else {
         Err(Error::file(path, "campaign file does not exist"))
     }
-}
-
-fn check(path: &std::path::Path) -> Result<()> {
-    require_file(path)?;
-    let loaded = crate::plan::read_campaign(path)?;
-    let c = &loaded.campaign;
-    let pulses = plan::plan(c)?;
-    let t = Instant::now();
-    let scene = Scene::load(&loaded.scene_path, c.wavelength_nm)?;
-    let load_s = t.elapsed().as_secs_f64();
-    let s = scene.stats();
-    let (lo, hi) = scene.bounds();
-    println!("campaign: {} ({})", c.name, path.display());
-    println!("scene: {} ({})", scene.name, loaded.scene_path.display());
-    println!("pulses: {}", pulses.len());
-    println!("rays per pulse: {}", c.simulation.rays_per_pulse);
-    println!("instances: {}", s.instances);
-    println!("distinct meshes: {}", s.distinct_meshes);
-    println!("triangles (distinct): {}", s.distinct_triangles);
-    println!("triangles (instanced): {}", s.instanced_triangles);
-    println!("scene memory: {:.1} MB", s.memory_bytes as f64 / 1e6);
-    if let Some(peak) = peak_rss_bytes() {
-        println!("peak process memory: {:.1} MB", peak as f64 / 1e6);
-    }
-    println!(
-        "bounds: [{:.3}, {:.3}, {:.3}] .. [{:.3}, {:.3}, {:.3}] m",
-        lo.x, lo.y, lo.z, hi.x, hi.y, hi.z
-    );
-    println!("scene load: {load_s:.2} s");
-    let rate = pipeline::probe_rays_per_second(&loaded, &scene, &pulses);
-    let total_rays = pulses.len() as f64 * c.simulation.rays_per_pulse as f64;
-    // what a run holds beyond the scene: the pulses, one part of waveforms, per-thread tallies
-    let bins = pulses
-        .iter()
-        .take(1)
-        .map(|p| {
-            crate::sensor::Gate::for_pulse(&c.instrument, p.origin, p.direction, scene.bounds())
-                .bins
-        })
-        .next()
-        .unwrap_or(0) as f64;
-    let run_bytes = pulses.len() as f64 * 80.0
-        + pipeline::PART_PULSES as f64 * (bins * 12.0 + c.simulation.max_order as f64 * 16.0)
-        + rayon::current_num_threads() as f64 * bins * 64.0 * 8.0;
-    println!(
-        "estimated memory: {:.0} MB (scene {:.0} MB + run {:.0} MB)",
-        (s.memory_bytes as f64 + run_bytes) / 1e6,
-        s.memory_bytes as f64 / 1e6,
-        run_bytes / 1e6
-    );
-    println!(
-        "estimated time: {} ({:.3e} rays at {:.3e} rays/s measured here on {} threads)",
-        human_seconds(total_rays / rate),
-        total_rays,
-        rate,
-        rayon::current_num_threads()
-    );
-    println!("ok");
-    Ok(())
-}
-
-fn human_seconds(s: f64) -> String {
-    if s < 120.0 {
-        format!("{s:.1} s")
-    } else if s < 7200.0 {
-        format!("{:.1} min", s / 60.0)
-    } else {
-        format!("{:.1} h", s / 3600.0)
-    }
-}
-
-/// Peak resident memory of this process (Linux), bytes.
-pub fn peak_rss_bytes() -> Option<u64> {
-    let status = std::fs::read_to_string("/proc/self/status").ok()?;
-    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
-    let kb: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
-    Some(kb * 1024)
 }

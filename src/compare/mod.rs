@@ -4,7 +4,11 @@
 
 use crate::error::{Error, Result};
 use crate::fsutil::write_text_atomic;
+use crate::pipeline::manifest::Manifest;
+use crate::pipeline::sweep::SweepIndex;
+use crate::products::dsm::DsmReport;
 use crate::products::plot::{line_plot, Series};
+use crate::products::summary::ProductsSummary;
 use std::path::{Path, PathBuf};
 
 /// One run's row.
@@ -23,19 +27,10 @@ pub struct Row {
     pub run_time_s: f64,
 }
 
-fn json(path: &Path) -> Option<serde_json::Value> {
-    serde_json::from_str(&std::fs::read_to_string(path).ok()?).ok()
-}
-
 /// The run folders a path stands for: itself, or a sweep's sub-runs in order.
 pub fn expand(dir: &Path) -> Result<Vec<PathBuf>> {
-    if let Some(sweep) = json(&dir.join("sweep.json")) {
-        let runs = sweep["sweep"].as_array().cloned().unwrap_or_default();
-        return Ok(runs
-            .iter()
-            .filter_map(|r| r.as_str())
-            .map(|r| dir.join(r))
-            .collect());
+    if let Some(sweep) = SweepIndex::read(&dir.join("sweep.json")) {
+        return Ok(sweep.sweep.iter().map(|r| dir.join(r)).collect());
     }
     if dir.join("manifest.json").is_file() {
         return Ok(vec![dir.to_path_buf()]);
@@ -47,13 +42,15 @@ pub fn expand(dir: &Path) -> Result<Vec<PathBuf>> {
 }
 
 pub fn read_row(dir: &Path) -> Result<Row> {
-    let manifest = json(&dir.join("manifest.json"))
-        .ok_or_else(|| Error::file(&dir.join("manifest.json"), "missing or not valid JSON"))?;
+    let manifest_path = dir.join("manifest.json");
+    let manifest = Manifest::read(&manifest_path)
+        .ok_or_else(|| Error::data(&manifest_path, "missing or not a lidarsim manifest"))?;
     let resolved: serde_yaml::Value = std::fs::read_to_string(dir.join("campaign.resolved.yaml"))
         .ok()
         .and_then(|t| serde_yaml::from_str(&t).ok())
         .unwrap_or(serde_yaml::Value::Null);
-    let f = |v: &serde_json::Value| v.as_f64();
+    // a figure with no meaning for the run (NaN in memory, null in JSON) is an empty cell
+    let finite = |x: f64| Some(x).filter(|x| x.is_finite());
     let mut row = Row {
         run: dir
             .file_name()
@@ -61,22 +58,21 @@ pub fn read_row(dir: &Path) -> Result<Row> {
             .unwrap_or_default(),
         altitude_m: resolved["platform"]["altitude_m"].as_f64(),
         prf_hz: resolved["platform"]["prf_hz"].as_f64(),
-        run_time_s: manifest["stages"]
-            .as_object()
-            .map(|m| m.values().filter_map(|s| s["wall_time_s"].as_f64()).sum())
-            .unwrap_or(0.0),
+        run_time_s: manifest.stages.values().map(|s| s.wall_time_s).sum(),
         ..Row::default()
     };
-    if let Some(p) = json(&dir.join("products.json")) {
-        row.pulses = p["pulses"].as_u64().unwrap_or(0);
-        row.points = p["points"].as_u64();
-        row.points_per_pulse = f(&p["points_per_pulse"]);
-        row.pulse_density_m2 = f(&p["pulse_density_per_m2"]);
+    if let Some(p) = ProductsSummary::read(&dir.join("products.json")) {
+        row.pulses = p.pulses as u64;
+        if let Some(pts) = p.points {
+            row.points = Some(pts.points as u64);
+            row.points_per_pulse = finite(pts.points_per_pulse);
+            row.pulse_density_m2 = pts.pulse_density_per_m2.and_then(finite);
+        }
     }
-    if let Some(d) = json(&dir.join("dsm/report.json")) {
-        row.dsm_bias_m = f(&d["bias_m"]);
-        row.dsm_rmse_m = f(&d["rmse_m"]);
-        row.dsm_coverage = f(&d["coverage"]);
+    if let Some(d) = DsmReport::read(&dir.join("dsm/report.json")) {
+        row.dsm_bias_m = finite(d.bias_m);
+        row.dsm_rmse_m = finite(d.rmse_m);
+        row.dsm_coverage = finite(d.coverage);
     }
     Ok(row)
 }
@@ -109,28 +105,38 @@ pub fn markdown(rows: &[Row]) -> String {
     s
 }
 
-pub fn csv(rows: &[Row]) -> String {
+/// Writes the table as CSV (run names quoted when they need it).
+pub fn write_csv(path: &Path, rows: &[Row]) -> Result<()> {
     let o = |v: Option<f64>| v.map(|x| x.to_string()).unwrap_or_default();
-    let mut s = String::from(
-        "run,altitude_m,prf_hz,pulses,points,points_per_pulse,pulse_density_per_m2,dsm_bias_m,dsm_rmse_m,dsm_coverage,run_time_s\n",
-    );
-    for r in rows {
-        s += &format!(
-            "{},{},{},{},{},{},{},{},{},{},{}\n",
-            r.run,
+    let header = [
+        "run",
+        "altitude_m",
+        "prf_hz",
+        "pulses",
+        "points",
+        "points_per_pulse",
+        "pulse_density_per_m2",
+        "dsm_bias_m",
+        "dsm_rmse_m",
+        "dsm_coverage",
+        "run_time_s",
+    ];
+    let table = rows.iter().map(|r| {
+        vec![
+            r.run.clone(),
             o(r.altitude_m),
             o(r.prf_hz),
-            r.pulses,
+            r.pulses.to_string(),
             r.points.map(|x| x.to_string()).unwrap_or_default(),
             o(r.points_per_pulse),
             o(r.pulse_density_m2),
             o(r.dsm_bias_m),
             o(r.dsm_rmse_m),
             o(r.dsm_coverage),
-            r.run_time_s
-        );
-    }
-    s
+            r.run_time_s.to_string(),
+        ]
+    });
+    crate::fsutil::write_csv_atomic(path, &header, table)
 }
 
 /// DSM bias and RMSE against altitude (one line per pulse rate) and against pulse rate (one

@@ -25,7 +25,7 @@ pub use tree::LeafAngle;
 use crate::rng::Rand;
 
 /// Which procedural scene to write.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum SceneKind {
     /// Mixed broadleaf stand after the RAMI-IV Järvselja birch stand: trees of up to 7
     /// species templates (birch, alder, ash, aspen, linden, spruce, maple) on gently sloping
@@ -53,20 +53,6 @@ impl SceneKind {
 impl std::fmt::Display for SceneKind {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.write_str(self.name())
-    }
-}
-
-impl std::str::FromStr for SceneKind {
-    type Err = Error;
-    fn from_str(s: &str) -> Result<SceneKind> {
-        SceneKind::ALL
-            .into_iter()
-            .find(|k| k.name().eq_ignore_ascii_case(s.trim()))
-            .ok_or_else(|| {
-                Error::msg(format!(
-                    "unknown scene kind \"{s}\": expected forest, orchard or flat"
-                ))
-            })
     }
 }
 
@@ -269,8 +255,7 @@ pub fn generate_with_summary(
     opts: &GenerateOptions,
 ) -> Result<GeneratedSummary> {
     let o = opts.resolve(kind)?;
-    std::fs::create_dir_all(out_dir)
-        .map_err(|e| Error::file(out_dir, format!("cannot create folder: {e}")))?;
+    std::fs::create_dir_all(out_dir).map_err(|e| Error::io(out_dir, "cannot create folder", e))?;
     match kind {
         SceneKind::Forest => stand::forest(seed, out_dir, &o),
         SceneKind::Orchard => stand::orchard(seed, out_dir, &o),
@@ -320,22 +305,24 @@ fn write_file(path: &Path, text: &str) -> Result<()> {
 /// placed uniformly in the crown with uniformly random orientation (a spherical leaf-angle
 /// distribution). Optical properties at 532/1064 nm are typical broadleaf values (leaf
 /// ρ 0.10/0.45, τ 0.05/0.45) over a soil of ρ 0.12/0.30.
+///
+/// One random stream in a fixed draw order makes the canopy, so its steps stay in one
+/// function.
 pub fn canopy(dir: &Path, c: &Canopy) -> Result<PathBuf> {
-    std::fs::create_dir_all(dir)
-        .map_err(|e| Error::file(dir, format!("cannot create folder: {e}")))?;
+    std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, "cannot create folder", e))?;
     let mut rng = Rand::new(c.seed);
     let mut objects = String::new();
     for k in 0..c.templates {
-        let (rx, rz) = (1.25 + 0.5 * rng.next(), 1.5 + rng.next());
-        let base = 4.0 + 3.0 * rng.next();
+        let (rx, rz) = (1.25 + 0.5 * rng.uniform(), 1.5 + rng.uniform());
+        let base = 4.0 + 3.0 * rng.uniform();
         let mut obj = format!("# crown template {k}: {} leaves\n", c.leaves);
         for i in 0..c.leaves {
             // uniform in the unit ball by rejection
             let p = loop {
                 let p = [
-                    2.0 * rng.next() - 1.0,
-                    2.0 * rng.next() - 1.0,
-                    2.0 * rng.next() - 1.0,
+                    2.0 * rng.uniform() - 1.0,
+                    2.0 * rng.uniform() - 1.0,
+                    2.0 * rng.uniform() - 1.0,
                 ];
                 if p[0] * p[0] + p[1] * p[1] + p[2] * p[2] <= 1.0 {
                     break p;
@@ -343,8 +330,8 @@ pub fn canopy(dir: &Path, c: &Canopy) -> Result<PathBuf> {
             };
             let centre = [p[0] * rx, p[1] * rx, base + rz * (1.0 + p[2])];
             // a random orthonormal pair spans the leaf's plane
-            let z = 2.0 * rng.next() - 1.0;
-            let phi = 2.0 * PI * rng.next();
+            let z = 2.0 * rng.uniform() - 1.0;
+            let phi = 2.0 * PI * rng.uniform();
             let r = (1.0 - z * z).sqrt();
             let n = [r * phi.cos(), r * phi.sin(), z];
             let a = if n[0].abs() < 0.9 {
@@ -364,7 +351,7 @@ pub fn canopy(dir: &Path, c: &Canopy) -> Result<PathBuf> {
                 n[2] * u[0] - n[0] * u[2],
                 n[0] * u[1] - n[1] * u[0],
             ];
-            let spin = 2.0 * PI * rng.next();
+            let spin = 2.0 * PI * rng.uniform();
             let s = c.leaf_m / 3f64.sqrt();
             for j in 0..3 {
                 let ang = spin + j as f64 * 2.0 * PI / 3.0;
@@ -387,10 +374,10 @@ pub fn canopy(dir: &Path, c: &Canopy) -> Result<PathBuf> {
             let _ = writeln!(
                 table,
                 "{:.3} {:.3} 0 {:.2} {:.3}",
-                c.size * rng.next(),
-                c.size * rng.next(),
-                360.0 * rng.next(),
-                0.8 + 0.4 * rng.next()
+                c.size * rng.uniform(),
+                c.size * rng.uniform(),
+                360.0 * rng.uniform(),
+                0.8 + 0.4 * rng.uniform()
             );
         }
         write_file(&dir.join(format!("crown{k}.csv")), &table)?;

@@ -464,13 +464,13 @@ fn terrain(rng: &mut Rand, size: [f64; 2], slope: f64) -> Terrain {
     let cell = (size[0].max(size[1]) / 400.0).max(1.0);
     let cols = (size[0] / cell - 1e-9).ceil() as usize + 1;
     let rows = (size[1] / cell - 1e-9).ceil() as usize + 1;
-    let az = 2.0 * PI * rng.next();
+    let az = 2.0 * PI * rng.uniform();
     let (c, s) = (az.cos(), az.sin());
     let waves: Vec<(f64, f64, f64)> = (0..3)
         .map(|_| {
-            let k = 2.0 * PI / (30.0 + 40.0 * rng.next());
-            let dir = 2.0 * PI * rng.next();
-            (k * dir.cos(), k * dir.sin(), 2.0 * PI * rng.next())
+            let k = 2.0 * PI / (30.0 + 40.0 * rng.uniform());
+            let dir = 2.0 * PI * rng.uniform();
+            (k * dir.cos(), k * dir.sin(), 2.0 * PI * rng.uniform())
         })
         .collect();
     let (cx, cy) = (0.5 * size[0], 0.5 * size[1]);
@@ -513,7 +513,10 @@ fn positions(rng: &mut Rand, size: [f64; 2], n: usize, min: f64) -> Result<Vec<[
                 out.len()
             )));
         }
-        let p = [round4(size[0] * rng.next()), round4(size[1] * rng.next())];
+        let p = [
+            round4(size[0] * rng.uniform()),
+            round4(size[1] * rng.uniform()),
+        ];
         let (ci, cj) = ((p[0] / cell) as usize, (p[1] / cell) as usize);
         let mut free = true;
         'near: for i in ci.saturating_sub(1)..=(ci + 1).min(gx - 1) {
@@ -538,7 +541,7 @@ fn positions(rng: &mut Rand, size: [f64; 2], n: usize, min: f64) -> Result<Vec<[
 /// Index drawn with probability proportional to `weights`.
 fn pick(rng: &mut Rand, weights: &[f64]) -> usize {
     let total: f64 = weights.iter().sum();
-    let mut x = total * rng.next();
+    let mut x = total * rng.uniform();
     for (i, &w) in weights.iter().enumerate() {
         if x < w {
             return i;
@@ -559,6 +562,9 @@ fn header(kind: SceneKind, seed: u64, lines: &[String]) -> String {
     s
 }
 
+/// A forest stand: terrain, species templates, tree positions, instance tables, scene file,
+/// in the order of one random stream (the draw order makes the stand); the steps are
+/// helpers (`terrain`, `positions`, `trees`), this function is their sequence and the YAML.
 pub(super) fn forest(seed: u64, dir: &Path, o: &Resolved) -> Result<GeneratedSummary> {
     let mut out = Written::default();
     let mut rng = stream(seed, 0);
@@ -585,9 +591,9 @@ pub(super) fn forest(seed: u64, dir: &Path, o: &Resolved) -> Result<GeneratedSum
             if round > 0 {
                 // further templates of a species are its variants
                 let mut r = stream(seed, 500 + k as u64);
-                shape.height *= 0.9 + 0.2 * r.next();
-                shape.crown_base *= 0.9 + 0.2 * r.next();
-                shape.crown_radius *= 0.9 + 0.2 * r.next();
+                shape.height *= 0.9 + 0.2 * r.uniform();
+                shape.crown_base *= 0.9 + 0.2 * r.uniform();
+                shape.crown_radius *= 0.9 + 0.2 * r.uniform();
             }
             Plan {
                 stem: if round == 0 {
@@ -623,8 +629,8 @@ pub(super) fn forest(seed: u64, dir: &Path, o: &Resolved) -> Result<GeneratedSum
                 x: p[0],
                 y: p[1],
                 z: round4(ground.z(p[0], p[1])),
-                rotation_deg: (36_000.0 * rng.next()).round() / 100.0,
-                scale: round4(0.8 + 0.4 * rng.next()),
+                rotation_deg: (36_000.0 * rng.uniform()).round() / 100.0,
+                scale: round4(0.8 + 0.4 * rng.uniform()),
                 template,
             }
         })
@@ -685,6 +691,7 @@ pub(super) fn forest(seed: u64, dir: &Path, o: &Resolved) -> Result<GeneratedSum
     finish(summary, dir.join("forest.yaml"), &yaml)
 }
 
+/// An orchard (the WCO layout: rows of one species); long for the same reason as [`forest`].
 pub(super) fn orchard(seed: u64, dir: &Path, o: &Resolved) -> Result<GeneratedSummary> {
     // WCO: rows about 4.5 m apart along y, trees 2 m apart in a row, some missing
     const ROW_M: f64 = 4.5;
@@ -708,7 +715,7 @@ pub(super) fn orchard(seed: u64, dir: &Path, o: &Resolved) -> Result<GeneratedSu
     let mut all: Vec<usize> = (0..rows * slots).collect();
     let n = all.len();
     for i in 0..o.trees {
-        let j = i + ((n - i) as f64 * rng.next()) as usize;
+        let j = i + ((n - i) as f64 * rng.uniform()) as usize;
         all.swap(i, j.min(n - 1));
     }
     let mut kept = all[..o.trees].to_vec();
@@ -720,15 +727,15 @@ pub(super) fn orchard(seed: u64, dir: &Path, o: &Resolved) -> Result<GeneratedSu
         .map(|(i, &slot)| {
             let (r, s) = (slot / slots, slot % slots);
             Placed {
-                x: round4(x0 + r as f64 * ROW_M + 0.1 * (rng.next() - 0.5)),
-                y: round4(y0 + s as f64 * TREE_M + 0.2 * (rng.next() - 0.5)),
+                x: round4(x0 + r as f64 * ROW_M + 0.1 * (rng.uniform() - 0.5)),
+                y: round4(y0 + s as f64 * TREE_M + 0.2 * (rng.uniform() - 0.5)),
                 z: 0.0,
-                rotation_deg: (36_000.0 * rng.next()).round() / 100.0,
-                scale: round4(0.9 + 0.2 * rng.next()),
+                rotation_deg: (36_000.0 * rng.uniform()).round() / 100.0,
+                scale: round4(0.9 + 0.2 * rng.uniform()),
                 template: if i < templates {
                     i
                 } else {
-                    (templates as f64 * rng.next()) as usize % templates
+                    (templates as f64 * rng.uniform()) as usize % templates
                 },
             }
         })
@@ -737,8 +744,8 @@ pub(super) fn orchard(seed: u64, dir: &Path, o: &Resolved) -> Result<GeneratedSu
         .map(|k| {
             let mut shape = CITRUS.clone();
             let mut r = stream(seed, 500 + k as u64);
-            shape.height *= 0.9 + 0.2 * r.next();
-            shape.crown_radius *= 0.9 + 0.2 * r.next();
+            shape.height *= 0.9 + 0.2 * r.uniform();
+            shape.crown_radius *= 0.9 + 0.2 * r.uniform();
             Plan {
                 stem: format!("citrus{}", k + 1),
                 species: "citrus (Citrus sinensis)".to_string(),

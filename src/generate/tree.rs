@@ -35,16 +35,16 @@ impl LeafAngle {
     /// classes g = 2/π (1 + a cos bθ), which needs no numerical inversion of the CDF.
     pub(super) fn sample(self, rng: &mut Rand) -> f64 {
         let (a, b) = match self {
-            LeafAngle::Spherical => return rng.next().acos(),
-            LeafAngle::Uniform => return FRAC_PI_2 * rng.next(),
+            LeafAngle::Spherical => return rng.uniform().acos(),
+            LeafAngle::Uniform => return FRAC_PI_2 * rng.uniform(),
             LeafAngle::Planophile => (1.0, 2.0),
             LeafAngle::Erectophile => (-1.0, 2.0),
             LeafAngle::Plagiophile => (-1.0, 4.0),
             LeafAngle::Extremophile => (1.0, 4.0),
         };
         loop {
-            let theta = FRAC_PI_2 * rng.next();
-            if 2.0 * rng.next() <= 1.0 + a * (b * theta).cos() {
+            let theta = FRAC_PI_2 * rng.uniform();
+            if 2.0 * rng.uniform() <= 1.0 + a * (b * theta).cos() {
                 return theta;
             }
         }
@@ -214,9 +214,9 @@ fn basis(n: DVec3) -> (DVec3, DVec3) {
 fn unit_ball(rng: &mut Rand) -> DVec3 {
     loop {
         let p = DVec3::new(
-            2.0 * rng.next() - 1.0,
-            2.0 * rng.next() - 1.0,
-            2.0 * rng.next() - 1.0,
+            2.0 * rng.uniform() - 1.0,
+            2.0 * rng.uniform() - 1.0,
+            2.0 * rng.uniform() - 1.0,
         );
         if p.length_squared() <= 1.0 {
             return p;
@@ -241,6 +241,10 @@ impl Host {
 }
 
 /// Builds one template. `leaf_area` is the target area of one leaf, m² (one side).
+///
+/// Long because the trunk, the branches and the leaves draw from one random stream in a
+/// fixed order (the order makes the template); split, every step would carry the stream and
+/// the half-built mesh.
 pub(super) fn build(
     shape: &TreeShape,
     leaves: usize,
@@ -286,9 +290,9 @@ pub(super) fn build(
     let span = (shape.height - 0.3 - shape.crown_base).max(0.1);
     for b in 0..shape.branches {
         // stratified heights and a golden-angle spiral keep the crown evenly filled
-        let h = shape.crown_base + span * (b as f64 + rng.next()) / shape.branches as f64;
-        let az = golden * b as f64 + 0.5 * (rng.next() - 0.5);
-        let el = (shape.branch_elevation_deg + 20.0 * (rng.next() - 0.5)).to_radians();
+        let h = shape.crown_base + span * (b as f64 + rng.uniform()) / shape.branches as f64;
+        let az = golden * b as f64 + 0.5 * (rng.uniform() - 0.5);
+        let el = (shape.branch_elevation_deg + 20.0 * (rng.uniform() - 0.5)).to_radians();
         let dir = DVec3::new(el.cos() * az.cos(), el.cos() * az.sin(), el.sin());
         let mut branch = Host {
             start: DVec3::new(0.0, 0.0, h),
@@ -309,10 +313,10 @@ pub(super) fn build(
         let radii: Vec<f64> = (0..=3).map(|i| r0 * (1.0 - 0.22 * i as f64)).collect();
         obj.tube(&centres, &radii, 6);
         for _ in 0..2 {
-            let s = branch.len * (0.35 + 0.45 * rng.next());
+            let s = branch.len * (0.35 + 0.45 * rng.uniform());
             let p = branch.at(s);
             let d = (branch.dir + unit_ball(rng) * 0.9 + DVec3::Z * 0.3).normalize();
-            let tl = (branch.len - s).max(0.2) * (0.4 + 0.3 * rng.next());
+            let tl = (branch.len - s).max(0.2) * (0.4 + 0.3 * rng.uniform());
             let rb = 0.5 * r0 * (1.0 - 0.66 * s / branch.len);
             obj.tube(&[p, p + d * tl], &[rb.max(0.003), 0.002], 5);
             hosts.push(Host {
@@ -339,10 +343,10 @@ pub(super) fn build(
     for _ in 0..leaves {
         let mut centre = None;
         for _ in 0..16 {
-            let x = total * rng.next();
+            let x = total * rng.uniform();
             let k = cumulative.partition_point(|&c| c < x).min(hosts.len() - 1);
             let h = &hosts[k];
-            let p = h.at(h.len * (h.from + (1.0 - h.from) * rng.next()))
+            let p = h.at(h.len * (h.from + (1.0 - h.from) * rng.uniform()))
                 + unit_ball(rng) * shape.cluster_m;
             if shape.in_crown(p) {
                 centre = Some(p);
@@ -352,23 +356,23 @@ pub(super) fn build(
         // a leaf that found no room near a branch goes anywhere in the crown
         let centre = centre.unwrap_or_else(|| loop {
             let p = DVec3::new(
-                shape.crown_radius * (2.0 * rng.next() - 1.0),
-                shape.crown_radius * (2.0 * rng.next() - 1.0),
-                shape.crown_base + (shape.height - shape.crown_base) * rng.next(),
+                shape.crown_radius * (2.0 * rng.uniform() - 1.0),
+                shape.crown_radius * (2.0 * rng.uniform() - 1.0),
+                shape.crown_base + (shape.height - shape.crown_base) * rng.uniform(),
             );
             if shape.in_crown(p) {
                 break p;
             }
         });
         let theta = shape.leaf_angle.sample(rng);
-        let phi = 2.0 * PI * rng.next();
+        let phi = 2.0 * PI * rng.uniform();
         let n = DVec3::new(
             theta.sin() * phi.cos(),
             theta.sin() * phi.sin(),
             theta.cos(),
         );
         let (e1, e2) = basis(n);
-        let psi = 2.0 * PI * rng.next();
+        let psi = 2.0 * PI * rng.uniform();
         let u = e1 * psi.cos() + e2 * psi.sin();
         obj.leaf(centre, n, u, a, b);
     }

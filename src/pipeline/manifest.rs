@@ -27,7 +27,8 @@ pub struct Manifest {
 }
 
 impl Manifest {
-    pub(super) fn read(path: &Path) -> Option<Manifest> {
+    /// A run folder's manifest; None when it is absent or not a manifest.
+    pub fn read(path: &Path) -> Option<Manifest> {
         serde_json::from_str(&std::fs::read_to_string(path).ok()?).ok()
     }
 

@@ -8,9 +8,9 @@
 //! file already written: a run killed at any moment and resumed gives the same files as an
 //! uninterrupted one, since every random draw derives from (seed, pulse, chunk).
 
-mod manifest;
+pub mod manifest;
 mod simulate;
-mod sweep;
+pub mod sweep;
 
 pub use manifest::StageRecord;
 use manifest::{fingerprint, invalidate_after, record, save, Manifest};
@@ -33,7 +33,7 @@ use std::time::Instant;
 /// Pulses per waveform part file.
 pub const PART_PULSES: usize = 1000;
 
-#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, clap::ValueEnum)]
 pub enum Stage {
     Plan,
     Simulate,
@@ -51,12 +51,6 @@ impl Stage {
             Stage::Products => "products",
             Stage::Report => "report",
         }
-    }
-
-    pub fn parse(s: &str) -> Result<Stage> {
-        Stage::ALL.into_iter().find(|st| st.name() == s).ok_or_else(|| {
-            Error::msg(format!("--stages: unknown stage `{s}`; the stages are plan, simulate, products, report"))
-        })
     }
 }
 
@@ -177,8 +171,7 @@ struct RunFolder<'a> {
 impl<'a> RunFolder<'a> {
     /// Creates the folder, or takes it over with its manifest when resuming or sharding.
     fn open(loaded: &Loaded, out: &'a Path, opts: &'a RunOptions) -> Result<RunFolder<'a>> {
-        std::fs::create_dir_all(out)
-            .map_err(|e| Error::file(out, format!("cannot create run folder: {e}")))?;
+        std::fs::create_dir_all(out).map_err(|e| Error::io(out, "cannot create run folder", e))?;
         let manifest_path = out.join("manifest.json");
         // shards share the folder with each other: they keep what is there, like a resume
         let keep = opts.resume || opts.shard.is_some();
@@ -285,43 +278,16 @@ fn run_single(
         return Ok(summary);
     }
 
-    // products: discrete returns, photon counts and the DSM error, from the waveforms
     let fp_products = fingerprint(&[fp_sim.as_bytes(), b"products"]);
     if run.wanted(Stage::Products) && !run.done(Stage::Products, &fp_products) {
-        let t = Instant::now();
-        let parts = pulses.len().div_ceil(PART_PULSES);
-        let (outputs, note) = products::stage::run(loaded, scene, out, &pulses, parts)?;
-        log(&format!(
-            "products: {} in {:.2} s",
-            outputs.join(", "),
-            t.elapsed().as_secs_f64()
-        ));
-        let note = (!note.is_empty()).then_some(note);
-        run.finish(Stage::Products, &fp_products, outputs, t, note, "done")?;
+        products_stage(&mut run, loaded, scene, &pulses, &fp_products)?;
     }
-
     let fp_report = fingerprint(&[fp_products.as_bytes(), b"report"]);
     if run.wanted(Stage::Report)
         && run.done(Stage::Products, &fp_products)
         && !run.done(Stage::Report, &fp_report)
     {
-        let t = Instant::now();
-        let simulate_s = run
-            .manifest
-            .stages
-            .get("simulate")
-            .map(|r| r.wall_time_s)
-            .unwrap_or(0.0);
-        let text = products::report::report(loaded, scene, &pulses, out, simulate_s)?;
-        write_text_atomic(&out.join("report.md"), &text)?;
-        run.finish(
-            Stage::Report,
-            &fp_report,
-            vec!["report.md".into()],
-            t,
-            None,
-            "done",
-        )?;
+        report_stage(&mut run, loaded, scene, &pulses, &fp_report)?;
     }
     if run.manifest == before {
         log("nothing to do: every stage is up to date");
@@ -329,6 +295,46 @@ fn run_single(
     summary.complete = opts.stages.is_some() || run.done(Stage::Report, &fp_report);
     summary.seconds = start.elapsed().as_secs_f64();
     Ok(summary)
+}
+
+/// The products stage: discrete returns, photon counts and the DSM error, from the waveforms.
+fn products_stage(
+    run: &mut RunFolder,
+    loaded: &Loaded,
+    scene: &Scene,
+    pulses: &[Pulse],
+    fp: &str,
+) -> Result<()> {
+    let t = Instant::now();
+    let parts = pulses.len().div_ceil(PART_PULSES);
+    let (outputs, note) = products::stage::run(loaded, scene, run.out, pulses, parts)?;
+    log(&format!(
+        "products: {} in {:.2} s",
+        outputs.join(", "),
+        t.elapsed().as_secs_f64()
+    ));
+    let note = (!note.is_empty()).then_some(note);
+    run.finish(Stage::Products, fp, outputs, t, note, "done")
+}
+
+/// The report stage: report.md, quoting the simulate stage's wall time.
+fn report_stage(
+    run: &mut RunFolder,
+    loaded: &Loaded,
+    scene: &Scene,
+    pulses: &[Pulse],
+    fp: &str,
+) -> Result<()> {
+    let t = Instant::now();
+    let simulate_s = run
+        .manifest
+        .stages
+        .get("simulate")
+        .map(|r| r.wall_time_s)
+        .unwrap_or(0.0);
+    let text = products::report::report(loaded, scene, pulses, run.out, simulate_s)?;
+    write_text_atomic(&run.out.join("report.md"), &text)?;
+    run.finish(Stage::Report, fp, vec!["report.md".into()], t, None, "done")
 }
 
 /// The plan stage. Planning is cheap and deterministic, so the pulses are always planned in
@@ -369,7 +375,7 @@ fn plan_stage(run: &mut RunFolder, c: &Campaign, fp: &str) -> Result<Vec<Pulse>>
 fn simulate_fingerprint(fp_plan: &str, scene: &Scene) -> Result<String> {
     let mut scene_bytes = Vec::new();
     for f in &scene.files {
-        let bytes = std::fs::read(f).map_err(|e| Error::file(f, format!("cannot read: {e}")))?;
+        let bytes = std::fs::read(f).map_err(|e| Error::io(f, "cannot read", e))?;
         scene_bytes.push(bytes);
     }
     let mut inputs: Vec<&[u8]> = vec![fp_plan.as_bytes()];

@@ -4,7 +4,6 @@
 use super::PART_PULSES;
 use crate::campaign::Loaded;
 use crate::error::Result;
-use crate::fsutil::write_text_atomic;
 use crate::plan::Pulse;
 use crate::progress::{log, progress};
 use crate::scene::Scene;
@@ -79,18 +78,23 @@ pub(super) fn part_range(k: usize, n: usize) -> std::ops::Range<usize> {
 /// Per-pulse counters beside the waveforms: effective paths per ray and time per ray. Kept
 /// out of the waveform files, which must not depend on timing.
 pub(super) fn write_pulse_stats(path: &Path, waveforms: &[Waveform], secs: &[f64]) -> Result<()> {
-    let mut text = String::from("pulse_id,rays,paths_per_ray,seconds,seconds_per_ray\n");
-    for (w, s) in waveforms.iter().zip(secs) {
-        text.push_str(&format!(
-            "{},{},{},{:.6},{:.4e}\n",
-            w.pulse_id,
-            w.rays,
-            w.paths_per_ray,
-            s,
-            s / w.rays.max(1) as f64
-        ));
-    }
-    write_text_atomic(path, &text)
+    let rows = waveforms.iter().zip(secs).map(|(w, s)| {
+        vec![
+            w.pulse_id.to_string(),
+            w.rays.to_string(),
+            w.paths_per_ray.to_string(),
+            format!("{s:.6}"),
+            format!("{:.4e}", s / w.rays.max(1) as f64),
+        ]
+    });
+    let header = [
+        "pulse_id",
+        "rays",
+        "paths_per_ray",
+        "seconds",
+        "seconds_per_ray",
+    ];
+    crate::fsutil::write_csv_atomic(path, &header, rows)
 }
 
 /// Simulates pulses: pulses and each pulse's ray chunks run in parallel. Returns the

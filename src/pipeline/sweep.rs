@@ -18,35 +18,7 @@ pub(super) fn run_sweep(
     out: &Path,
     opts: &RunOptions,
 ) -> Result<RunSummary> {
-    // combinations vary the keys in the order the file gives them
-    let mut keys: Vec<&String> = sweep.keys().collect();
-    // (a dotted key is one YAML key here, so look for its text after `sweep:`)
-    let sweep_at = loaded.doc.text.find("sweep:").unwrap_or(0);
-    keys.sort_by_key(|k| {
-        loaded.doc.text[sweep_at..]
-            .find(k.as_str())
-            .unwrap_or(usize::MAX)
-    });
-    for k in &keys {
-        if sweep[*k].is_empty() {
-            return Err(loaded
-                .doc
-                .error(&format!("sweep.{k}"), "the list of values is empty"));
-        }
-    }
-    let mut combos: Vec<Vec<&serde_yaml::Value>> = vec![vec![]];
-    for k in &keys {
-        combos = combos
-            .into_iter()
-            .flat_map(|c| {
-                sweep[*k].iter().map(move |v| {
-                    let mut c = c.clone();
-                    c.push(v);
-                    c
-                })
-            })
-            .collect();
-    }
+    let (keys, combos) = combinations(loaded, sweep)?;
     let mut cache = SceneCache::default();
     let mut total = RunSummary {
         out: out.to_path_buf(),
@@ -58,40 +30,12 @@ pub(super) fn run_sweep(
     };
     let mut runs = Vec::new();
     let mut rows: Vec<(Vec<serde_yaml::Value>, RunTotals)> = Vec::new();
-    for combo in combos {
-        let mut tree =
-            serde_yaml::to_value(&loaded.campaign).map_err(|e| Error::msg(e.to_string()))?;
-        let mut names = Vec::new();
-        for (k, v) in keys.iter().zip(&combo) {
-            set_path(&mut tree, k, (*v).clone())
-                .map_err(|m| loaded.doc.error(&format!("sweep.{k}"), m))?;
-            let value = serde_yaml::to_string(v)
-                .unwrap_or_default()
-                .trim()
-                .to_string();
-            names.push(format!("{}={}", k.rsplit('.').next().unwrap_or(k), value));
-        }
-        if let serde_yaml::Value::Mapping(m) = &mut tree {
-            m.remove("sweep");
-        }
-        let campaign: Campaign = serde_yaml::from_value(tree).map_err(|e| {
-            loaded.doc.error(
-                "sweep",
-                format!("a combination does not make a valid campaign: {e}"),
-            )
-        })?;
-        plan::check_campaign(&loaded.doc, &campaign).map_err(|e| {
-            Error::msg(format!(
-                "{e} (in the sweep combination {})",
-                names.join(", ")
-            ))
-        })?;
-        let sub = Loaded {
-            campaign,
-            doc: loaded.doc.clone(),
-            scene_path: loaded.scene_path.clone(),
-        };
-        let name = names.join("_").replace(['/', '\\', ' '], "-");
+    // every combination is checked before any runs: a bad value ends the run at once
+    let subs = combos
+        .iter()
+        .map(|combo| sub_campaign(loaded, &keys, combo))
+        .collect::<Result<Vec<_>>>()?;
+    for (combo, (sub, name)) in combos.iter().zip(subs) {
         log(&format!("sweep: {name}"));
         let s = run_single(&sub, &out.join(&name), opts, &mut cache)?;
         total.pulses += s.pulses;
@@ -108,12 +52,120 @@ pub(super) fn run_sweep(
         runs.push(name);
     }
     write_sweep_summary(out, &keys, &rows)?;
-    let index = serde_json::json!({ "tool_version": env!("CARGO_PKG_VERSION"), "campaign": loaded.campaign.name, "sweep": runs });
+    let index = SweepIndex {
+        campaign: loaded.campaign.name.clone(),
+        sweep: runs,
+        tool_version: env!("CARGO_PKG_VERSION").into(),
+    };
     write_text_atomic(
         &out.join("sweep.json"),
         &serde_json::to_string_pretty(&index).unwrap_or_default(),
     )?;
     Ok(total)
+}
+
+/// The swept keys in the order the file gives them, and every combination of their values
+/// (the last key varying fastest).
+#[allow(clippy::type_complexity)]
+fn combinations<'a>(
+    loaded: &Loaded,
+    sweep: &'a BTreeMap<String, Vec<serde_yaml::Value>>,
+) -> Result<(Vec<&'a String>, Vec<Vec<&'a serde_yaml::Value>>)> {
+    let mut keys: Vec<&String> = sweep.keys().collect();
+    // (a dotted key is one YAML key here, so look for its text after `sweep:`)
+    let sweep_at = loaded.doc.text.find("sweep:").unwrap_or(0);
+    keys.sort_by_key(|k| {
+        loaded.doc.text[sweep_at..]
+            .find(k.as_str())
+            .unwrap_or(usize::MAX)
+    });
+    for k in &keys {
+        if sweep[*k].is_empty() {
+            return Err(loaded.doc.sweep_error(k, "the list of values is empty"));
+        }
+    }
+    let mut combos: Vec<Vec<&serde_yaml::Value>> = vec![vec![]];
+    for k in &keys {
+        combos = combos
+            .into_iter()
+            .flat_map(|c| {
+                sweep[*k].iter().map(move |v| {
+                    let mut c = c.clone();
+                    c.push(v);
+                    c
+                })
+            })
+            .collect();
+    }
+    Ok((keys, combos))
+}
+
+/// The campaign of one combination, checked, and its sub-folder's name (`key=value_...`). A
+/// value the campaign rejects is reported at its entry under `sweep:`.
+fn sub_campaign(
+    loaded: &Loaded,
+    keys: &[&String],
+    combo: &[&serde_yaml::Value],
+) -> Result<(Loaded, String)> {
+    let mut tree = serde_yaml::to_value(&loaded.campaign).map_err(|e| Error::msg(e.to_string()))?;
+    let mut names = Vec::new();
+    for (k, v) in keys.iter().zip(combo) {
+        crate::campaign::yaml::set_path(&mut tree, k, (*v).clone())
+            .map_err(|m| loaded.doc.sweep_error(k, m))?;
+        let value = serde_yaml::to_string(v)
+            .unwrap_or_default()
+            .trim()
+            .to_string();
+        names.push(format!("{}={}", k.rsplit('.').next().unwrap_or(k), value));
+    }
+    if let serde_yaml::Value::Mapping(m) = &mut tree {
+        m.remove("sweep");
+    }
+    let campaign: Campaign = serde_yaml::from_value(tree).map_err(|e| {
+        loaded.doc.error(
+            "sweep",
+            format!("a combination does not make a valid campaign: {e}"),
+        )
+    })?;
+    plan::check_campaign(&loaded.doc, &campaign).map_err(|e| {
+        let swept = e.key.as_deref().and_then(|ek| {
+            keys.iter()
+                .zip(combo)
+                .find(|(k, _)| ek == k.as_str() || ek.starts_with(&format!("{k}.")))
+        });
+        match swept {
+            Some((k, v)) => {
+                let value = serde_yaml::to_string(v).unwrap_or_default();
+                loaded
+                    .doc
+                    .sweep_error(k, format!("value {}: {}", value.trim(), e.message))
+            }
+            None => e.within(format!("in the sweep combination {}", names.join(", "))),
+        }
+    })?;
+    let sub = Loaded {
+        campaign,
+        doc: loaded.doc.clone(),
+        scene_path: loaded.scene_path.clone(),
+    };
+    let name = names.join("_").replace(['/', '\\', ' '], "-");
+    Ok((sub, name))
+}
+
+/// `sweep.json`: the sub-runs of a sweep, in order (fields in the file's sorted key order).
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct SweepIndex {
+    pub campaign: String,
+    /// Sub-folder of each combination.
+    pub sweep: Vec<String>,
+    pub tool_version: String,
+}
+
+impl SweepIndex {
+    /// A sweep folder's `sweep.json`; None when it is absent or not ours.
+    pub fn read(path: &Path) -> Option<SweepIndex> {
+        serde_json::from_str(&std::fs::read_to_string(path).ok()?).ok()
+    }
 }
 
 /// Means over a run's pulses of what a sweep compares.
@@ -162,14 +214,16 @@ pub(super) fn write_sweep_summary(
     keys: &[&String],
     rows: &[(Vec<serde_yaml::Value>, RunTotals)],
 ) -> Result<()> {
-    let mut csv = keys
-        .iter()
-        .map(|k| k.as_str())
-        .collect::<Vec<_>>()
-        .join(",");
-    csv += ",pulses,received_energy_j,solar_photons_per_bin,brf_fov_solar,brf_footprint_laser\n";
-    for (vals, t) in rows {
-        let v: Vec<String> = vals
+    let mut header: Vec<&str> = keys.iter().map(|k| k.as_str()).collect();
+    header.extend([
+        "pulses",
+        "received_energy_j",
+        "solar_photons_per_bin",
+        "brf_fov_solar",
+        "brf_footprint_laser",
+    ]);
+    let table = rows.iter().map(|(vals, t)| {
+        let mut row: Vec<String> = vals
             .iter()
             .map(|v| {
                 serde_yaml::to_string(v)
@@ -178,17 +232,16 @@ pub(super) fn write_sweep_summary(
                     .to_string()
             })
             .collect();
-        csv += &format!(
-            "{},{},{:.6e},{:.6e},{:.6},{:.6}\n",
-            v.join(","),
-            t.pulses,
-            t.received_energy_j,
-            t.solar_photons_per_bin,
-            t.brf_fov_solar,
-            t.brf_footprint_laser
-        );
-    }
-    write_text_atomic(&out.join("sweep.csv"), &csv)?;
+        row.extend([
+            t.pulses.to_string(),
+            format!("{:.6e}", t.received_energy_j),
+            format!("{:.6e}", t.solar_photons_per_bin),
+            format!("{:.6}", t.brf_fov_solar),
+            format!("{:.6}", t.brf_footprint_laser),
+        ]);
+        row
+    });
+    crate::fsutil::write_csv_atomic(&out.join("sweep.csv"), &header, table)?;
     if keys.len() != 1 || rows.len() < 2 {
         return Ok(());
     }
@@ -226,28 +279,4 @@ pub(super) fn write_sweep_summary(
         write_text_atomic(&out.join("sweep_brf.svg"), &svg)?;
     }
     Ok(())
-}
-
-/// Sets the value at a dotted key path (`platform.altitude_m`) in a YAML tree.
-pub(super) fn set_path(
-    tree: &mut serde_yaml::Value,
-    key: &str,
-    value: serde_yaml::Value,
-) -> std::result::Result<(), String> {
-    let mut node = tree;
-    let parts: Vec<&str> = key.split('.').collect();
-    for (i, p) in parts.iter().enumerate() {
-        let map = node
-            .as_mapping_mut()
-            .ok_or_else(|| format!("`{}` is not a section", parts[..i].join(".")))?;
-        let k = serde_yaml::Value::String(p.to_string());
-        if i + 1 == parts.len() {
-            map.insert(k, value);
-            return Ok(());
-        }
-        node = map
-            .entry(k)
-            .or_insert_with(|| serde_yaml::Value::Mapping(Default::default()));
-    }
-    Err("empty key".into())
 }

@@ -119,7 +119,8 @@ pub fn plan(campaign: &Campaign) -> Result<Vec<Pulse>> {
     if n > MAX_PULSES {
         return Err(Error::msg(too_many(n)));
     }
-    let mut out = Vec::with_capacity(n as usize);
+    // reserve no more than a part's worth up front: the count was checked, memory is not
+    let mut out = Vec::with_capacity((n as usize).min(1 << 20));
     match p.kind {
         PlatformKind::Static => static_pulses(p, &mut out),
         PlatformKind::Als => als::Als::new(p)?.fill(&mut out),

@@ -33,7 +33,9 @@ fn validate(platform: &str) -> Result<()> {
 }
 
 fn error(platform: &str) -> String {
-    validate(platform).expect_err("campaign must be rejected").0
+    validate(platform)
+        .expect_err("campaign must be rejected")
+        .to_string()
 }
 
 fn close(a: DVec3, b: DVec3) -> bool {

@@ -232,6 +232,7 @@ pub fn numbers(doc: &Doc, p: &Platform) -> Result<()> {
     }
 }
 
+/// The ALS platform's checks: scanner, lines and pulse rate, one located check per key.
 fn als(c: &Check, p: &Platform) -> Result<()> {
     let doc = c.doc;
     c.opt_positive("platform.speed_m_s", p.speed_m_s)?;

@@ -31,25 +31,12 @@ pub(crate) fn png(
     draw: impl FnOnce(&Area) -> Result<()>,
 ) -> Result<()> {
     register_font();
-    if let Some(dir) = path.parent() {
-        std::fs::create_dir_all(dir)
-            .map_err(|e| Error::file(dir, format!("cannot create folder: {e}")))?;
-    }
-    let mut tmp = crate::fsutil::temp_name(path).into_os_string();
-    tmp.push(".png");
-    let tmp = std::path::PathBuf::from(tmp);
-    let result = (|| {
-        let root = BitMapBackend::new(&tmp, size).into_drawing_area();
+    crate::fsutil::write_atomic_at(path, ".png", |tmp| {
+        let root = BitMapBackend::new(tmp, size).into_drawing_area();
         root.fill(&WHITE).map_err(|e| fail(path, e))?;
         draw(&root)?;
         root.present().map_err(|e| fail(path, e))
-    })();
-    if let Err(e) = result {
-        let _ = std::fs::remove_file(&tmp);
-        return Err(e);
-    }
-    std::fs::rename(&tmp, path)
-        .map_err(|e| Error::file(path, format!("cannot move file into place: {e}")))
+    })
 }
 
 /// Axis labels: short, with an exponent when the values are large or small.

@@ -146,7 +146,7 @@ fn scan_angle_for_las(deg: f32) -> f32 {
 /// Reads a LAS file written by [`write_las`] (or any file with the same two extra
 /// dimensions, found by name in its Extra Bytes VLR).
 pub fn read_las(path: &Path) -> Result<Vec<Point>> {
-    let err = |e: las::Error| Error::file(path, format!("cannot read LAS: {e}"));
+    let err = |e: las::Error| Error::data(path, format!("cannot read LAS: {e}"));
     let mut reader = Reader::from_path(path).map_err(err)?;
     let offsets = {
         let vlr = reader

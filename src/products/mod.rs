@@ -10,3 +10,4 @@ pub mod points;
 pub mod report;
 pub mod returns;
 pub mod stage;
+pub mod summary;

@@ -39,6 +39,8 @@ fn fmt(v: f64) -> String {
 }
 
 /// One plot: lines with markers, axes with ticks and labels, a legend.
+///
+/// The SVG is written top to bottom (frame, ticks, lines, legend): one pass, one function.
 pub fn line_plot(title: &str, x_label: &str, y_label: &str, series: &[Series]) -> String {
     let (w, h) = (640.0, 420.0);
     let (l, r, t, b) = (80.0, 20.0, 40.0, 60.0);

@@ -3,7 +3,10 @@
 use crate::campaign::Loaded;
 use crate::error::{Error, Result};
 use crate::plan::Pulse;
+use crate::products::dsm::DsmReport;
+use crate::products::summary::ProductsSummary;
 use crate::scene::Scene;
+use crate::scene::SurfaceClass;
 use crate::waveform::file::read_waveforms;
 use std::path::Path;
 
@@ -81,20 +84,27 @@ pub fn report(
 /// The products part of report.md: figures from products.json and dsm/report.json, and the
 /// plots beside them.
 fn products_section(out: &Path) -> String {
-    let read = |p: &Path| -> Option<serde_json::Value> {
-        serde_json::from_str(&std::fs::read_to_string(p).ok()?).ok()
-    };
     let mut text = String::new();
-    let Some(p) = read(&out.join("products.json")) else {
+    let Some(p) = ProductsSummary::read(&out.join("products.json")) else {
         return text;
     };
-    let num = |v: &serde_json::Value| v.as_f64().map_or("–".to_string(), |x| format!("{x:.3}"));
-    if p.get("points").is_some() {
-        let by = &p["points_by_class"];
+    let num = |v: Option<f64>| {
+        v.filter(|x| x.is_finite())
+            .map_or("–".to_string(), |x| format!("{x:.3}"))
+    };
+    // a number as the JSON files print it (2.0, not 2), so the report quotes them alike
+    let raw = |x: f64| serde_json::Value::from(x).to_string();
+    if let Some(pts) = &p.points {
+        let by = |class: SurfaceClass| {
+            pts.points_by_class
+                .get(class.las_name())
+                .copied()
+                .unwrap_or(0)
+        };
         text += &format!(
             "\n## Discrete returns (points.las)\n\n| | |\n| --- | --- |\n| points | {} |\n| points per pulse | {} |\n| pulse density | {} per m² |\n| ground / vegetation / building / unclassified | {} / {} / {} / {} |\n",
-            p["points"], num(&p["points_per_pulse"]), num(&p["pulse_density_per_m2"]),
-            by["ground"], by["vegetation"], by["building"], by["unclassified"]
+            pts.points, num(Some(pts.points_per_pulse)), num(pts.pulse_density_per_m2),
+            by(SurfaceClass::Ground), by(SurfaceClass::Vegetation), by(SurfaceClass::Building), by(SurfaceClass::Other)
         );
         for (f, what) in [
             (
@@ -108,29 +118,29 @@ fn products_section(out: &Path) -> String {
             }
         }
     }
-    if let Some(d) = read(&out.join("dsm/report.json")) {
+    if let Some(d) = DsmReport::read(&out.join("dsm/report.json")) {
         text += &format!(
             "\n## DSM error ({} m cells)\n\n| bias | RMSE | MAE | coverage | cells |\n| --- | --- | --- | --- | --- |\n| {} m | {} m | {} m | {} | {} |\n\n| \\|scan angle\\| (°) | cells | coverage | bias (m) | RMSE (m) |\n| --- | --- | --- | --- | --- |\n",
-            d["resolution_m"], num(&d["bias_m"]), num(&d["rmse_m"]), num(&d["mae_m"]),
-            num(&d["coverage"]), d["cells"]
+            raw(d.resolution_m), num(Some(d.bias_m)), num(Some(d.rmse_m)), num(Some(d.mae_m)),
+            num(Some(d.coverage)), d.cells
         );
-        for b in d["by_scan_angle"].as_array().into_iter().flatten() {
+        for b in &d.by_scan_angle {
             text += &format!(
                 "| {}–{} | {} | {} | {} | {} |\n",
-                b["bin_deg_lo"],
-                b["bin_deg_hi"],
-                b["cells_surfaced"],
-                num(&b["coverage"]),
-                num(&b["bias_m"]),
-                num(&b["rmse_m"])
+                raw(b.bin_deg_lo),
+                raw(b.bin_deg_hi),
+                b.cells_surfaced,
+                num(Some(b.coverage)),
+                num(Some(b.bias_m)),
+                num(Some(b.rmse_m))
             );
         }
         text += "\n![DSM error map](dsm/error_map.png)\n\n![DSM error and coverage against scan angle](dsm/error_vs_scan_angle.png)\n";
     }
-    if let Some(ph) = p.get("photons") {
+    if let Some(ph) = &p.photons {
         text += &format!(
             "\n## Photon counting (photons.parquet)\n\n| total | laser | solar | dark | laser per shot |\n| --- | --- | --- | --- | --- |\n| {} | {} | {} | {} | {} |\n",
-            ph["total"], ph["laser"], ph["solar"], ph["dark"], num(&ph["laser_per_shot"])
+            ph.total, ph.laser, ph.solar, ph.dark, num(Some(ph.laser_per_shot))
         );
     }
     text

@@ -10,8 +10,9 @@ use crate::products::las::write_las;
 use crate::products::photons::{count_photons, photon_rows, write_photons, PhotonRow};
 use crate::products::points::{points_on_axis, Point, PointConfig};
 use crate::products::returns::{decompose, Component, Decomposition};
+use crate::products::summary::{PhotonCounts, PointsSummary, ProductsSummary};
 use crate::progress::{log, progress};
-use crate::scene::Scene;
+use crate::scene::{Scene, SurfaceClass};
 use crate::sensor::pulse_sigma_s;
 use crate::waveform::file::{part_name, read_waveforms};
 use crate::waveform::Waveform;
@@ -48,9 +49,10 @@ pub fn wanted(loaded: &Loaded) -> Wanted {
 fn class_of(w: &Waveform, centre: f64, sigma: f64) -> u8 {
     let lo = (centre - 2.0 * sigma).floor().max(0.0) as usize;
     let hi = ((centre + 2.0 * sigma).ceil() as usize).min(w.impulse_energy_j.len());
-    let mut best = (0.0f64, 1u8);
-    for (k, code) in [(0usize, 2u8), (1, 5), (2, 6), (3, 1)] {
-        let e: f64 = w.class_energy_j[k]
+    let mut best = (0.0f64, SurfaceClass::Other.las_code());
+    for class in SurfaceClass::ALL {
+        let code = class.las_code();
+        let e: f64 = w.class_energy_j[class.index()]
             .get(lo..hi)
             .map_or(0.0, |s| s.iter().map(|&x| x as f64).sum());
         if e > best.0 {
@@ -270,33 +272,15 @@ pub fn run(
         )));
     }
     let mut outputs = Vec::new();
-    let mut summary = serde_json::json!({ "pulses": pulses.len() });
+    let mut summary = ProductsSummary {
+        pulses: pulses.len(),
+        ..Default::default()
+    };
     if want.points {
         write_las(&out.join("points.las"), &points)?;
         outputs.push("points.las".to_string());
         outputs.extend(point_figures(loaded, out, examples, &points)?);
-        // pulse density over the area the first returns cover
-        let (mut lo, mut hi) = ([f64::MAX; 2], [f64::MIN; 2]);
-        for p in points.iter().filter(|p| p.return_number == 1) {
-            lo = [lo[0].min(p.x), lo[1].min(p.y)];
-            hi = [hi[0].max(p.x), hi[1].max(p.y)];
-        }
-        let area = ((hi[0] - lo[0]) * (hi[1] - lo[1])).max(0.0);
-        summary["points"] = points.len().into();
-        summary["points_per_pulse"] = (points.len() as f64 / pulses.len().max(1) as f64).into();
-        summary["area_m2"] = area.into();
-        summary["pulse_density_per_m2"] = if area > 0.0 {
-            (pulses.len() as f64 / area).into()
-        } else {
-            serde_json::Value::Null
-        };
-        let classes: Vec<(u8, usize)> = [1u8, 2, 5, 6]
-            .iter()
-            .map(|c| (*c, points.iter().filter(|p| p.classification == *c).count()))
-            .collect();
-        summary["points_by_class"] = serde_json::json!({
-            "unclassified": classes[0].1, "ground": classes[1].1, "vegetation": classes[2].1, "building": classes[3].1
-        });
+        summary.points = Some(points_summary(&points, pulses.len()));
         if let Some(res) = want.dsm {
             let dsm_outputs = crate::products::dsm::write_dsm(scene, out, &points, pulses, res)?;
             outputs.extend(dsm_outputs);
@@ -306,15 +290,15 @@ pub fn run(
         write_photons(&out.join("photons.parquet"), &rows)?;
         outputs.push("photons.parquet".to_string());
         let count = |s: u8| rows.iter().filter(|r| r.source == s).count();
-        summary["photons"] = serde_json::json!({
-            "total": rows.len(), "laser": count(0), "solar": count(1), "dark": count(2),
-            "laser_per_shot": count(0) as f64 / pulses.len().max(1) as f64,
+        summary.photons = Some(PhotonCounts {
+            total: rows.len(),
+            laser: count(0),
+            solar: count(1),
+            dark: count(2),
+            laser_per_shot: count(0) as f64 / pulses.len().max(1) as f64,
         });
     }
-    write_text_atomic(
-        &out.join("products.json"),
-        &serde_json::to_string_pretty(&summary).unwrap_or_default(),
-    )?;
+    write_text_atomic(&out.join("products.json"), &summary.to_json())?;
     outputs.push("products.json".to_string());
     let note = if !want.points && !want.photons {
         "the waveforms are the product"
@@ -322,4 +306,32 @@ pub fn run(
         ""
     };
     Ok((outputs, note.to_string()))
+}
+
+/// The points' part of `products.json`: counts, and the pulse density over the box the first
+/// returns cover.
+fn points_summary(points: &[Point], pulses: usize) -> PointsSummary {
+    let (mut lo, mut hi) = ([f64::MAX; 2], [f64::MIN; 2]);
+    for p in points.iter().filter(|p| p.return_number == 1) {
+        lo = [lo[0].min(p.x), lo[1].min(p.y)];
+        hi = [hi[0].max(p.x), hi[1].max(p.y)];
+    }
+    let area = ((hi[0] - lo[0]) * (hi[1] - lo[1])).max(0.0);
+    let points_by_class = SurfaceClass::ALL
+        .iter()
+        .map(|class| {
+            let n = points
+                .iter()
+                .filter(|p| p.classification == class.las_code())
+                .count();
+            (class.las_name().to_string(), n)
+        })
+        .collect();
+    PointsSummary {
+        points: points.len(),
+        points_per_pulse: points.len() as f64 / pulses.max(1) as f64,
+        area_m2: Some(area).filter(|a| a.is_finite()),
+        pulse_density_per_m2: (area > 0.0).then(|| pulses as f64 / area),
+        points_by_class,
+    }
 }

@@ -12,14 +12,17 @@ use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 use super::bvh::Blas;
-use super::config::{resolve_materials, ObjectSpec, Resolved, SceneFile};
+use super::config::{
+    resolve_materials, HeightfieldSpec, MeshSpec, ObjectSpec, PlaneSpec, Resolved, SceneFile,
+};
 use super::mesh;
 use super::table::{parse_grid, parse_instances, InstanceRow};
 use super::{Instance, Scene, Surface, SurfaceClass};
 
 /// Geometry to load once, shared by every object that names it.
 enum Source {
-    Mesh(PathBuf),
+    /// A mesh file, and where the scene names it first (for messages).
+    Mesh(PathBuf, String),
     Plane {
         z: f64,
         a: [f64; 2],
@@ -29,22 +32,26 @@ enum Source {
         path: PathBuf,
         cell_m: f64,
         origin: [f64; 2],
+        named_at: String,
     },
 }
 
 impl Source {
     fn build(&self, scene: &Path) -> Result<Blas> {
         let data = match self {
-            Source::Mesh(p) => mesh::load_mesh(p)?,
+            Source::Mesh(p, named_at) => mesh::load_mesh(p)
+                .map_err(|e| e.within(format!("{}: {named_at}", scene.display())))?,
             Source::Plane { z, a, b } => mesh::plane(scene, *z, *a, *b)?,
             Source::Heightfield {
                 path,
                 cell_m,
                 origin,
+                named_at,
             } => {
-                let text = crate::error::read_text(path)?;
-                let grid = parse_grid(path, &text)?;
-                mesh::heightfield(path, &grid, *cell_m, *origin)?
+                let within = |e: Error| e.within(format!("{}: {named_at}", scene.display()));
+                let text = crate::error::read_text(path).map_err(within)?;
+                let grid = parse_grid(path, &text).map_err(within)?;
+                mesh::heightfield(path, &grid, *cell_m, *origin).map_err(within)?
             }
         };
         Ok(Blas::build(data))
@@ -104,6 +111,9 @@ fn check_material(
     ))
 }
 
+/// Reads a scene file and builds its scene: the objects checked against the file, every
+/// distinct mesh loaded once, materials given to each slot, instances placed, the top level
+/// built.
 pub(crate) fn load(path: &Path, wavelength_nm: f64) -> Result<Scene> {
     let doc = Doc::read(path)?;
     let mut files = vec![path.to_path_buf()];
@@ -112,132 +122,217 @@ pub(crate) fn load(path: &Path, wavelength_nm: f64) -> Result<Scene> {
     if file.objects.is_empty() {
         return Err(doc.error("objects", "the scene has no objects"));
     }
-
-    let mut sources: Vec<Source> = Vec::new();
-    let mut mesh_sources: HashMap<PathBuf, usize> = HashMap::new();
-    let mut plans: Vec<Plan> = Vec::new();
-    for (i, obj) in file.objects.iter().enumerate() {
-        let key = format!("objects[{i}].{}", obj.kind());
-        let plan = match obj {
-            ObjectSpec::Plane(p) => {
-                check_material(&doc, &format!("{key}.material"), &p.material, &materials)?;
-                let [a, b] = p.extent;
-                let finite = p.z.is_finite() && a.iter().chain(b.iter()).all(|v| v.is_finite());
-                if !finite || a[0] == b[0] || a[1] == b[1] {
-                    return Err(doc.error(
-                        &format!("{key}.extent"),
-                        "the plane must have a finite, non-empty extent [[x0, y0], [x1, y1]] with x0 ≠ x1 and y0 ≠ y1",
-                    ));
-                }
-                sources.push(Source::Plane { z: p.z, a, b });
-                Plan {
-                    key,
-                    source: sources.len() - 1,
-                    mapping: Mapping::One(p.material.clone()),
-                    class: p.class.map(Into::into),
-                    is_mesh: false,
-                    rows: None,
-                    file: String::new(),
-                }
-            }
-            ObjectSpec::Heightfield(h) => {
-                check_material(&doc, &format!("{key}.material"), &h.material, &materials)?;
-                if !(h.cell_m.is_finite() && h.cell_m > 0.0) {
-                    return Err(doc.error(
-                        &format!("{key}.cell_m"),
-                        format!(
-                            "expected a positive cell size in metres, found {}",
-                            h.cell_m
-                        ),
-                    ));
-                }
-                let origin = h.origin.unwrap_or([0.0, 0.0]);
-                if !origin.iter().all(|v| v.is_finite()) {
-                    return Err(doc.error(&format!("{key}.origin"), "expected finite coordinates"));
-                }
-                let p = existing(&doc, &format!("{key}.file"), &h.file)?;
-                files.push(p.clone());
-                sources.push(Source::Heightfield {
-                    path: p,
-                    cell_m: h.cell_m,
-                    origin,
-                });
-                Plan {
-                    key,
-                    source: sources.len() - 1,
-                    mapping: Mapping::One(h.material.clone()),
-                    class: h.class.map(Into::into),
-                    is_mesh: false,
-                    rows: None,
-                    file: h.file.clone(),
-                }
-            }
-            ObjectSpec::Mesh(m) => {
-                let mapping = match (&m.material, &m.materials) {
-                    (Some(name), None) => {
-                        check_material(&doc, &format!("{key}.material"), name, &materials)?;
-                        Mapping::One(name.clone())
-                    }
-                    (None, Some(map)) => {
-                        if map.is_empty() {
-                            return Err(doc.error(&format!("{key}.materials"), "the map is empty"));
-                        }
-                        for (group, name) in map {
-                            check_material(&doc, &format!("{key}.materials.{group}"), name, &materials)?;
-                        }
-                        Mapping::Map(map.clone())
-                    }
-                    _ => {
-                        return Err(doc.error(
-                            &key,
-                            "give either `material: NAME` (one material for the whole mesh) or `materials: { group_or_usemtl: NAME, ... }`",
-                        ))
-                    }
-                };
-                let p = existing(&doc, &format!("{key}.file"), &m.file)?;
-                files.push(p.clone());
-                let canonical = std::fs::canonicalize(&p).unwrap_or(p);
-                let source = *mesh_sources.entry(canonical.clone()).or_insert_with(|| {
-                    sources.push(Source::Mesh(canonical));
-                    sources.len() - 1
-                });
-                let rows = match &m.instances {
-                    Some(name) => {
-                        let p = existing(&doc, &format!("{key}.instances"), name)?;
-                        files.push(p.clone());
-                        let text = crate::error::read_text(&p)?;
-                        Some(parse_instances(&p, &text)?)
-                    }
-                    None => None,
-                };
-                Plan {
-                    key,
-                    source,
-                    mapping,
-                    class: m.class.map(Into::into),
-                    is_mesh: true,
-                    rows,
-                    file: m.file.clone(),
-                }
-            }
-        };
-        plans.push(plan);
-    }
+    let (sources, plans) = plan_objects(&doc, &file, &materials, &mut files)?;
 
     // Every distinct mesh is read and its BVH built in parallel; the first error in file order wins.
     let built: Vec<Result<Blas>> = sources.par_iter().map(|s| s.build(path)).collect();
     let meshes: Vec<Blas> = built.into_iter().collect::<Result<_>>()?;
 
-    // Material slots of each object -> surfaces (material, class).
+    let slots = assign_surfaces(&doc, &plans, &meshes, &materials)?;
+    let placed = place_instances(&plans, &meshes, &slots.object_base);
+    if placed.len() >= u32::MAX as usize {
+        return Err(Error::file(path, "too many instances"));
+    }
+    let top = TopLevel::build(placed, &meshes);
+
+    files.sort();
+    files.dedup();
+    Ok(Scene {
+        name: file.name,
+        files,
+        surfaces: slots.surfaces,
+        origin: top.origin,
+        meshes,
+        instances: top.instances,
+        tlas: top.tlas,
+        slot_surfaces: slots.slot_surfaces,
+        world_lo: top.world_lo,
+        world_hi: top.world_hi,
+        clip_lo: top.clip_lo,
+        clip_hi: top.clip_hi,
+        instanced_triangles: top.instanced_triangles,
+    })
+}
+
+/// Checks every object of the scene file against the file and the materials, and lists the
+/// geometry to load (each distinct mesh file once) and what each object makes of it.
+fn plan_objects(
+    doc: &Doc,
+    file: &SceneFile,
+    materials: &BTreeMap<String, Resolved>,
+    files: &mut Vec<PathBuf>,
+) -> Result<(Vec<Source>, Vec<Plan>)> {
+    let mut objects = Objects {
+        doc,
+        materials,
+        files,
+        sources: Vec::new(),
+        mesh_sources: HashMap::new(),
+    };
+    let mut plans: Vec<Plan> = Vec::new();
+    for (i, obj) in file.objects.iter().enumerate() {
+        let key = format!("objects[{i}].{}", obj.kind());
+        plans.push(match obj {
+            ObjectSpec::Plane(p) => objects.plane(key, p)?,
+            ObjectSpec::Heightfield(h) => objects.heightfield(key, h)?,
+            ObjectSpec::Mesh(m) => objects.mesh(key, m)?,
+        });
+    }
+    Ok((objects.sources, plans))
+}
+
+/// What [`plan_objects`] gathers while it checks objects one by one.
+struct Objects<'a> {
+    doc: &'a Doc,
+    materials: &'a BTreeMap<String, Resolved>,
+    /// Every file the scene reads (for the run's fingerprint).
+    files: &'a mut Vec<PathBuf>,
+    sources: Vec<Source>,
+    /// Source of each distinct mesh file, by canonical path.
+    mesh_sources: HashMap<PathBuf, usize>,
+}
+
+impl Objects<'_> {
+    fn plane(&mut self, key: String, p: &PlaneSpec) -> Result<Plan> {
+        let doc = self.doc;
+        check_material(doc, &format!("{key}.material"), &p.material, self.materials)?;
+        let [a, b] = p.extent;
+        let finite = p.z.is_finite() && a.iter().chain(b.iter()).all(|v| v.is_finite());
+        if !finite || a[0] == b[0] || a[1] == b[1] {
+            return Err(doc.error(
+                &format!("{key}.extent"),
+                "the plane must have a finite, non-empty extent [[x0, y0], [x1, y1]] with x0 ≠ x1 and y0 ≠ y1",
+            ));
+        }
+        self.sources.push(Source::Plane { z: p.z, a, b });
+        Ok(Plan {
+            key,
+            source: self.sources.len() - 1,
+            mapping: Mapping::One(p.material.clone()),
+            class: p.class.map(Into::into),
+            is_mesh: false,
+            rows: None,
+            file: String::new(),
+        })
+    }
+
+    fn heightfield(&mut self, key: String, h: &HeightfieldSpec) -> Result<Plan> {
+        let doc = self.doc;
+        check_material(doc, &format!("{key}.material"), &h.material, self.materials)?;
+        if !(h.cell_m.is_finite() && h.cell_m > 0.0) {
+            return Err(doc.error(
+                &format!("{key}.cell_m"),
+                format!(
+                    "expected a positive cell size in metres, found {}",
+                    h.cell_m
+                ),
+            ));
+        }
+        let origin = h.origin.unwrap_or([0.0, 0.0]);
+        if !origin.iter().all(|v| v.is_finite()) {
+            return Err(doc.error(&format!("{key}.origin"), "expected finite coordinates"));
+        }
+        let p = existing(doc, &format!("{key}.file"), &h.file)?;
+        self.files.push(p.clone());
+        self.sources.push(Source::Heightfield {
+            path: p,
+            cell_m: h.cell_m,
+            origin,
+            named_at: format!("{key}.file"),
+        });
+        Ok(Plan {
+            key,
+            source: self.sources.len() - 1,
+            mapping: Mapping::One(h.material.clone()),
+            class: h.class.map(Into::into),
+            is_mesh: false,
+            rows: None,
+            file: h.file.clone(),
+        })
+    }
+
+    fn mesh(&mut self, key: String, m: &MeshSpec) -> Result<Plan> {
+        let doc = self.doc;
+        let mapping = match (&m.material, &m.materials) {
+            (Some(name), None) => {
+                check_material(doc, &format!("{key}.material"), name, self.materials)?;
+                Mapping::One(name.clone())
+            }
+            (None, Some(map)) => {
+                if map.is_empty() {
+                    return Err(doc.error(&format!("{key}.materials"), "the map is empty"));
+                }
+                for (group, name) in map {
+                    check_material(doc, &format!("{key}.materials.{group}"), name, self.materials)?;
+                }
+                Mapping::Map(map.clone())
+            }
+            _ => {
+                return Err(doc.error(
+                    &key,
+                    "give either `material: NAME` (one material for the whole mesh) or `materials: { group_or_usemtl: NAME, ... }`",
+                ))
+            }
+        };
+        let p = existing(doc, &format!("{key}.file"), &m.file)?;
+        self.files.push(p.clone());
+        let canonical = std::fs::canonicalize(&p).unwrap_or(p);
+        let sources = &mut self.sources;
+        let source = *self
+            .mesh_sources
+            .entry(canonical.clone())
+            .or_insert_with(|| {
+                sources.push(Source::Mesh(canonical, format!("{key}.file")));
+                sources.len() - 1
+            });
+        let rows = match &m.instances {
+            Some(name) => {
+                let p = existing(doc, &format!("{key}.instances"), name)?;
+                self.files.push(p.clone());
+                let within =
+                    |e: Error| e.within(format!("{}: {key}.instances", doc.path.display()));
+                let text = crate::error::read_text(&p).map_err(within)?;
+                Some(parse_instances(&p, &text).map_err(within)?)
+            }
+            None => None,
+        };
+        Ok(Plan {
+            key,
+            source,
+            mapping,
+            class: m.class.map(Into::into),
+            is_mesh: true,
+            rows,
+            file: m.file.clone(),
+        })
+    }
+}
+
+/// The surfaces of a scene and the surface of every material slot of every object.
+struct Slots {
+    surfaces: Vec<Surface>,
+    slot_surfaces: Vec<u32>,
+    /// First slot of each object in `slot_surfaces`.
+    object_base: Vec<u32>,
+}
+
+/// Material slots of each object -> surfaces (material, class); one surface per distinct
+/// (material, class) pair.
+fn assign_surfaces(
+    doc: &Doc,
+    plans: &[Plan],
+    meshes: &[Blas],
+    materials: &BTreeMap<String, Resolved>,
+) -> Result<Slots> {
     let mut surfaces: Vec<Surface> = Vec::new();
     let mut surface_index: HashMap<(String, SurfaceClass), u32> = HashMap::new();
     let mut slot_surfaces: Vec<u32> = Vec::new();
     let mut object_base: Vec<u32> = Vec::with_capacity(plans.len());
-    for plan in &plans {
+    for plan in plans {
         let blas = &meshes[plan.source];
         let names: Vec<&str> = match &plan.mapping {
             Mapping::One(name) => vec![name.as_str(); blas.slot_names.len()],
-            Mapping::Map(map) => map_slots(&doc, plan, blas, map)?,
+            Mapping::Map(map) => map_slots(doc, plan, blas, map)?,
         };
         let transmits = names.iter().any(|n| materials[*n].transmittance > 0.0);
         let class = plan.class.unwrap_or(if !plan.is_mesh {
@@ -266,17 +361,27 @@ pub(crate) fn load(path: &Path, wavelength_nm: f64) -> Result<Scene> {
         }
     }
 
-    // World transforms and bounds, in f64.
-    struct Placed {
-        translation: DVec3,
-        cos: f64,
-        sin: f64,
-        scale: f64,
-        lo: DVec3,
-        hi: DVec3,
-        mesh: u32,
-        surfaces: u32,
-    }
+    Ok(Slots {
+        surfaces,
+        slot_surfaces,
+        object_base,
+    })
+}
+
+/// One instance placed in the world, in f64.
+struct Placed {
+    translation: DVec3,
+    cos: f64,
+    sin: f64,
+    scale: f64,
+    lo: DVec3,
+    hi: DVec3,
+    mesh: u32,
+    surfaces: u32,
+}
+
+/// World transforms and bounds of every instance of every object, in f64.
+fn place_instances(plans: &[Plan], meshes: &[Blas], object_base: &[u32]) -> Vec<Placed> {
     let identity = [InstanceRow {
         x: 0.0,
         y: 0.0,
@@ -285,7 +390,7 @@ pub(crate) fn load(path: &Path, wavelength_nm: f64) -> Result<Scene> {
         scale: 1.0,
     }];
     let mut placed: Vec<Placed> = Vec::new();
-    for (plan, &base) in plans.iter().zip(&object_base) {
+    for (plan, &base) in plans.iter().zip(object_base) {
         let blas = &meshes[plan.source];
         let rows: &[InstanceRow] = plan.rows.as_deref().unwrap_or(&identity);
         for r in rows {
@@ -316,76 +421,84 @@ pub(crate) fn load(path: &Path, wavelength_nm: f64) -> Result<Scene> {
             });
         }
     }
-    if placed.len() >= u32::MAX as usize {
-        return Err(Error::file(path, "too many instances"));
-    }
-    let mut world_lo = DVec3::splat(f64::INFINITY);
-    let mut world_hi = DVec3::splat(f64::NEG_INFINITY);
-    for p in &placed {
-        world_lo = world_lo.min(p.lo);
-        world_hi = world_hi.max(p.hi);
-    }
-    let origin = (world_lo + world_hi) * 0.5;
-    let extent = (world_hi - world_lo).max_element();
-    // The clip box must contain every instance box after rounding to f32 and leave room for
-    // rays that graze a flat scene (a single plane has zero height).
-    let pad = 1e-3 + 1e-6 * extent;
-    let clip_lo = world_lo - DVec3::splat(pad);
-    let clip_hi = world_hi + DVec3::splat(pad);
+    placed
+}
 
-    let instance_pad = |v: DVec3| (v.abs().max_element() * 4.0 * f32::EPSILON as f64 + 1e-6) as f32;
-    let mut instances: Vec<Instance> = Vec::with_capacity(placed.len());
-    let mut boxes: Vec<Aabb> = Vec::with_capacity(placed.len());
-    let mut instanced_triangles = 0u64;
-    for (id, p) in placed.iter().enumerate() {
-        let lo = p.lo - origin;
-        let hi = p.hi - origin;
-        let pad = instance_pad(lo).max(instance_pad(hi));
-        boxes.push(Aabb::new(
-            Vec3A::from(lo.as_vec3() - pad),
-            Vec3A::from(hi.as_vec3() + pad),
-        ));
-        instances.push(Instance {
-            translation: Vec3A::from((p.translation - origin).as_vec3()),
-            cos: p.cos as f32,
-            sin: p.sin as f32,
-            inv_scale: (1.0 / p.scale) as f32,
-            mesh: p.mesh,
-            surfaces: p.surfaces,
-            id: id as u32,
-        });
-        instanced_triangles += meshes[p.mesh as usize].tris.len() as u64;
-    }
-    drop(placed);
-    let mut tlas = build_cwbvh(
-        &boxes,
-        BvhBuildParams::medium_build(),
-        &mut Duration::default(),
-    );
-    super::bvh::shrink(&mut tlas);
-    let instances: Vec<Instance> = tlas
-        .primitive_indices
-        .iter()
-        .map(|&i| instances[i as usize])
-        .collect();
+/// The scene's top level: its frame (origin, bounds, clip box) and the instance BVH.
+struct TopLevel {
+    origin: DVec3,
+    world_lo: DVec3,
+    world_hi: DVec3,
+    clip_lo: DVec3,
+    clip_hi: DVec3,
+    instances: Vec<Instance>,
+    tlas: obvhs::cwbvh::CwBvh,
+    instanced_triangles: u64,
+}
 
-    files.sort();
-    files.dedup();
-    Ok(Scene {
-        name: file.name,
-        files,
-        surfaces,
-        origin,
-        meshes,
-        instances,
-        tlas,
-        slot_surfaces,
-        world_lo,
-        world_hi,
-        clip_lo,
-        clip_hi,
-        instanced_triangles,
-    })
+impl TopLevel {
+    fn build(placed: Vec<Placed>, meshes: &[Blas]) -> TopLevel {
+        let mut world_lo = DVec3::splat(f64::INFINITY);
+        let mut world_hi = DVec3::splat(f64::NEG_INFINITY);
+        for p in &placed {
+            world_lo = world_lo.min(p.lo);
+            world_hi = world_hi.max(p.hi);
+        }
+        let origin = (world_lo + world_hi) * 0.5;
+        let extent = (world_hi - world_lo).max_element();
+        // The clip box must contain every instance box after rounding to f32 and leave room for
+        // rays that graze a flat scene (a single plane has zero height).
+        let pad = 1e-3 + 1e-6 * extent;
+        let clip_lo = world_lo - DVec3::splat(pad);
+        let clip_hi = world_hi + DVec3::splat(pad);
+
+        let instance_pad =
+            |v: DVec3| (v.abs().max_element() * 4.0 * f32::EPSILON as f64 + 1e-6) as f32;
+        let mut instances: Vec<Instance> = Vec::with_capacity(placed.len());
+        let mut boxes: Vec<Aabb> = Vec::with_capacity(placed.len());
+        let mut instanced_triangles = 0u64;
+        for (id, p) in placed.iter().enumerate() {
+            let lo = p.lo - origin;
+            let hi = p.hi - origin;
+            let pad = instance_pad(lo).max(instance_pad(hi));
+            boxes.push(Aabb::new(
+                Vec3A::from(lo.as_vec3() - pad),
+                Vec3A::from(hi.as_vec3() + pad),
+            ));
+            instances.push(Instance {
+                translation: Vec3A::from((p.translation - origin).as_vec3()),
+                cos: p.cos as f32,
+                sin: p.sin as f32,
+                inv_scale: (1.0 / p.scale) as f32,
+                mesh: p.mesh,
+                surfaces: p.surfaces,
+                id: id as u32,
+            });
+            instanced_triangles += meshes[p.mesh as usize].tris.len() as u64;
+        }
+        drop(placed);
+        let mut tlas = build_cwbvh(
+            &boxes,
+            BvhBuildParams::medium_build(),
+            &mut Duration::default(),
+        );
+        super::bvh::shrink(&mut tlas);
+        let instances: Vec<Instance> = tlas
+            .primitive_indices
+            .iter()
+            .map(|&i| instances[i as usize])
+            .collect();
+        TopLevel {
+            origin,
+            world_lo,
+            world_hi,
+            clip_lo,
+            clip_hi,
+            instances,
+            tlas,
+            instanced_triangles,
+        }
+    }
 }
 
 /// Materials of a mesh's slots from a `materials:` map: a slot's usemtl name first, then its

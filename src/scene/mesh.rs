@@ -133,9 +133,11 @@ const NAMES_MTL: &str = "__lidarsim_usemtl_names__";
 /// OBJ through tobj. Materials are only needed by name: the names come from the usemtl lines
 /// themselves, handed to tobj as a synthetic material library, so a missing or broken .mtl
 /// file does not matter.
+///
+/// Long because each kind of bad input (no faces, indices out of range, non-finite
+/// vertices, degenerate triangles) gets its own located message.
 pub(crate) fn load_obj(path: &Path) -> Result<MeshData> {
-    let bytes =
-        std::fs::read(path).map_err(|e| Error::file(path, format!("cannot read file: {e}")))?;
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path, "cannot read file", e))?;
     let text = std::str::from_utf8(&bytes)
         .map_err(|_| Error::file(path, "cannot parse OBJ: the file is not UTF-8 text"))?;
     let mut names: Vec<String> = Vec::new();
@@ -326,9 +328,10 @@ impl PropertyAccess for PlySkip {
 /// PLY (ASCII, binary little- or big-endian): vertex x y z (any numeric type), faces as
 /// `vertex_indices`/`vertex_index` lists of any integer type, polygons triangulated as fans.
 /// One material slot named after the file stem.
+///
+/// Long for the same reason as [`load_obj`]: a located message per kind of bad input.
 pub(crate) fn load_ply(path: &Path) -> Result<MeshData> {
-    let f = std::fs::File::open(path)
-        .map_err(|e| Error::file(path, format!("cannot read file: {e}")))?;
+    let f = std::fs::File::open(path).map_err(|e| Error::io(path, "cannot read file", e))?;
     let mut reader = Reader::new(BufReader::with_capacity(1 << 20, f));
     let bad = |e: &dyn std::fmt::Display| Error::file(path, format!("cannot parse PLY: {e}"));
     let vparser = Parser::<PlyVertex>::new();

@@ -27,16 +27,30 @@ use obvhs::ray::RayHit;
 use std::collections::BTreeMap;
 use std::path::Path;
 
-/// Class of a surface, used by products to label returns with the truth.
+/// Class of a surface, used by products to label returns with the truth. Its order is the
+/// order of the per-class columns of the waveform files (`ground_energy_j` … `other_energy_j`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum SurfaceClass {
-    Ground,
-    Vegetation,
-    Building,
-    Other,
+    Ground = 0,
+    Vegetation = 1,
+    Building = 2,
+    Other = 3,
 }
 
 impl SurfaceClass {
+    /// Every class, in column order.
+    pub const ALL: [SurfaceClass; 4] = [
+        SurfaceClass::Ground,
+        SurfaceClass::Vegetation,
+        SurfaceClass::Building,
+        SurfaceClass::Other,
+    ];
+
+    /// Index of the class's per-class tally and waveform column.
+    pub fn index(self) -> usize {
+        self as usize
+    }
+
     /// ASPRS LAS classification code.
     pub fn las_code(self) -> u8 {
         match self {
@@ -44,6 +58,16 @@ impl SurfaceClass {
             SurfaceClass::Vegetation => 5,
             SurfaceClass::Building => 6,
             SurfaceClass::Other => 1,
+        }
+    }
+
+    /// Name of the LAS class, as `products.json` counts points by it.
+    pub fn las_name(self) -> &'static str {
+        match self {
+            SurfaceClass::Ground => "ground",
+            SurfaceClass::Vegetation => "vegetation",
+            SurfaceClass::Building => "building",
+            SurfaceClass::Other => "unclassified",
         }
     }
 }

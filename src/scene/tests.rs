@@ -381,18 +381,26 @@ fn instance_tables() {
     let text = "1 2\n1 2\n1 2\n1 2\n1 2\n1 2\n1 2 3 4 5 6\n";
     let e = parse_instances(p, text).unwrap_err();
     assert_eq!(
-        e.0,
+        e.to_string(),
         "trees.csv:7: expected 2 to 5 columns (x y [z [rotation_deg [scale]]]), found 6"
     );
     let e = parse_instances(p, "1\n").unwrap_err();
     assert_eq!(
-        e.0,
+        e.to_string(),
         "trees.csv:1: expected 2 to 5 columns (x y [z [rotation_deg [scale]]]), found 1"
     );
     let e = parse_instances(p, "1 2\n1 abc 3\n").unwrap_err();
-    assert!(e.0.starts_with("trees.csv:2: column 2 (y)"), "{}", e.0);
+    assert!(
+        e.to_string().starts_with("trees.csv:2: column 2 (y)"),
+        "{}",
+        e.to_string()
+    );
     let e = parse_instances(p, "1 2 0 0 0\n").unwrap_err();
-    assert!(e.0.starts_with("trees.csv:1: column 5 (scale)"), "{}", e.0);
+    assert!(
+        e.to_string().starts_with("trees.csv:1: column 5 (scale)"),
+        "{}",
+        e.to_string()
+    );
     assert!(parse_instances(p, "1 2 0 0 -1\n").is_err());
     assert!(parse_instances(p, "1 2 0 0 inf\n").is_err());
     assert!(parse_instances(p, "# nothing\n").is_err());
@@ -435,20 +443,24 @@ fn material_errors_are_located() {
         "{}:3:24: materials.leaf.reflectance: no value for 1064 nm (the table gives 532 nm); add 1064: <value> or give a single number",
         p.display()
     );
-    assert_eq!(e.0, want);
+    assert_eq!(e.to_string(), want);
 
     // Block style, float keys, a table for transmittance only.
     let p = scene(&format!(
         "name: t\nmaterials:\n  leaf:\n    reflectance: 0.4\n    transmittance:\n      532.5: 0.3\n{obj}"
     ));
     let e = Scene::load(&p, 1064.0).err().unwrap();
-    assert!(e.0.starts_with(&format!("{}:6:", p.display())), "{}", e.0);
     assert!(
-        e.0.contains(
+        e.to_string().starts_with(&format!("{}:6:", p.display())),
+        "{}",
+        e.to_string()
+    );
+    assert!(
+        e.to_string().contains(
             "materials.leaf.transmittance: no value for 1064 nm (the table gives 532.5 nm)"
         ),
         "{}",
-        e.0
+        e.to_string()
     );
     let s = Scene::load(&p, 532.5).unwrap();
     assert_eq!(s.surfaces[0].transmittance, 0.3);
@@ -463,9 +475,11 @@ fn material_errors_are_located() {
     ));
     let e = Scene::load(&p, 1064.0).err().unwrap();
     assert!(
-        e.0.contains(":3:") && e.0.contains("materials.leaf.reflectance") && e.0.contains("[0, 1]"),
+        e.to_string().contains(":3:")
+            && e.to_string().contains("materials.leaf.reflectance")
+            && e.to_string().contains("[0, 1]"),
         "{}",
-        e.0
+        e.to_string()
     );
 
     let p = scene(&format!(
@@ -473,18 +487,19 @@ fn material_errors_are_located() {
     ));
     let e = Scene::load(&p, 1064.0).err().unwrap();
     assert!(
-        e.0.contains("materials.leaf.reflectance") && e.0.contains("> 1"),
+        e.to_string().contains("materials.leaf.reflectance") && e.to_string().contains("> 1"),
         "{}",
-        e.0
+        e.to_string()
     );
     let p = scene(&format!(
         "name: t\nmaterials:\n  leaf: {{ reflectance: 0.4, back_reflectance: 0.6, transmittance: 0.5 }}\n{obj}"
     ));
     let e = Scene::load(&p, 1064.0).err().unwrap();
     assert!(
-        e.0.contains("materials.leaf.back_reflectance") && e.0.contains("back side"),
+        e.to_string().contains("materials.leaf.back_reflectance")
+            && e.to_string().contains("back side"),
         "{}",
-        e.0
+        e.to_string()
     );
     let p = scene(&format!(
         "name: t\nmaterials:\n  leaf: {{ reflectance: 0.4, back_reflectance: 0.3, transmittance: 0.5 }}\n{obj}"
@@ -495,33 +510,41 @@ fn material_errors_are_located() {
     // Undefined material, unknown key, unknown class.
     let p = scene("name: t\nmaterials:\n  soil: { reflectance: 0.2 }\nobjects:\n  - plane: { z: 0, extent: [[0, 0], [1, 1]], material: leaf }\n");
     let e = Scene::load(&p, 1064.0).err().unwrap();
-    assert!(e.0.starts_with(&format!("{}:5:", p.display())), "{}", e.0);
     assert!(
-        e.0.contains("objects[0].plane.material")
-            && e.0.contains("\"leaf\"")
-            && e.0.contains("soil"),
+        e.to_string().starts_with(&format!("{}:5:", p.display())),
         "{}",
-        e.0
+        e.to_string()
+    );
+    assert!(
+        e.to_string().contains("objects[0].plane.material")
+            && e.to_string().contains("\"leaf\"")
+            && e.to_string().contains("soil"),
+        "{}",
+        e.to_string()
     );
     let p = scene("name: t\nmaterials:\n  soil: { reflectance: 0.2, colour: red }\nobjects: []\n");
     let e = Scene::load(&p, 1064.0).err().unwrap();
     assert!(
-        e.0.contains("materials.soil.colour") && e.0.contains("unknown field"),
+        e.to_string().contains("materials.soil.colour") && e.to_string().contains("unknown field"),
         "{}",
-        e.0
+        e.to_string()
     );
     let p = scene("name: t\nmaterials:\n  soil: { reflectance: 0.2 }\nobjects:\n  - plane: { z: 0, extent: [[0, 0], [1, 1]], material: soil, class: tree }\n");
     let e = Scene::load(&p, 1064.0).err().unwrap();
     assert!(
-        e.0.contains(":5:") && e.0.contains("objects[0].plane.class"),
+        e.to_string().contains(":5:") && e.to_string().contains("objects[0].plane.class"),
         "{}",
-        e.0
+        e.to_string()
     );
     let p = scene(
         "name: t\nmaterials:\n  soil: { reflectance: 0.2 }\nobjects:\n  - cube: { size: 1 }\n",
     );
     let e = Scene::load(&p, 1064.0).err().unwrap();
-    assert!(e.0.contains(":5:") && e.0.contains("objects[0]"), "{}", e.0);
+    assert!(
+        e.to_string().contains(":5:") && e.to_string().contains("objects[0]"),
+        "{}",
+        e.to_string()
+    );
 }
 
 #[test]
@@ -534,7 +557,7 @@ fn mesh_errors() {
             &format!("name: t\nmaterials:\n  leaf: {{ reflectance: 0.4, transmittance: 0.4 }}\n  bark: {{ reflectance: 0.3 }}\nobjects:\n{objects}"),
         )
     };
-    let load = |p: &Path| Scene::load(p, 1064.0).err().unwrap().0;
+    let load = |p: &Path| Scene::load(p, 1064.0).err().unwrap().to_string();
 
     let p = scene("  - mesh: { file: nowhere.obj, material: bark }\n");
     let e = load(&p);
@@ -710,9 +733,9 @@ fn ply_ascii_and_binary() {
     );
     let e = Scene::load(&p, 1064.0).err().unwrap();
     assert!(
-        e.0.contains("\"le\"") && e.0.contains("le: <material>"),
+        e.to_string().contains("\"le\"") && e.to_string().contains("le: <material>"),
         "{}",
-        e.0
+        e.to_string()
     );
 }
 
@@ -796,9 +819,9 @@ fn heightfield_and_shared_meshes() {
     );
     let e = Scene::load(&p, 1064.0).err().unwrap();
     assert!(
-        e.0.contains("ragged.csv:3:") && e.0.contains("same length"),
+        e.to_string().contains("ragged.csv:3:") && e.to_string().contains("same length"),
         "{}",
-        e.0
+        e.to_string()
     );
 }
 

@@ -12,18 +12,14 @@ use glam::DVec3;
 /// surface: the one the laser lit, which a return's range points at.
 #[inline]
 pub(super) fn class_of(setup: &PulseSetup, v: &Vertex) -> usize {
-    use crate::scene::SurfaceClass;
-    match setup
+    // a vertex off every surface (none lit) counts as "other", as an unknown class does
+    setup
         .scene
         .surfaces
         .get(v.surface as usize)
-        .map(|s| s.class)
-    {
-        Some(SurfaceClass::Ground) => 0,
-        Some(SurfaceClass::Vegetation) => 1,
-        Some(SurfaceClass::Building) => 2,
-        _ => 3,
-    }
+        .map_or(crate::scene::SurfaceClass::Other.index(), |s| {
+            s.class.index()
+        })
 }
 
 /// Reusable per-thread buffers.

@@ -59,6 +59,9 @@ pub fn link(setup: &PulseSetup, path: &mut [Vertex]) {
 /// receiver side, strategy s' has density P(s') = Π_{k<s'} p_l[k] Π_{k≥s'} p_c[k], so
 /// P(s'+1)/P(s') = p_l[s']/p_c[s']: the weight is 1 / Σ_{s'} (P(s')/P(s))^β over the strategies
 /// the method allows (s' ≥ 1: the laser is a delta position).
+///
+/// Kept whole, like pbrt-v4's `MISWeight`: the density ratios along the path read as one
+/// product, with the special cases (delta laser, receiver aperture, light selection) beside it.
 pub fn mis_weight(
     setup: &PulseSetup,
     light: &[Vertex],

@@ -5,6 +5,7 @@ use super::Waveform;
 use crate::error::{Error, Result};
 use crate::parquet_io::{batch, list_f32, list_f64, write_batch};
 use arrow_array::{Float32Array, Float64Array, UInt32Array, UInt64Array};
+use arrow_schema::DataType;
 use std::path::Path;
 use std::sync::Arc;
 
@@ -13,6 +14,9 @@ pub fn part_name(k: usize) -> String {
     format!("waveforms/part-{k:05}.parquet")
 }
 
+/// Writes a waveform part. One statement per column of the output contract (README,
+/// "Outputs"), in the file's column order: the function is as long as the contract, and
+/// splitting it would scatter the contract over several places.
 pub fn write_waveforms(path: &Path, w: &[Waveform]) -> Result<()> {
     let b = batch(vec![
         (
@@ -126,11 +130,13 @@ pub fn write_waveforms(path: &Path, w: &[Waveform]) -> Result<()> {
 }
 
 /// Reads a waveform part back (used by tests and later stages).
+/// As long as the contract for the same reason as [`write_waveforms`]: every column is
+/// checked for its type, then read, in the file's order.
 pub fn read_waveforms(path: &Path) -> Result<Vec<Waveform>> {
     use arrow_array::cast::AsArray;
     use arrow_array::types::{Float32Type, Float64Type, UInt32Type, UInt64Type};
     use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
-    let err = |e: &dyn std::fmt::Display| Error::file(path, format!("cannot read Parquet: {e}"));
+    let err = |e: &dyn std::fmt::Display| Error::data(path, format!("cannot read Parquet: {e}"));
     let file = std::fs::File::open(path).map_err(|e| err(&e))?;
     let reader = ParquetRecordBatchReaderBuilder::try_new(file)
         .map_err(|e| err(&e))?
@@ -139,28 +145,57 @@ pub fn read_waveforms(path: &Path) -> Result<Vec<Waveform>> {
     let mut out = Vec::new();
     for b in reader {
         let b = b.map_err(|e| err(&e))?;
-        let col = |name: &str| {
-            b.column_by_name(name)
-                .ok_or_else(|| err(&format!("column {name} missing")))
+        // a file that is not ours (another tool's, or another version's) is an error, never
+        // a panic: every column's type is checked before it is read as that type
+        let typed = |name: &str, want: &DataType| {
+            let c = b
+                .column_by_name(name)
+                .ok_or_else(|| err(&format!("column {name} missing")))?;
+            let found = match c.data_type() {
+                DataType::List(f) => f.data_type(),
+                t => t,
+            };
+            let list = matches!(c.data_type(), DataType::List(_));
+            let want_list = name_is_list(name);
+            if found != want || list != want_list {
+                return Err(err(&format!(
+                    "column {name} is {}, not the {}{want} lidarsim writes",
+                    c.data_type(),
+                    if want_list { "list of " } else { "" }
+                )));
+            }
+            Ok(c)
         };
-        let ids = col("pulse_id")?.as_primitive::<UInt64Type>().clone();
-        let t0 = col("t0_ns")?.as_primitive::<Float64Type>().clone();
-        let bin = col("bin_ns")?.as_primitive::<Float32Type>().clone();
-        let lp = col("laser_photons")?.as_list::<i32>().clone();
-        let ie = col("impulse_energy_j")?.as_list::<i32>().clone();
-        let ise = col("impulse_energy_se_j")?.as_list::<i32>().clone();
-        let rec = col("received_energy_j")?
+        let (u64t, u32t, f32t, f64t) = (
+            DataType::UInt64,
+            DataType::UInt32,
+            DataType::Float32,
+            DataType::Float64,
+        );
+        let ids = typed("pulse_id", &u64t)?
+            .as_primitive::<UInt64Type>()
+            .clone();
+        let t0 = typed("t0_ns", &f64t)?.as_primitive::<Float64Type>().clone();
+        let bin = typed("bin_ns", &f32t)?
+            .as_primitive::<Float32Type>()
+            .clone();
+        let lp = typed("laser_photons", &f32t)?.as_list::<i32>().clone();
+        let ie = typed("impulse_energy_j", &f32t)?.as_list::<i32>().clone();
+        let ise = typed("impulse_energy_se_j", &f32t)?
+            .as_list::<i32>()
+            .clone();
+        let rec = typed("received_energy_j", &f64t)?
             .as_primitive::<Float64Type>()
             .clone();
-        let out_g = col("outside_gate_energy_j")?
+        let out_g = typed("outside_gate_energy_j", &f64t)?
             .as_primitive::<Float64Type>()
             .clone();
-        let oe = col("order_energy_j")?.as_list::<i32>().clone();
-        let ose = col("order_energy_se_j")?.as_list::<i32>().clone();
-        let rse = col("received_energy_se_j")?
+        let oe = typed("order_energy_j", &f64t)?.as_list::<i32>().clone();
+        let ose = typed("order_energy_se_j", &f64t)?.as_list::<i32>().clone();
+        let rse = typed("received_energy_se_j", &f64t)?
             .as_primitive::<Float64Type>()
             .clone();
-        let sol = col("solar_photons_per_bin")?
+        let sol = typed("solar_photons_per_bin", &f32t)?
             .as_primitive::<Float32Type>()
             .clone();
         let cls: Vec<arrow_array::ListArray> = [
@@ -170,18 +205,24 @@ pub fn read_waveforms(path: &Path) -> Result<Vec<Waveform>> {
             "other_energy_j",
         ]
         .iter()
-        .map(|n| col(n).map(|c| c.as_list::<i32>().clone()))
+        .map(|n| typed(n, &f32t).map(|c| c.as_list::<i32>().clone()))
         .collect::<Result<_>>()?;
-        let spw = col("solar_power_w")?.as_primitive::<Float64Type>().clone();
-        let sps = col("solar_power_se_w")?
+        let spw = typed("solar_power_w", &f64t)?
             .as_primitive::<Float64Type>()
             .clone();
-        let bfs = col("brf_fov_solar")?.as_primitive::<Float32Type>().clone();
-        let bfl = col("brf_footprint_laser")?
+        let sps = typed("solar_power_se_w", &f64t)?
+            .as_primitive::<Float64Type>()
+            .clone();
+        let bfs = typed("brf_fov_solar", &f32t)?
             .as_primitive::<Float32Type>()
             .clone();
-        let rays = col("rays")?.as_primitive::<UInt32Type>().clone();
-        let ppr = col("paths_per_ray")?.as_primitive::<Float32Type>().clone();
+        let bfl = typed("brf_footprint_laser", &f32t)?
+            .as_primitive::<Float32Type>()
+            .clone();
+        let rays = typed("rays", &u32t)?.as_primitive::<UInt32Type>().clone();
+        let ppr = typed("paths_per_ray", &f32t)?
+            .as_primitive::<Float32Type>()
+            .clone();
         let f32s = |l: &arrow_array::ListArray, i: usize| {
             l.value(i).as_primitive::<Float32Type>().values().to_vec()
         };
@@ -218,4 +259,20 @@ pub fn read_waveforms(path: &Path) -> Result<Vec<Waveform>> {
         }
     }
     Ok(out)
+}
+
+/// Whether a column of the waveform files holds one list per pulse.
+fn name_is_list(name: &str) -> bool {
+    matches!(
+        name,
+        "laser_photons"
+            | "impulse_energy_j"
+            | "impulse_energy_se_j"
+            | "order_energy_j"
+            | "order_energy_se_j"
+            | "ground_energy_j"
+            | "vegetation_energy_j"
+            | "building_energy_j"
+            | "other_energy_j"
+    )
 }

@@ -16,7 +16,7 @@ use crate::plan::Pulse;
 use crate::products::points::Point;
 pub use crate::scene::top_surface::Grid;
 use crate::scene::Scene;
-use serde::Serialize;
+use serde::{Deserialize, Deserializer, Serialize};
 use std::path::Path;
 
 /// One point as the DSM needs it: world position, scan angle (degrees), and whether it is its
@@ -88,7 +88,7 @@ pub fn aim_angles(pulses: &[Pulse], grid: &Grid, ground_z: f64) -> Vec<f64> {
 }
 
 /// Error figures of the cells whose |scan angle| falls in [bin_deg_lo, bin_deg_hi).
-#[derive(Clone, Debug, PartialEq, Serialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct AngleBin {
     pub bin_deg_lo: f64,
     pub bin_deg_hi: f64,
@@ -96,20 +96,27 @@ pub struct AngleBin {
     pub cells_surfaced: usize,
     pub cells: usize,
     /// `cells / cells_surfaced`; 1 − coverage is the bin's coverage gap.
+    #[serde(deserialize_with = "nan_if_null")]
     pub coverage: f64,
     /// NaN (null in JSON) for an empty bin.
+    #[serde(deserialize_with = "nan_if_null")]
     pub bias_m: f64,
+    #[serde(deserialize_with = "nan_if_null")]
     pub rmse_m: f64,
 }
 
 /// DSM error figures. Error = measured − reference over the cells where both exist; the
 /// figures are NaN (null in JSON) when there is no such cell.
-#[derive(Clone, Debug, PartialEq, Serialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct DsmReport {
+    #[serde(deserialize_with = "nan_if_null")]
     pub bias_m: f64,
+    #[serde(deserialize_with = "nan_if_null")]
     pub rmse_m: f64,
+    #[serde(deserialize_with = "nan_if_null")]
     pub mae_m: f64,
     /// `cells_with_points / cells`.
+    #[serde(deserialize_with = "nan_if_null")]
     pub coverage: f64,
     /// Cells with a reference surface.
     pub cells: usize,
@@ -118,6 +125,18 @@ pub struct DsmReport {
     /// 2° bins of |scan angle| from 0 up to the largest angle seen, empty bins included.
     pub by_scan_angle: Vec<AngleBin>,
     pub resolution_m: f64,
+}
+
+/// JSON writes a NaN as null; reading it back gives the NaN again.
+fn nan_if_null<'de, D: Deserializer<'de>>(d: D) -> std::result::Result<f64, D::Error> {
+    Ok(Option::<f64>::deserialize(d)?.unwrap_or(f64::NAN))
+}
+
+impl DsmReport {
+    /// `dsm/report.json` of a run folder; None when it is absent or not ours.
+    pub fn read(path: &Path) -> Option<DsmReport> {
+        serde_json::from_str(&std::fs::read_to_string(path).ok()?).ok()
+    }
 }
 
 #[derive(Default)]

@@ -1,0 +1,345 @@
+//! Gaussian decomposition: peaks grouped, each group fitted with bin-integrated Gaussians,
+//! extra components accepted only when they pay for their parameters in deviance.
+
+use super::detect::{smooth, smoothing_sigma};
+use super::{Component, COLLAPSED_SIGMA, MAX_JOINT, MIN_DEVIANCE_GAIN, SIGMA_FLOOR};
+use crate::waveform::normal_cdf;
+
+/// A Gaussian's parameters during the fit: centre, sigma (bins), area (photons).
+pub(super) type Params = [f64; 3];
+
+pub(super) fn fit_all(y: &[f64], peaks: &[Component], threshold: f64, hint: f64) -> Vec<Component> {
+    let floor = hint.max(SIGMA_FLOOR);
+    let mut seeds: Vec<Params> = peaks
+        .iter()
+        .map(|p| {
+            [
+                p.centre_bin,
+                p.sigma_bins.max(floor),
+                p.area_photons.max(1e-6),
+            ]
+        })
+        .collect();
+    seeds.sort_by(|a, b| a[0].total_cmp(&b[0]));
+    // Seeds whose fitting windows (see `bounds`) overlap are fitted together: a window
+    // holding photons of a return that is not in its model would drag the fit.
+    let mut groups: Vec<Vec<Params>> = Vec::new();
+    for s in seeds {
+        match groups.last_mut() {
+            Some(g)
+                if {
+                    let l = g.last().expect("groups are never empty");
+                    l[0] + 6.0 * l[1].max(hint) + 3.0 > s[0] - 6.0 * s[1].max(hint) - 3.0
+                } =>
+            {
+                g.push(s)
+            }
+            _ => groups.push(vec![s]),
+        }
+    }
+    let groups: Vec<Vec<Params>> = groups
+        .into_iter()
+        .map(|mut g| {
+            if g.len() > MAX_JOINT {
+                g.sort_by(|a, b| b[2].total_cmp(&a[2]));
+                g.truncate(MAX_JOINT);
+            }
+            g
+        })
+        .collect();
+    // A return found in a group's residual may reach into the next group's window, so each
+    // group sees the components fitted so far as a fixed background; a second pass then
+    // gives every group the background of all the others.
+    let reaching = |fitted: &[Vec<Params>], k: usize, lo: usize, hi: usize| -> Vec<Params> {
+        fitted
+            .iter()
+            .enumerate()
+            .filter(|(j, _)| *j != k)
+            .flat_map(|(_, g)| g.iter().copied())
+            .filter(|p| p[0] + 8.0 * p[1] > lo as f64 && p[0] - 8.0 * p[1] < hi as f64)
+            .collect()
+    };
+    let mut fitted: Vec<Vec<Params>> = vec![Vec::new(); groups.len()];
+    for (k, g) in groups.iter().enumerate() {
+        let others = match bounds(g, hint, y.len()) {
+            Some((lo, hi)) => reaching(&fitted, k, lo, hi),
+            None => Vec::new(),
+        };
+        fitted[k] = fit_group(y, g.clone(), threshold, hint, floor, &others);
+    }
+    {
+        for k in 0..fitted.len() {
+            let start = if fitted[k].is_empty() {
+                groups[k].clone()
+            } else {
+                fitted[k].clone()
+            };
+            let Some((lo, hi)) = bounds(&start, hint, y.len()) else {
+                continue;
+            };
+            let others = reaching(&fitted, k, lo, hi);
+            if others.is_empty() && bounds(&groups[k], hint, y.len()) == Some((lo, hi)) {
+                continue;
+            }
+            let win = Window::new(y, lo, hi, Some(&others));
+            if let Some((p, _)) = fit_clean(&win, start, floor) {
+                fitted[k] = p;
+            }
+        }
+    }
+    let mut out = Vec::new();
+    for g in fitted {
+        out.extend(g.into_iter().map(|p| Component {
+            centre_bin: p[0],
+            sigma_bins: p[1],
+            area_photons: p[2],
+            amplitude: p[2] / (p[1] * (2.0 * std::f64::consts::PI).sqrt()),
+        }));
+    }
+    out
+}
+
+/// Fits one group, then looks in the residual for returns that peak detection missed
+/// (a weak return on the flank of a strong one makes a shoulder, not a maximum).
+///
+/// Long because the search is one loop: fit, look at the residual, try one more component,
+/// keep it only if it pays for its three parameters in deviance.
+fn fit_group(
+    y: &[f64],
+    seeds: Vec<Params>,
+    threshold: f64,
+    hint: f64,
+    floor: f64,
+    others: &[Params],
+) -> Vec<Params> {
+    let Some((lo, hi)) = bounds(&seeds, hint, y.len()) else {
+        return Vec::new();
+    };
+    let win = Window::new(y, lo, hi, Some(others));
+    let Some((mut params, mut dev)) = fit_clean(&win, seeds, floor) else {
+        return Vec::new();
+    };
+    let sk = smoothing_sigma(hint);
+    for _ in 0..3 {
+        // No extra component could gain enough: the common case of a clean fit.
+        if params.len() >= MAX_JOINT || dev < MIN_DEVIANCE_GAIN {
+            break;
+        }
+        let mut trials: Vec<Vec<Params>> = Vec::new();
+        // A return on the flank of a stronger one: the most significant excess in the
+        // residual, not the largest, so a strong return's small shape mismatch does not
+        // hide a weak one beside it.
+        let m = win.model(&params);
+        let r: Vec<f64> = win.y.iter().zip(&m).map(|(y, m)| y - m).collect();
+        let rs = smooth(&r, sk);
+        let ms = smooth(&m, sk);
+        let z: Vec<f64> = rs
+            .iter()
+            .zip(&ms)
+            .map(|(r, m)| r / (m + 1.0).sqrt())
+            .collect();
+        // The few most significant local excesses each make a trial: the single largest
+        // may sit under a strong return whose shape the current model misses.
+        let mut excess: Vec<usize> = (0..z.len())
+            .filter(|&j| {
+                rs[j] > threshold
+                    && (j == 0 || z[j - 1] < z[j])
+                    && (j + 1 == z.len() || z[j + 1] <= z[j])
+            })
+            .collect();
+        excess.sort_by(|&a, &b| z[b].total_cmp(&z[a]));
+        excess.truncate(3);
+        for j in excess {
+            let half = (2.0 * hint.max(1.0)).ceil() as usize;
+            let (a, b) = (j.saturating_sub(half), (j + half + 1).min(r.len()));
+            let area: f64 = r[a..b].iter().sum();
+            let noise = (m[a..b].iter().sum::<f64>() + 1.0).sqrt();
+            // Only a loose screen: the deviance test below decides.
+            if area > threshold && area > 2.0 * noise {
+                let mut t = params.clone();
+                t.push([win.offset + j as f64 + 0.5, hint.max(1.0), area]);
+                trials.push(t);
+            }
+        }
+        // Two returns closer than their widths blend into one wide component: try it split.
+        let widest = (0..params.len())
+            .max_by(|&a, &b| params[a][1].total_cmp(&params[b][1]))
+            .filter(|&w| params[w][1] > 1.3 * floor.max(1.0));
+        if let Some(w) = widest {
+            let p = params[w];
+            let s2 = (0.6 * p[1]).max(floor);
+            let mut t: Vec<Params> = params
+                .iter()
+                .enumerate()
+                .filter(|(k, _)| *k != w)
+                .map(|(_, q)| *q)
+                .collect();
+            t.push([p[0] - 0.8 * p[1], s2, 0.5 * p[2]]);
+            t.push([p[0] + 0.8 * p[1], s2, 0.5 * p[2]]);
+            trials.push(t);
+        }
+        let mut best: Option<(Vec<Params>, f64)> = None;
+        for t in trials {
+            if let Some((p, d)) = fit_clean(&win, t, floor) {
+                if d < dev - MIN_DEVIANCE_GAIN
+                    && p.len() > params.len()
+                    && best.as_ref().is_none_or(|b| d < b.1)
+                {
+                    best = Some((p, d));
+                }
+            }
+        }
+        match best {
+            Some((p, d)) => {
+                params = p;
+                dev = d;
+            }
+            None => break,
+        }
+    }
+    params
+}
+
+/// Fits, then drops diverged, collapsed or duplicated components and refits the rest once.
+fn fit_clean(win: &Window, seeds: Vec<Params>, floor: f64) -> Option<(Vec<Params>, f64)> {
+    let mut params = seeds;
+    for round in 0..3 {
+        let (p, dev) = win.fit(params.clone(), floor)?;
+        let len = win.y.len() as f64;
+        let mut kept: Vec<Params> = p
+            .iter()
+            .copied()
+            .filter(|q| {
+                q.iter().all(|v| v.is_finite())
+                    && q[0] > win.offset - 1.0
+                    && q[0] < win.offset + len + 1.0
+                    && q[1] >= COLLAPSED_SIGMA
+                    && q[1] < len
+                    && q[2] > 0.0
+            })
+            .collect();
+        // Two components on top of each other are one return split in two.
+        kept.sort_by(|a, b| a[0].total_cmp(&b[0]));
+        let mut merged: Vec<Params> = Vec::new();
+        for q in kept {
+            match merged.last_mut() {
+                Some(l) if (q[0] - l[0]).abs() < 0.5 * l[1].min(q[1]) => {
+                    let a = l[2] + q[2];
+                    *l = [(l[0] * l[2] + q[0] * q[2]) / a, l[1].max(q[1]), a];
+                }
+                _ => merged.push(q),
+            }
+        }
+        if merged.len() == p.len() {
+            return Some((p, dev));
+        }
+        if merged.is_empty() || round == 2 {
+            return if merged.is_empty() {
+                None
+            } else {
+                win.fit(merged, floor)
+            };
+        }
+        params = merged;
+    }
+    None
+}
+
+/// Bins [lo, hi) a group is fitted on: ±6σ of each component and 3 bins of margin.
+fn bounds(params: &[Params], hint: f64, n: usize) -> Option<(usize, usize)> {
+    let lo = params
+        .iter()
+        .map(|p| p[0] - 6.0 * p[1].max(hint) - 3.0)
+        .fold(f64::INFINITY, f64::min)
+        .floor()
+        .max(0.0) as usize;
+    let hi = (params
+        .iter()
+        .map(|p| p[0] + 6.0 * p[1].max(hint) + 3.0)
+        .fold(f64::NEG_INFINITY, f64::max)
+        .ceil()
+        .max(0.0) as usize)
+        .min(n);
+    (lo < hi).then_some((lo, hi))
+}
+
+/// Adds bin-integrated Gaussians to `m`, whose first bin has index `offset`.
+fn add_gaussians(m: &mut [f64], offset: f64, params: &[Params]) {
+    let n = m.len() as f64;
+    for p in params {
+        let a = (p[0] - offset - 8.0 * p[1] - 1.0).floor().clamp(0.0, n) as usize;
+        let b = (p[0] - offset + 8.0 * p[1] + 1.0).ceil().clamp(0.0, n) as usize;
+        let mut prev = normal_cdf((offset + a as f64 - p[0]) / p[1]);
+        for (i, mi) in m.iter_mut().enumerate().take(b).skip(a) {
+            let next = normal_cdf((offset + (i + 1) as f64 - p[0]) / p[1]);
+            *mi += p[2] * (next - prev);
+            prev = next;
+        }
+    }
+}
+
+/// The bins a group is fitted on.
+pub(super) struct Window<'a> {
+    pub(super) y: &'a [f64],
+    /// Bin index of y[0].
+    pub(super) offset: f64,
+    /// Fixed part of the model: the other groups' components that reach into this window,
+    /// plus a floor that keeps the model positive so the likelihood stays finite.
+    pub(super) base: Vec<f64>,
+}
+
+impl<'a> Window<'a> {
+    fn new(y: &'a [f64], lo: usize, hi: usize, others: Option<&[Params]>) -> Self {
+        let y = &y[lo..hi];
+        let eps = 1e-9 * (1.0 + y.iter().cloned().fold(0.0, f64::max));
+        let mut base = vec![eps; y.len()];
+        if let Some(o) = others {
+            add_gaussians(&mut base, lo as f64, o);
+        }
+        Window {
+            y,
+            offset: lo as f64,
+            base,
+        }
+    }
+}
+
+pub(super) fn pdf(z: f64) -> f64 {
+    (-0.5 * z * z).exp() * (0.5 / std::f64::consts::PI).sqrt()
+}
+
+impl Window<'_> {
+    /// Bins a component touches: ±8σ holds all but 1e-15 of it.
+    pub(super) fn reach(&self, p: &Params) -> (usize, usize) {
+        let n = self.y.len();
+        let a = (p[0] - self.offset - 8.0 * p[1] - 1.0).floor();
+        let b = (p[0] - self.offset + 8.0 * p[1] + 1.0).ceil();
+        let a = a.clamp(0.0, n as f64) as usize;
+        let b = b.clamp(0.0, n as f64) as usize;
+        (a, b)
+    }
+
+    pub(super) fn model(&self, params: &[Params]) -> Vec<f64> {
+        let mut m = self.base.clone();
+        add_gaussians(&mut m, self.offset, params);
+        m
+    }
+
+    /// Poisson deviance, 2 Σ [m - y + y ln(y/m)].
+    pub(super) fn deviance(&self, m: &[f64]) -> f64 {
+        2.0 * self
+            .y
+            .iter()
+            .zip(m)
+            .map(
+                |(&y, &m)| {
+                    if y > 0.0 {
+                        m - y + y * (y / m).ln()
+                    } else {
+                        m
+                    }
+                },
+            )
+            .sum::<f64>()
+    }
+}

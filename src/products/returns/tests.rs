@@ -1,0 +1,297 @@
+use super::*;
+use crate::rng::SplitMix64;
+use crate::waveform::normal_cdf;
+
+#[derive(Debug)]
+struct Truth {
+    centre: f64,
+    sigma: f64,
+    area: f64,
+}
+
+fn bin_mass(i: usize, t: &Truth) -> f64 {
+    normal_cdf((i as f64 + 1.0 - t.centre) / t.sigma) - normal_cdf((i as f64 - t.centre) / t.sigma)
+}
+
+/// `count` Gaussians, sigmas in [1.5, 4] bins, areas log-uniform in [50, 5000] photons,
+/// centres at least 3 × the larger sigma apart.
+fn random_case(r: &mut SplitMix64, count: usize, min_area: f64, range: f64) -> (Vec<Truth>, usize) {
+    let mut t: Vec<Truth> = Vec::new();
+    let mut pos = 15.0 + 10.0 * r.uniform();
+    for k in 0..count {
+        let sigma = 1.5 + 2.5 * r.uniform();
+        let area = min_area * range.powf(r.uniform());
+        if k > 0 {
+            let prev: &Truth = &t[k - 1];
+            pos = prev.centre + 3.0 * prev.sigma.max(sigma) + 8.0 * r.uniform();
+        }
+        t.push(Truth {
+            centre: pos,
+            sigma,
+            area,
+        });
+    }
+    let len = (pos + 25.0).ceil() as usize;
+    (t, len)
+}
+
+fn mean_waveform(t: &[Truth], len: usize) -> Vec<f64> {
+    (0..len)
+        .map(|i| t.iter().map(|g| g.area * bin_mass(i, g)).sum())
+        .collect()
+}
+
+/// Noise-free sums of Gaussians come back exactly. Areas start at 5000 photons: below
+/// that a weak return 3σ beside a strong one may not improve the Poisson deviance by the
+/// 16 the decomposition asks of an extra component, and is then rightly kept merged.
+#[test]
+fn noise_free_gaussians_are_recovered_exactly() {
+    let mut r = SplitMix64::new(1);
+    let (mut worst_c, mut worst_a) = (0.0f64, 0.0f64);
+    let mut missed: Vec<String> = Vec::new();
+    for count in 1..=4 {
+        for case in 0..200 {
+            let (t, len) = random_case(&mut r, count, 5000.0, 100.0);
+            let y: Vec<f32> = mean_waveform(&t, len).iter().map(|&v| v as f32).collect();
+            let c = decompose(&y, 2.0, 4, Decomposition::Gaussian, 1.5);
+            if c.len() != count {
+                missed.push(format!("count {count} case {case}: {c:?} truth {t:?}"));
+                continue;
+            }
+            for (g, f) in t.iter().zip(&c) {
+                worst_c = worst_c.max((f.centre_bin - g.centre).abs());
+                worst_a = worst_a.max((f.area_photons / g.area - 1.0).abs());
+            }
+        }
+    }
+    println!(
+        "noise-free: {} of 800 cases with a wrong count; max centre error {worst_c:.2e} bin, \
+         max area error {worst_a:.2e}",
+        missed.len()
+    );
+    assert!(missed.is_empty(), "{missed:#?}");
+    assert!(worst_c < 0.01 && worst_a < 0.002);
+}
+
+/// The issue's criterion: 1 to 4 Gaussians (σ 1.5–4 bins, at least 3σ apart) with Poisson
+/// noise, centres within 0.1 bin and areas within 2 %. Areas are 5·10⁴–5·10⁵ photons, a
+/// mJ-class airborne return (the bundled ALS campaign over the plane gets ~2·10⁸), one
+/// decade apart at most within a waveform: there the Cramér–Rao bounds of an isolated
+/// return, σ/√A ≤ 0.018 bin and 1/√A ≤ 0.45 %, put the tolerances at 5.6 and 4.5 standard
+/// errors; a neighbour 3σ away widens them (the test prints the worst errors). A return
+/// beside one a hundred times stronger has bounds several times larger, and 2 % does not
+/// hold there: the width of the weak one trades against the strong one's tail.
+#[test]
+fn noisy_gaussians_meet_a_tenth_of_a_bin_and_two_percent() {
+    let mut r = SplitMix64::new(4);
+    let (mut worst_c, mut worst_a, mut n) = (0.0f64, 0.0f64, 0);
+    let mut missed: Vec<String> = Vec::new();
+    for count in 1..=4 {
+        for case in 0..200 {
+            let (t, len) = random_case(&mut r, count, 5e4, 10.0);
+            let y: Vec<f32> = mean_waveform(&t, len)
+                .iter()
+                .map(|&v| r.poisson(v) as f32)
+                .collect();
+            let c = decompose(&y, 5.0, 4, Decomposition::Gaussian, 1.5);
+            if c.len() != count {
+                missed.push(format!("count {count} case {case}: {c:?} truth {t:?}"));
+                continue;
+            }
+            for (g, f) in t.iter().zip(&c) {
+                worst_c = worst_c.max((f.centre_bin - g.centre).abs());
+                worst_a = worst_a.max((f.area_photons / g.area - 1.0).abs());
+                n += 1;
+            }
+        }
+    }
+    println!(
+        "poisson, 5e4-5e5 photons: {} of 800 cases with a wrong count; {n} returns, max \
+         centre error {worst_c:.4} bin, max area error {:.3} %",
+        missed.len(),
+        worst_a * 100.0
+    );
+    assert!(missed.is_empty(), "{missed:#?}");
+    assert!(worst_c < 0.1, "centre off by {worst_c} bin");
+    assert!(worst_a < 0.02, "area off by {worst_a}");
+}
+
+/// Weak returns (50–5000 photons) with Poisson noise cannot meet 0.1 bin and 2 % (the
+/// Cramér–Rao bounds are σ/√A bins and 1/√A: 0.57 bin and 14 % at A = 50, σ = 4), and a
+/// weak return beside a strong one is sometimes not worth an extra component to the
+/// likelihood-ratio test. What must hold: the count is right in at least 99 % of cases,
+/// and the pulls against the truth in units of those bounds have a median |z| near the
+/// 0.67 of a unit normal (below 1: fits no worse than 1.5 × the bound on typical returns).
+#[test]
+fn poisson_gaussians_are_recovered_to_their_noise() {
+    let mut r = SplitMix64::new(2);
+    let mut worst = [0.0f64; 4]; // |Δc| real, |ΔA|/A real, |z_c|, |z_A| vs truth
+    let (mut sum_zc2, mut sum_za2, mut n) = (0.0, 0.0, 0.0);
+    let (mut pulls_c, mut pulls_a) = (Vec::new(), Vec::new());
+    let (mut within_c, mut within_a, mut total) = (0, 0, 0);
+    let mut missed: Vec<String> = Vec::new();
+    for count in 1..=4 {
+        for case in 0..200 {
+            let (t, len) = random_case(&mut r, count, 50.0, 100.0);
+            let mut y = vec![0.0f32; len];
+            let mut real = Vec::new();
+            for g in &t {
+                let (mut a, mut c1) = (0.0, 0.0);
+                for (i, yi) in y.iter_mut().enumerate() {
+                    let k = r.poisson(g.area * bin_mass(i, g)) as f64;
+                    *yi += k as f32;
+                    a += k;
+                    c1 += k * (i as f64 + 0.5);
+                }
+                real.push((c1 / a, a));
+            }
+            let c = decompose(&y, 2.0, 4, Decomposition::Gaussian, 1.5);
+            if c.len() != count {
+                missed.push(format!("count {count} case {case}: {c:?} truth {t:?}"));
+                continue;
+            }
+            for ((g, f), (rc, ra)) in t.iter().zip(&c).zip(&real) {
+                let zc = (f.centre_bin - g.centre) / (g.sigma / g.area.sqrt());
+                let za = (f.area_photons - g.area) / g.area.sqrt();
+                worst[0] = worst[0].max((f.centre_bin - rc).abs());
+                worst[1] = worst[1].max((f.area_photons / ra - 1.0).abs());
+                worst[2] = worst[2].max(zc.abs());
+                worst[3] = worst[3].max(za.abs());
+                sum_zc2 += zc * zc;
+                sum_za2 += za * za;
+                pulls_c.push(zc.abs());
+                pulls_a.push(za.abs());
+                n += 1.0;
+                total += 1;
+                within_c += ((f.centre_bin - g.centre).abs() < 0.1) as usize;
+                within_a += ((f.area_photons / g.area - 1.0).abs() < 0.02) as usize;
+            }
+        }
+    }
+    let (rms_c, rms_a) = ((sum_zc2 / n).sqrt(), (sum_za2 / n).sqrt());
+    println!(
+        "poisson: vs realised photons max |dc| {:.3} bin, max |dA|/A {:.4}; vs truth max \
+         |z_c| {:.2}, max |z_A| {:.2}, rms z_c {rms_c:.3}, rms z_A {rms_a:.3}; within 0.1 \
+         bin {within_c}/{total}, within 2% {within_a}/{total}",
+        worst[0], worst[1], worst[2], worst[3]
+    );
+    println!("poisson: {} of 800 cases with a wrong count", missed.len());
+    assert!(missed.len() <= 8, "{missed:#?}");
+    let median = |v: &mut Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    };
+    let (mc, ma) = (median(&mut pulls_c), median(&mut pulls_a));
+    println!("poisson: median |z_c| {mc:.3}, median |z_A| {ma:.3}");
+    assert!(mc < 1.0 && ma < 1.0);
+}
+
+#[test]
+fn weak_return_below_threshold_is_not_reported() {
+    let t = [
+        Truth {
+            centre: 30.5,
+            sigma: 2.0,
+            area: 2000.0,
+        },
+        Truth {
+            centre: 60.5,
+            sigma: 2.0,
+            area: 8.0,
+        },
+    ];
+    let y: Vec<f32> = mean_waveform(&t, 90).iter().map(|&v| v as f32).collect();
+    for method in [Decomposition::Gaussian, Decomposition::PeakDetection] {
+        let c = decompose(&y, 3.0, 4, method, 2.0);
+        assert_eq!(c.len(), 1, "{method:?}: {c:?}");
+        assert!((c[0].centre_bin - 30.5).abs() < 0.05);
+        // Lower the threshold and it is there.
+        assert_eq!(decompose(&y, 0.5, 4, method, 2.0).len(), 2, "{method:?}");
+    }
+}
+
+#[test]
+fn max_returns_keeps_the_strongest_in_time_order() {
+    let t = [
+        Truth {
+            centre: 20.5,
+            sigma: 2.0,
+            area: 300.0,
+        },
+        Truth {
+            centre: 40.5,
+            sigma: 2.0,
+            area: 900.0,
+        },
+        Truth {
+            centre: 60.5,
+            sigma: 2.0,
+            area: 100.0,
+        },
+        Truth {
+            centre: 80.5,
+            sigma: 2.0,
+            area: 600.0,
+        },
+    ];
+    let y: Vec<f32> = mean_waveform(&t, 100).iter().map(|&v| v as f32).collect();
+    let c = decompose(&y, 2.0, 2, Decomposition::Gaussian, 2.0);
+    assert_eq!(c.len(), 2);
+    assert!((c[0].centre_bin - 40.5).abs() < 0.01 && (c[1].centre_bin - 80.5).abs() < 0.01);
+    assert!(decompose(&y, 2.0, 0, Decomposition::Gaussian, 2.0).is_empty());
+}
+
+#[test]
+fn peak_detection_finds_centres_and_areas() {
+    let t = [
+        Truth {
+            centre: 20.3,
+            sigma: 2.0,
+            area: 500.0,
+        },
+        Truth {
+            centre: 50.8,
+            sigma: 3.0,
+            area: 1500.0,
+        },
+    ];
+    let y: Vec<f32> = mean_waveform(&t, 80).iter().map(|&v| v as f32).collect();
+    let c = decompose(&y, 2.0, 4, Decomposition::PeakDetection, 2.0);
+    assert_eq!(c.len(), 2);
+    for (g, f) in t.iter().zip(&c) {
+        assert!((f.centre_bin - g.centre).abs() < 0.05, "{f:?}");
+        assert!((f.area_photons / g.area - 1.0).abs() < 0.01, "{f:?}");
+    }
+}
+
+#[test]
+fn shoulder_on_a_strong_return_is_found() {
+    let t = [
+        Truth {
+            centre: 40.0,
+            sigma: 4.0,
+            area: 5000.0,
+        },
+        Truth {
+            centre: 52.0,
+            sigma: 1.5,
+            area: 50.0,
+        },
+    ];
+    let y: Vec<f32> = mean_waveform(&t, 90).iter().map(|&v| v as f32).collect();
+    let c = decompose(&y, 2.0, 4, Decomposition::Gaussian, 1.5);
+    assert_eq!(c.len(), 2, "{c:?}");
+    assert!((c[1].centre_bin - 52.0).abs() < 0.01 && (c[1].area_photons / 50.0 - 1.0).abs() < 0.01);
+}
+
+#[test]
+fn bad_input_gives_no_returns_and_no_panic() {
+    assert!(decompose(&[], 1.0, 4, Decomposition::Gaussian, 1.0).is_empty());
+    let y = [f32::NAN, f32::INFINITY, -3.0, 0.0, 5.0, 0.0];
+    for m in [Decomposition::Gaussian, Decomposition::PeakDetection] {
+        for c in decompose(&y, 1.0, 4, m, f64::NAN) {
+            assert!(c.centre_bin.is_finite() && c.area_photons.is_finite());
+        }
+        assert!(decompose(&[0.0; 50], 1.0, 4, m, 2.0).is_empty());
+    }
+}

@@ -1,6 +1,8 @@
 //! For the tests: data they need from outside the repository, and how a test that cannot run
-//! says so. A skip is printed on stderr (cargo shows it), and `LIDARSIM_REQUIRE_DATA=1`, which
-//! `.ci/run` sets where `../shared/` is present, turns every skip into a failure.
+//! says so. A skip is printed on stderr (cargo shows it). `LIDARSIM_REQUIRE_DATA=1`, which
+//! `.ci/run` sets where `../shared/` is present, turns a skip for want of data into a failure;
+//! `LIDARSIM_REQUIRE_TOOLS=1`, which it sets once it has installed laspy, does the same for a
+//! skip for want of an outside reader.
 
 use std::path::PathBuf;
 
@@ -24,11 +26,21 @@ pub fn rami_dir() -> Option<PathBuf> {
     }
 }
 
-/// Says on stderr why a test cannot run; fails the test instead when
+/// Says on stderr why a test cannot run for want of data; fails the test instead when
 /// `LIDARSIM_REQUIRE_DATA=1`.
 pub fn skip(why: &str) {
-    if std::env::var("LIDARSIM_REQUIRE_DATA").is_ok_and(|v| v == "1") {
-        panic!("this test cannot run, and LIDARSIM_REQUIRE_DATA=1 requires it: {why}");
+    skip_unless("LIDARSIM_REQUIRE_DATA", why);
+}
+
+/// Says on stderr why a test cannot run for want of an outside tool (laspy); fails the test
+/// instead when `LIDARSIM_REQUIRE_TOOLS=1`.
+pub fn skip_tool(why: &str) {
+    skip_unless("LIDARSIM_REQUIRE_TOOLS", why);
+}
+
+fn skip_unless(required: &str, why: &str) {
+    if std::env::var(required).is_ok_and(|v| v == "1") {
+        panic!("this test cannot run, and {required}=1 requires it: {why}");
     }
     eprintln!("SKIPPED: {why}");
 }

@@ -184,7 +184,8 @@ pub fn plots(rows: &[Row], dir: &Path) -> Result<Vec<PathBuf>> {
             continue;
         }
         let path = dir.join(name);
-        write_text_atomic(&path, &line_plot("DSM error", x_label, "RMSE (m)", &series))?;
+        let svg = line_plot(&path, "DSM error", x_label, "RMSE (m)", &series)?;
+        write_text_atomic(&path, &svg)?;
         written.push(path);
     }
     Ok(written)

@@ -176,7 +176,16 @@ impl<'a> RunFolder<'a> {
         // shards share the folder with each other: they keep what is there, like a resume
         let keep = opts.resume || opts.shard.is_some();
         let mut manifest = if keep {
-            Manifest::read(&manifest_path).unwrap_or_default()
+            Manifest::read(&manifest_path).unwrap_or_else(|| {
+                if manifest_path.exists() {
+                    // a damaged record is never trusted: nothing it says is kept
+                    log(&format!(
+                        "{} cannot be read: every stage is redone",
+                        manifest_path.display()
+                    ));
+                }
+                Manifest::default()
+            })
         } else {
             Manifest::default()
         };

@@ -6,6 +6,7 @@ use crate::campaign::{Campaign, Loaded};
 use crate::error::{Error, Result};
 use crate::fsutil::write_text_atomic;
 use crate::plan;
+use crate::products::plot::{line_plot, Series};
 use crate::progress::log;
 use crate::waveform::file::read_waveforms;
 use std::collections::BTreeMap;
@@ -248,35 +249,37 @@ pub(super) fn write_sweep_summary(
     let xs: Option<Vec<f64>> = rows.iter().map(|(v, _)| v[0].as_f64()).collect();
     let Some(xs) = xs else { return Ok(()) };
     let key = keys[0].as_str();
-    let series = |name: &str, f: &dyn Fn(&RunTotals) -> f64| crate::products::plot::Series {
+    let series = |name: &str, f: &dyn Fn(&RunTotals) -> f64| Series {
         name: name.into(),
         points: xs.iter().zip(rows).map(|(x, (_, t))| (*x, f(t))).collect(),
     };
-    let svg = crate::products::plot::line_plot(
+    let plot = |name: &str, title: &str, y_label: &str, series: &[Series]| {
+        let path = out.join(name);
+        let svg = line_plot(&path, title, key, y_label, series)?;
+        write_text_atomic(&path, &svg)
+    };
+    plot(
+        "sweep_energy.svg",
         "Received laser energy",
-        key,
         "J per pulse",
         &[series("laser", &|t| t.received_energy_j)],
-    );
-    write_text_atomic(&out.join("sweep_energy.svg"), &svg)?;
+    )?;
     if rows.iter().any(|(_, t)| t.solar_photons_per_bin > 0.0) {
-        let svg = crate::products::plot::line_plot(
+        plot(
+            "sweep_solar.svg",
             "Solar background",
-            key,
             "solar photons per bin",
             &[series("N_SN", &|t| t.solar_photons_per_bin)],
-        );
-        write_text_atomic(&out.join("sweep_solar.svg"), &svg)?;
-        let svg = crate::products::plot::line_plot(
+        )?;
+        plot(
+            "sweep_brf.svg",
             "Scene BRF",
-            key,
             "BRF",
             &[
                 series("field of view, solar (Eq. 20)", &|t| t.brf_fov_solar),
                 series("footprint, laser", &|t| t.brf_footprint_laser),
             ],
-        );
-        write_text_atomic(&out.join("sweep_brf.svg"), &svg)?;
+        )?;
     }
     Ok(())
 }

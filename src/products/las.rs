@@ -307,7 +307,7 @@ mod tests {
             .map(|o| o.status.success())
             .unwrap_or(false);
         if !ok {
-            crate::testdata::skip("python3 with laspy is not available (pip install laspy)");
+            crate::testdata::skip_tool("python3 with laspy is not available (pip install laspy)");
             return;
         }
         let pts = sample(257);

@@ -1,142 +1,96 @@
-//! Small line plots as SVG, written by hand: no font or system library needed, and any
-//! browser or image viewer shows them.
+//! Line plots as SVG (a sweep's signal and BRFs, `compare --plots`), drawn with plotters
+//! like every other figure: SVG because a browser or any image viewer shows it and its text
+//! stays text.
 
-use std::fmt::Write as _;
+use crate::error::{Error, Result};
+use crate::products::figures::{register_font, short};
+use plotters::prelude::*;
+use std::path::Path;
 
 pub struct Series {
     pub name: String,
     pub points: Vec<(f64, f64)>,
 }
 
-const COLOURS: [&str; 6] = [
-    "#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#17becf",
-];
-
-/// "Nice" tick values covering [lo, hi].
-fn ticks(lo: f64, hi: f64) -> Vec<f64> {
-    let span = (hi - lo).abs().max(1e-300);
-    let raw = span / 5.0;
-    let mag = 10f64.powf(raw.log10().floor());
-    let step = [1.0, 2.0, 5.0, 10.0]
-        .iter()
-        .map(|m| m * mag)
-        .find(|s| span / s <= 6.0)
-        .unwrap_or(10.0 * mag);
-    let start = (lo / step).ceil() * step;
-    (0..20)
-        .map(|i| start + i as f64 * step)
-        .take_while(|v| *v <= hi + step * 1e-9)
-        .collect()
-}
-
-fn fmt(v: f64) -> String {
-    if v != 0.0 && (v.abs() < 1e-3 || v.abs() >= 1e5) {
-        format!("{v:.2e}")
+/// The range an axis shows: the values' span, widened when it is empty, padded by 8 %, and
+/// starting at zero when the values are positive and zero is near.
+fn axis(values: impl Iterator<Item = f64>, pad_to_zero: bool) -> (f64, f64) {
+    let (mut lo, mut hi) = (f64::MAX, f64::MIN);
+    for v in values {
+        lo = lo.min(v);
+        hi = hi.max(v);
+    }
+    if lo > hi {
+        return (0.0, 1.0);
+    }
+    if hi <= lo {
+        let half = lo.abs().max(1.0) * 0.05;
+        return (lo - half, hi + half);
+    }
+    let pad = (hi - lo) * 0.08;
+    let lo = if pad_to_zero && lo >= 0.0 && lo - pad < 0.0 {
+        0.0
     } else {
-        let s = format!("{v:.4}");
-        s.trim_end_matches('0').trim_end_matches('.').to_string()
-    }
+        lo - pad
+    };
+    (lo, hi + pad)
 }
 
-/// One plot: lines with markers, axes with ticks and labels, a legend.
-///
-/// The SVG is written top to bottom (frame, ticks, lines, legend): one pass, one function.
-pub fn line_plot(title: &str, x_label: &str, y_label: &str, series: &[Series]) -> String {
-    let (w, h) = (640.0, 420.0);
-    let (l, r, t, b) = (80.0, 20.0, 40.0, 60.0);
-    let pts: Vec<(f64, f64)> = series
-        .iter()
-        .flat_map(|s| s.points.iter().copied())
-        .filter(|p| p.0.is_finite() && p.1.is_finite())
-        .collect();
-    let (mut x0, mut x1, mut y0, mut y1) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
-    for (x, y) in &pts {
-        x0 = x0.min(*x);
-        x1 = x1.max(*x);
-        y0 = y0.min(*y);
-        y1 = y1.max(*y);
-    }
-    if pts.is_empty() {
-        (x0, x1, y0, y1) = (0.0, 1.0, 0.0, 1.0);
-    }
-    if x1 <= x0 {
-        x1 = x0 + 1.0;
-    }
-    if y1 <= y0 {
-        y1 = y0 + y0.abs().max(1.0) * 0.1;
-    }
-    let pad = (y1 - y0) * 0.08;
-    let (y0, y1) = (
-        if y0 >= 0.0 && y0 - pad < 0.0 {
-            0.0
-        } else {
-            y0 - pad
-        },
-        y1 + pad,
-    );
-    let sx = |x: f64| l + (x - x0) / (x1 - x0) * (w - l - r);
-    let sy = |y: f64| h - b - (y - y0) / (y1 - y0) * (h - t - b);
-    let mut s = format!(
-        "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{w}\" height=\"{h}\" font-family=\"sans-serif\" font-size=\"12\">\n<rect width=\"100%\" height=\"100%\" fill=\"white\"/>\n<text x=\"{}\" y=\"22\" text-anchor=\"middle\" font-size=\"15\">{}</text>\n",
-        w / 2.0,
-        escape(title)
-    );
-    let _ = writeln!(
-        s,
-        "<rect x=\"{l}\" y=\"{t}\" width=\"{}\" height=\"{}\" fill=\"none\" stroke=\"#333\"/>",
-        w - l - r,
-        h - t - b
-    );
-    for v in ticks(x0, x1) {
-        let x = sx(v);
-        let _ = writeln!(s, "<line x1=\"{x:.1}\" y1=\"{}\" x2=\"{x:.1}\" y2=\"{}\" stroke=\"#ddd\"/><text x=\"{x:.1}\" y=\"{}\" text-anchor=\"middle\">{}</text>", t, h - b, h - b + 16.0, fmt(v));
-    }
-    for v in ticks(y0, y1) {
-        let y = sy(v);
-        let _ = writeln!(s, "<line x1=\"{l}\" y1=\"{y:.1}\" x2=\"{}\" y2=\"{y:.1}\" stroke=\"#ddd\"/><text x=\"{}\" y=\"{:.1}\" text-anchor=\"end\">{}</text>", w - r, l - 6.0, y + 4.0, fmt(v));
-    }
-    let _ = writeln!(
-        s,
-        "<text x=\"{}\" y=\"{}\" text-anchor=\"middle\">{}</text>",
-        (l + w - r) / 2.0,
-        h - 18.0,
-        escape(x_label)
-    );
-    let _ = writeln!(
-        s,
-        "<text x=\"18\" y=\"{}\" text-anchor=\"middle\" transform=\"rotate(-90 18 {})\">{}</text>",
-        (t + h - b) / 2.0,
-        (t + h - b) / 2.0,
-        escape(y_label)
-    );
-    for (i, se) in series.iter().enumerate() {
-        let c = COLOURS[i % COLOURS.len()];
-        let path: Vec<String> = se
-            .points
-            .iter()
-            .filter(|p| p.0.is_finite() && p.1.is_finite())
-            .map(|(x, y)| format!("{:.1},{:.1}", sx(*x), sy(*y)))
-            .collect();
-        let _ = writeln!(
-            s,
-            "<polyline fill=\"none\" stroke=\"{c}\" stroke-width=\"2\" points=\"{}\"/>",
-            path.join(" ")
-        );
-        for p in &path {
-            let (x, y) = p.split_once(',').unwrap_or(("0", "0"));
-            let _ = writeln!(s, "<circle cx=\"{x}\" cy=\"{y}\" r=\"3\" fill=\"{c}\"/>");
+/// One plot: lines with markers, axes with ticks and labels, a legend. `path` is where the
+/// SVG will go, for messages.
+pub fn line_plot(
+    path: &Path,
+    title: &str,
+    x_label: &str,
+    y_label: &str,
+    series: &[Series],
+) -> Result<String> {
+    register_font();
+    let fail = |e: &dyn std::fmt::Display| Error::data(path, format!("cannot draw: {e}"));
+    let finite = |p: &&(f64, f64)| p.0.is_finite() && p.1.is_finite();
+    let all = || series.iter().flat_map(|s| s.points.iter().filter(finite));
+    let (x0, x1) = axis(all().map(|p| p.0), false);
+    let (y0, y1) = axis(all().map(|p| p.1), true);
+    let mut svg = String::new();
+    {
+        let root = SVGBackend::with_string(&mut svg, (640, 420)).into_drawing_area();
+        root.fill(&WHITE).map_err(|e| fail(&e))?;
+        let mut chart = ChartBuilder::on(&root)
+            .caption(title, ("sans-serif", 16))
+            .margin(12)
+            .x_label_area_size(40)
+            .y_label_area_size(70)
+            .build_cartesian_2d(x0..x1, y0..y1)
+            .map_err(|e| fail(&e))?;
+        chart
+            .configure_mesh()
+            .x_desc(x_label)
+            .y_desc(y_label)
+            .x_label_formatter(&short)
+            .y_label_formatter(&short)
+            .draw()
+            .map_err(|e| fail(&e))?;
+        for (k, s) in series.iter().enumerate() {
+            let colour = Palette99::pick(k).to_rgba();
+            let points: Vec<(f64, f64)> = s.points.iter().filter(finite).copied().collect();
+            chart
+                .draw_series(LineSeries::new(points.clone(), colour.stroke_width(2)))
+                .map_err(|e| fail(&e))?
+                .label(s.name.as_str())
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], colour));
+            chart
+                .draw_series(points.iter().map(|p| Circle::new(*p, 3, colour.filled())))
+                .map_err(|e| fail(&e))?;
         }
-        let ly = t + 16.0 + 16.0 * i as f64;
-        let _ = writeln!(s, "<line x1=\"{}\" y1=\"{ly}\" x2=\"{}\" y2=\"{ly}\" stroke=\"{c}\" stroke-width=\"2\"/><text x=\"{}\" y=\"{}\">{}</text>", l + 10.0, l + 30.0, l + 36.0, ly + 4.0, escape(&se.name));
+        chart
+            .configure_series_labels()
+            .border_style(BLACK)
+            .background_style(WHITE.mix(0.8))
+            .draw()
+            .map_err(|e| fail(&e))?;
+        root.present().map_err(|e| fail(&e))?;
     }
-    s.push_str("</svg>\n");
-    s
-}
-
-fn escape(s: &str) -> String {
-    s.replace('&', "&amp;")
-        .replace('<', "&lt;")
-        .replace('>', "&gt;")
+    Ok(svg)
 }
 
 #[cfg(test)]
@@ -144,8 +98,9 @@ mod tests {
     use super::*;
 
     #[test]
-    fn plot_is_well_formed_svg() {
+    fn plot_is_an_svg_with_its_points_and_escaped_text() {
         let s = line_plot(
+            Path::new("t.svg"),
             "t <1>",
             "x",
             "y",
@@ -153,12 +108,16 @@ mod tests {
                 name: "a".into(),
                 points: vec![(0.0, 1.0), (1.0, 3.0), (2.0, f64::NAN)],
             }],
+        )
+        .unwrap();
+        assert!(
+            s.starts_with("<svg") && s.trim_end().ends_with("</svg>"),
+            "{s}"
         );
-        assert!(s.starts_with("<svg") && s.trim_end().ends_with("</svg>"));
-        assert!(s.contains("t &lt;1&gt;"));
-        assert_eq!(s.matches("<circle").count(), 2);
-        let t = ticks(0.0, 1.0);
-        assert_eq!(t.len(), 6);
-        assert!((t[5] - 1.0).abs() < 1e-12);
+        assert!(s.contains("t &lt;1&gt;"), "{s}");
+        // the two finite points as markers, the NaN left out
+        assert_eq!(s.matches("<circle").count(), 2, "{s}");
+        assert_eq!(axis([2.0, 2.0].into_iter(), true), (1.9, 2.1));
+        assert_eq!(axis(std::iter::empty(), true), (0.0, 1.0));
     }
 }

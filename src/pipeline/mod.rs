@@ -14,7 +14,7 @@ pub mod sweep;
 
 pub use manifest::StageRecord;
 use manifest::{fingerprint, invalidate_after, record, save, Manifest};
-use simulate::simulate_parts;
+use simulate::{part_range, simulate_parts};
 pub use simulate::{probe_rays_per_second, simulate};
 use sweep::run_sweep;
 pub use sweep::RunTotals;
@@ -26,12 +26,11 @@ use crate::plan::{self, Pulse};
 use crate::products;
 use crate::progress::log;
 use crate::scene::Scene;
-use crate::waveform::file::part_name;
+use crate::waveform::file::{part_count, part_is_whole, part_name};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-/// Pulses per waveform part file.
-pub const PART_PULSES: usize = 1000;
+pub use crate::waveform::file::PART_PULSES;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, clap::ValueEnum)]
 pub enum Stage {
@@ -274,6 +273,12 @@ fn run_single(
 
     let scene = cache.get(&loaded.scene_path, loaded.campaign.wavelength_nm)?;
     let fp_sim = simulate_fingerprint(&fp_plan, scene)?;
+    if run.done(Stage::Simulate, &fp_sim) && !parts_whole(out, pulses.len()) {
+        // the manifest says done, the files disagree: the files win
+        log("simulate: a part file is missing or damaged: it is simulated again");
+        run.manifest.stages.remove(Stage::Simulate.name());
+        invalidate_after(&mut run.manifest, Stage::Simulate);
+    }
     if run.wanted(Stage::Simulate) && !run.done(Stage::Simulate, &fp_sim) {
         let (rays, parts_done) = simulate_stage(&mut run, loaded, scene, &pulses, &fp_sim)?;
         summary.rays = rays;
@@ -315,7 +320,7 @@ fn products_stage(
     fp: &str,
 ) -> Result<()> {
     let t = Instant::now();
-    let parts = pulses.len().div_ceil(PART_PULSES);
+    let parts = part_count(pulses.len());
     let (outputs, note) = products::stage::run(loaded, scene, run.out, pulses, parts)?;
     log(&format!(
         "products: {} in {:.2} s",
@@ -394,6 +399,12 @@ fn simulate_fingerprint(fp_plan: &str, scene: &Scene) -> Result<String> {
 
 /// The simulate stage: the parts this invocation owns (all, or its shard's) that are not
 /// written yet. Returns (rays traced, parts written).
+/// Whether every part of a run of `pulses` pulses is on disk and whole.
+fn parts_whole(out: &Path, pulses: usize) -> bool {
+    (0..part_count(pulses))
+        .all(|k| part_is_whole(&out.join(part_name(k)), part_range(k, pulses).len()))
+}
+
 fn simulate_stage(
     run: &mut RunFolder,
     loaded: &Loaded,
@@ -403,7 +414,7 @@ fn simulate_stage(
 ) -> Result<(u64, usize)> {
     let (out, shard) = (run.out, run.opts.shard);
     let t = Instant::now();
-    let parts = pulses.len().div_ceil(PART_PULSES);
+    let parts = part_count(pulses.len());
     let part_files: Vec<String> = (0..parts).map(part_name).collect();
     let wf_dir = out.join("waveforms");
     let marker = wf_dir.join("fingerprint");
@@ -414,14 +425,14 @@ fn simulate_stage(
         let _ = std::fs::remove_dir_all(&wf_dir);
     }
     write_text_atomic(&marker, fp)?;
+    let whole =
+        |k: usize| part_is_whole(&out.join(part_name(k)), part_range(k, pulses.len()).len());
     let todo: Vec<usize> = (0..parts)
         .filter(|k| shard.is_none_or(|(i, n)| k % n == i))
-        .filter(|&k| !out.join(part_name(k)).is_file())
+        .filter(|&k| !whole(k))
         .collect();
     let (rays, done) = simulate_parts(loaded, scene, pulses, &todo, out)?;
-    let missing = (0..parts)
-        .filter(|&k| !out.join(part_name(k)).is_file())
-        .count();
+    let missing = (0..parts).filter(|&k| !whole(k)).count();
     if missing == 0 {
         run.finish(Stage::Simulate, fp, part_files, t, None, "done")?;
     } else {

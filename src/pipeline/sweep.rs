@@ -8,9 +8,9 @@ use crate::fsutil::write_text_atomic;
 use crate::plan;
 use crate::products::plot::{line_plot, Series};
 use crate::progress::log;
-use crate::waveform::file::read_waveforms;
+use crate::waveform::file::{part_name, read_waveforms};
 use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 /// One sub-run per combination of the sweep's values, in sub-folders named after them.
 pub(super) fn run_sweep(
@@ -182,15 +182,12 @@ pub struct RunTotals {
 impl RunTotals {
     pub fn read(run: &Path) -> Result<RunTotals> {
         let mut t = RunTotals::default();
-        let dir = run.join("waveforms");
-        let mut files: Vec<PathBuf> = std::fs::read_dir(&dir)
-            .map_err(|e| Error::file(&dir, e))?
-            .flatten()
-            .map(|e| e.path())
-            .filter(|p| p.extension().is_some_and(|e| e == "parquet"))
-            .collect();
-        files.sort();
-        for f in files {
+        // the parts by index (part-00000, part-00001, ...), as every stage reads them
+        for k in 0.. {
+            let f = run.join(part_name(k));
+            if !f.is_file() {
+                break;
+            }
             for w in read_waveforms(&f)? {
                 t.pulses += 1;
                 t.received_energy_j += w.received_energy_j;

@@ -1,13 +1,13 @@
 //! `report.md`: what ran, on what, how fast, and what came back, with the products' figures.
 
 use crate::campaign::Loaded;
-use crate::error::{Error, Result};
+use crate::error::Result;
 use crate::plan::Pulse;
 use crate::products::dsm::DsmReport;
 use crate::products::summary::ProductsSummary;
 use crate::scene::Scene;
 use crate::scene::SurfaceClass;
-use crate::waveform::file::read_waveforms;
+use crate::waveform::file::{part_count, part_name, read_waveforms};
 use std::path::Path;
 
 /// `report.md`: what ran, on what, how fast, and what came back.
@@ -24,21 +24,17 @@ pub fn report(
     let mut rays = 0u64;
     let mut paths = 0.0;
     let (mut solar, mut brf_fov, mut brf_fp) = (0.0, 0.0, 0.0);
-    for f in std::fs::read_dir(out.join("waveforms"))
-        .map_err(|e| Error::file(out, e))?
-        .flatten()
-    {
-        let p = f.path();
-        if p.extension().is_some_and(|e| e == "parquet") {
-            for w in read_waveforms(&p)? {
-                received.push(w.received_energy_j);
-                multiple += w.received_energy_j - w.order_energy_j.first().copied().unwrap_or(0.0);
-                rays += w.rays as u64;
-                paths += w.paths_per_ray as f64 * w.rays as f64;
-                solar += w.solar_photons_per_bin as f64;
-                brf_fov += w.brf_fov_solar as f64;
-                brf_fp += w.brf_footprint_laser as f64;
-            }
+    // the parts by index, as the products stage reads them: another file in the folder is
+    // not part of the run
+    for k in 0..part_count(pulses.len()) {
+        for w in read_waveforms(&out.join(part_name(k)))? {
+            received.push(w.received_energy_j);
+            multiple += w.received_energy_j - w.order_energy_j.first().copied().unwrap_or(0.0);
+            rays += w.rays as u64;
+            paths += w.paths_per_ray as f64 * w.rays as f64;
+            solar += w.solar_photons_per_bin as f64;
+            brf_fov += w.brf_fov_solar as f64;
+            brf_fp += w.brf_footprint_laser as f64;
         }
     }
     let total: f64 = received.iter().sum();

@@ -9,6 +9,14 @@ use arrow_schema::DataType;
 use std::path::Path;
 use std::sync::Arc;
 
+/// Pulses per waveform part file.
+pub const PART_PULSES: usize = 1000;
+
+/// Part files of a run of `pulses` pulses.
+pub fn part_count(pulses: usize) -> usize {
+    pulses.div_ceil(PART_PULSES)
+}
+
 /// The path of part `k` inside a run folder.
 pub fn part_name(k: usize) -> String {
     format!("waveforms/part-{k:05}.parquet")
@@ -259,6 +267,18 @@ pub fn read_waveforms(path: &Path) -> Result<Vec<Waveform>> {
         }
     }
     Ok(out)
+}
+
+/// Whether a part file is whole: its Parquet footer reads and it holds `rows` pulses. A part
+/// cut short (a kill mid-write that escaped the atomic rename, a full disk, a copy) fails;
+/// `--resume` redoes such a part instead of trusting it.
+pub fn part_is_whole(path: &Path, rows: usize) -> bool {
+    use parquet::file::reader::{FileReader, SerializedFileReader};
+    let Ok(file) = std::fs::File::open(path) else {
+        return false;
+    };
+    SerializedFileReader::new(file)
+        .is_ok_and(|r| r.metadata().file_metadata().num_rows() == rows as i64)
 }
 
 /// Whether a column of the waveform files holds one list per pulse.

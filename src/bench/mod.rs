@@ -96,7 +96,7 @@ impl BenchOptions {
 
 /// One method's row of the table.
 #[derive(Clone, Debug)]
-pub struct Row {
+pub struct LadderRow {
     pub method: Method,
     /// Fewest rays reaching the target, or None if `max_rays` did not.
     pub rays: Option<u64>,
@@ -255,7 +255,7 @@ pub fn run(opts: &BenchOptions) -> Result<String> {
     if reference.received_energy_j <= 0.0 {
         return Err(Error::msg("bench: the reference waveform is empty"));
     }
-    let rows: Vec<Row> = [Method::Forward, Method::Backward, Method::Bdpt]
+    let rows: Vec<LadderRow> = [Method::Forward, Method::Backward, Method::Bdpt]
         .into_iter()
         .map(|m| ladder(&b, &reference, m, opts.seeds, opts.max_rays))
         .collect();
@@ -284,7 +284,7 @@ pub fn run(opts: &BenchOptions) -> Result<String> {
                 );
                 bd.run(Method::Bdpt, opts.reference_rays, 1_000_003).0
             };
-            let rows: Vec<Row> = [Method::Forward, Method::Backward, Method::Bdpt]
+            let rows: Vec<LadderRow> = [Method::Forward, Method::Backward, Method::Bdpt]
                 .into_iter()
                 .map(|m| ladder(&bd, &reference, m, opts.seeds, opts.table2_max_rays))
                 .collect();
@@ -424,7 +424,7 @@ fn campaigns_section(opts: &BenchOptions) -> Result<String> {
 
 /// Table 2 of the paper: rays (and wall seconds) each method needs for rRMSE ≤ 5% by
 /// footprint diameter.
-fn table2(rows: &[(f64, Vec<Row>)], max_rays: u64) -> String {
+fn table2(rows: &[(f64, Vec<LadderRow>)], max_rays: u64) -> String {
     let mut s = String::from(
         "\n### Rays for rRMSE ≤ 5% by footprint diameter (paper Table 2)\n\n| footprint m | forward | backward | bdpt |\n| ---: | ---: | ---: | ---: |\n",
     );
@@ -509,8 +509,8 @@ fn selection_table(rows: &[SelectionRow], rays: u64) -> String {
 }
 
 /// The fewest rays on a 1-2-5 ladder from 100 whose median rRMSE over `seeds` reaches 5%.
-fn ladder(b: &Bench, reference: &Waveform, method: Method, seeds: u64, max_rays: u64) -> Row {
-    let mut row = Row {
+fn ladder(b: &Bench, reference: &Waveform, method: Method, seeds: u64, max_rays: u64) -> LadderRow {
+    let mut row = LadderRow {
         method,
         rays: None,
         rrmse: f64::NAN,
@@ -573,7 +573,7 @@ fn report(
     stats: &crate::scene::SceneStats,
     reference: &Waveform,
     ref_secs: f64,
-    rows: &[Row],
+    rows: &[LadderRow],
 ) -> String {
     let mut s = String::new();
     let threads = rayon::current_num_threads();
@@ -628,8 +628,8 @@ fn report(
 /// One column per method of a figure along the ray ladder.
 fn ladder_table(
     title: &str,
-    rows: &[Row],
-    column: impl Fn(&Row) -> &[(u64, f64)],
+    rows: &[LadderRow],
+    column: impl Fn(&LadderRow) -> &[(u64, f64)],
     cell: impl Fn(f64) -> String,
 ) -> String {
     let mut s = format!("\n{title}:\n\n");

@@ -13,7 +13,7 @@ use std::path::{Path, PathBuf};
 
 /// One run's row.
 #[derive(Clone, Debug, Default)]
-pub struct Row {
+pub struct RunRow {
     pub run: String,
     pub altitude_m: Option<f64>,
     pub prf_hz: Option<f64>,
@@ -41,7 +41,7 @@ pub fn expand(dir: &Path) -> Result<Vec<PathBuf>> {
     ))
 }
 
-pub fn read_row(dir: &Path) -> Result<Row> {
+pub fn read_row(dir: &Path) -> Result<RunRow> {
     let manifest_path = dir.join("manifest.json");
     let manifest = Manifest::read(&manifest_path)
         .ok_or_else(|| Error::data(&manifest_path, "missing or not a lidarsim manifest"))?;
@@ -51,7 +51,7 @@ pub fn read_row(dir: &Path) -> Result<Row> {
         .unwrap_or(serde_yaml::Value::Null);
     // a figure with no meaning for the run (NaN in memory, null in JSON) is an empty cell
     let finite = |x: f64| Some(x).filter(|x| x.is_finite());
-    let mut row = Row {
+    let mut row = RunRow {
         run: dir
             .file_name()
             .map(|n| n.to_string_lossy().into_owned())
@@ -59,7 +59,7 @@ pub fn read_row(dir: &Path) -> Result<Row> {
         altitude_m: resolved["platform"]["altitude_m"].as_f64(),
         prf_hz: resolved["platform"]["prf_hz"].as_f64(),
         run_time_s: manifest.stages.values().map(|s| s.wall_time_s).sum(),
-        ..Row::default()
+        ..RunRow::default()
     };
     if let Some(p) = ProductsSummary::read(&dir.join("products.json")) {
         row.pulses = p.pulses as u64;
@@ -83,7 +83,7 @@ fn cell(v: Option<f64>, digits: usize) -> String {
         .unwrap_or_else(|| "–".into())
 }
 
-pub fn markdown(rows: &[Row]) -> String {
+pub fn markdown(rows: &[RunRow]) -> String {
     let mut s = String::from(
         "| run | altitude m | PRF Hz | pulses | points/pulse | pulses/m² | DSM bias m | DSM RMSE m | coverage | run s |\n| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n",
     );
@@ -106,7 +106,7 @@ pub fn markdown(rows: &[Row]) -> String {
 }
 
 /// Writes the table as CSV (run names quoted when they need it).
-pub fn write_csv(path: &Path, rows: &[Row]) -> Result<()> {
+pub fn write_csv(path: &Path, rows: &[RunRow]) -> Result<()> {
     let o = |v: Option<f64>| v.map(|x| x.to_string()).unwrap_or_default();
     let header = [
         "run",
@@ -141,7 +141,7 @@ pub fn write_csv(path: &Path, rows: &[Row]) -> Result<()> {
 
 /// DSM bias and RMSE against altitude (one line per pulse rate) and against pulse rate (one
 /// line per altitude).
-pub fn plots(rows: &[Row], dir: &Path) -> Result<Vec<PathBuf>> {
+pub fn plots(rows: &[RunRow], dir: &Path) -> Result<Vec<PathBuf>> {
     let mut written = Vec::new();
     for (name, x_of, group_of, x_label, group_label) in [
         (
@@ -153,7 +153,7 @@ pub fn plots(rows: &[Row], dir: &Path) -> Result<Vec<PathBuf>> {
         ),
         ("dsm_error_vs_prf.svg", 1, 0, "pulse rate (Hz)", "H"),
     ] {
-        let key = |r: &Row, i: usize| if i == 0 { r.altitude_m } else { r.prf_hz };
+        let key = |r: &RunRow, i: usize| if i == 0 { r.altitude_m } else { r.prf_hz };
         let mut groups: Vec<f64> = rows.iter().filter_map(|r| key(r, group_of)).collect();
         groups.sort_by(|a, b| a.total_cmp(b));
         groups.dedup();

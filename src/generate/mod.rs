@@ -111,7 +111,7 @@ impl GenerateOptions {
     }
 
     /// Fills defaults and checks ranges, with messages naming the option.
-    fn resolve(&self, kind: SceneKind) -> Result<stand::Resolved> {
+    fn resolve(&self, kind: SceneKind) -> Result<stand::StandOptions> {
         let d = GenerateOptions::defaults(kind);
         let bad =
             |what: &str, why: String| Err(Error::msg(format!("generate {kind}: {what}: {why}")));
@@ -145,7 +145,7 @@ impl GenerateOptions {
                 ),
             );
         }
-        let r = stand::Resolved {
+        let r = stand::StandOptions {
             size,
             trees: self.trees.or(d.trees).unwrap_or(0),
             templates: self.templates.or(d.templates).unwrap_or(0),

@@ -11,7 +11,7 @@ use std::path::{Path, PathBuf};
 
 /// Options with every default filled in for one kind.
 #[derive(Clone, Debug)]
-pub(super) struct Resolved {
+pub(super) struct StandOptions {
     pub size: [f64; 2],
     pub trees: usize,
     pub templates: usize,
@@ -332,7 +332,7 @@ impl Written {
 }
 
 /// One placed tree.
-struct Placed {
+struct PlacedTree {
     x: f64,
     y: f64,
     z: f64,
@@ -342,7 +342,7 @@ struct Placed {
 }
 
 /// A template to build: its file stem, species label, shape, optics, and tree count.
-struct Plan<'a> {
+struct TemplatePlan<'a> {
     stem: String,
     species: String,
     shape: TreeShape,
@@ -358,14 +358,14 @@ struct Plan<'a> {
 fn trees(
     seed: u64,
     dir: &Path,
-    plans: &[Plan],
-    placed: &[Placed],
+    plans: &[TemplatePlan],
+    placed: &[PlacedTree],
     leaves: usize,
     lai: f64,
     ground_area: f64,
     out: &mut Written,
 ) -> Result<(Vec<TemplateSummary>, String)> {
-    let weight = |p: &Plan| PI * p.shape.crown_radius * p.shape.crown_radius;
+    let weight = |p: &TemplatePlan| PI * p.shape.crown_radius * p.shape.crown_radius;
     let denom: f64 = placed
         .iter()
         .map(|t| weight(&plans[t.template]) * t.scale * t.scale)
@@ -565,7 +565,7 @@ fn header(kind: SceneKind, seed: u64, lines: &[String]) -> String {
 /// A forest stand: terrain, species templates, tree positions, instance tables, scene file,
 /// in the order of one random stream (the draw order makes the stand); the steps are
 /// helpers (`terrain`, `positions`, `trees`), this function is their sequence and the YAML.
-pub(super) fn forest(seed: u64, dir: &Path, o: &Resolved) -> Result<GeneratedSummary> {
+pub(super) fn forest(seed: u64, dir: &Path, o: &StandOptions) -> Result<GeneratedSummary> {
     let mut out = Written::default();
     let mut rng = stream(seed, 0);
     let ground = terrain(&mut rng, o.size, o.slope);
@@ -583,7 +583,7 @@ pub(super) fn forest(seed: u64, dir: &Path, o: &Resolved) -> Result<GeneratedSum
     out.write(dir.join("terrain.csv"), &csv)?;
 
     let templates = o.templates.min(o.trees);
-    let plans: Vec<Plan> = (0..templates)
+    let plans: Vec<TemplatePlan> = (0..templates)
         .map(|k| {
             let sp = &SPECIES[k % SPECIES.len()];
             let round = k / SPECIES.len();
@@ -595,7 +595,7 @@ pub(super) fn forest(seed: u64, dir: &Path, o: &Resolved) -> Result<GeneratedSum
                 shape.crown_base *= 0.9 + 0.2 * r.uniform();
                 shape.crown_radius *= 0.9 + 0.2 * r.uniform();
             }
-            Plan {
+            TemplatePlan {
                 stem: if round == 0 {
                     sp.name.to_string()
                 } else {
@@ -615,7 +615,7 @@ pub(super) fn forest(seed: u64, dir: &Path, o: &Resolved) -> Result<GeneratedSum
         })
         .collect();
     let xy = positions(&mut rng, o.size, o.trees, o.min_spacing_m)?;
-    let placed: Vec<Placed> = xy
+    let placed: Vec<PlacedTree> = xy
         .iter()
         .enumerate()
         .map(|(i, p)| {
@@ -625,7 +625,7 @@ pub(super) fn forest(seed: u64, dir: &Path, o: &Resolved) -> Result<GeneratedSum
             } else {
                 pick(&mut rng, &weights)
             };
-            Placed {
+            PlacedTree {
                 x: p[0],
                 y: p[1],
                 z: round4(ground.z(p[0], p[1])),
@@ -692,7 +692,7 @@ pub(super) fn forest(seed: u64, dir: &Path, o: &Resolved) -> Result<GeneratedSum
 }
 
 /// An orchard (the WCO layout: rows of one species); long for the same reason as [`forest`].
-pub(super) fn orchard(seed: u64, dir: &Path, o: &Resolved) -> Result<GeneratedSummary> {
+pub(super) fn orchard(seed: u64, dir: &Path, o: &StandOptions) -> Result<GeneratedSummary> {
     // WCO: rows about 4.5 m apart along y, trees 2 m apart in a row, some missing
     const ROW_M: f64 = 4.5;
     const TREE_M: f64 = 2.0;
@@ -721,12 +721,12 @@ pub(super) fn orchard(seed: u64, dir: &Path, o: &Resolved) -> Result<GeneratedSu
     let mut kept = all[..o.trees].to_vec();
     kept.sort_unstable();
     let templates = o.templates.min(o.trees);
-    let placed: Vec<Placed> = kept
+    let placed: Vec<PlacedTree> = kept
         .iter()
         .enumerate()
         .map(|(i, &slot)| {
             let (r, s) = (slot / slots, slot % slots);
-            Placed {
+            PlacedTree {
                 x: round4(x0 + r as f64 * ROW_M + 0.1 * (rng.uniform() - 0.5)),
                 y: round4(y0 + s as f64 * TREE_M + 0.2 * (rng.uniform() - 0.5)),
                 z: 0.0,
@@ -740,13 +740,13 @@ pub(super) fn orchard(seed: u64, dir: &Path, o: &Resolved) -> Result<GeneratedSu
             }
         })
         .collect();
-    let plans: Vec<Plan> = (0..templates)
+    let plans: Vec<TemplatePlan> = (0..templates)
         .map(|k| {
             let mut shape = CITRUS.clone();
             let mut r = stream(seed, 500 + k as u64);
             shape.height *= 0.9 + 0.2 * r.uniform();
             shape.crown_radius *= 0.9 + 0.2 * r.uniform();
-            Plan {
+            TemplatePlan {
                 stem: format!("citrus{}", k + 1),
                 species: "citrus (Citrus sinensis)".to_string(),
                 shape,
@@ -805,7 +805,7 @@ pub(super) fn orchard(seed: u64, dir: &Path, o: &Resolved) -> Result<GeneratedSu
     finish(summary, dir.join("orchard.yaml"), &yaml)
 }
 
-pub(super) fn flat(seed: u64, dir: &Path, o: &Resolved) -> Result<GeneratedSummary> {
+pub(super) fn flat(seed: u64, dir: &Path, o: &StandOptions) -> Result<GeneratedSummary> {
     let area = o.size[0] * o.size[1];
     let summary = summarize(
         SceneKind::Flat,

@@ -143,6 +143,8 @@ pub fn keys(doc: &Doc, p: &Platform) -> Result<()> {
 }
 
 /// Number checks of the non-static kinds (static is checked by the caller).
+///
+/// A flat list of located checks, one per key of each platform kind.
 pub fn numbers(doc: &Doc, p: &Platform) -> Result<()> {
     let c = Check { doc };
     c.opt_finite("platform.gps_start_s", p.gps_start_s)?;

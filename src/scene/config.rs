@@ -232,7 +232,7 @@ fn check_wavelength<E: de::Error>(v: f64) -> std::result::Result<Wavelength, E> 
 
 /// A material's optical properties at the campaign wavelength.
 #[derive(Debug, Clone, PartialEq)]
-pub(crate) struct Resolved {
+pub(crate) struct ResolvedMaterial {
     pub reflectance: f64,
     pub back_reflectance: f64,
     pub transmittance: f64,
@@ -273,7 +273,7 @@ pub(crate) fn resolve_materials(
     doc: &Doc,
     file: &SceneFile,
     wavelength_nm: f64,
-) -> Result<BTreeMap<String, Resolved>> {
+) -> Result<BTreeMap<String, ResolvedMaterial>> {
     if !(wavelength_nm.is_finite() && wavelength_nm > 0.0) {
         return Err(Error::msg(format!(
             "wavelength {wavelength_nm} nm is not a positive number"
@@ -318,7 +318,7 @@ pub(crate) fn resolve_materials(
         }
         out.insert(
             name.clone(),
-            Resolved {
+            ResolvedMaterial {
                 reflectance: r,
                 back_reflectance: rb,
                 transmittance: t,

@@ -13,7 +13,8 @@ use std::time::Duration;
 
 use super::bvh::Blas;
 use super::config::{
-    resolve_materials, HeightfieldSpec, MeshSpec, ObjectSpec, PlaneSpec, Resolved, SceneFile,
+    resolve_materials, HeightfieldSpec, MeshSpec, ObjectSpec, PlaneSpec, ResolvedMaterial,
+    SceneFile,
 };
 use super::mesh;
 use super::table::{parse_grid, parse_instances, InstanceRow};
@@ -64,7 +65,7 @@ enum Mapping {
 }
 
 /// One object of the scene file, checked, waiting for its geometry.
-struct Plan {
+struct ObjectPlan {
     key: String,
     source: usize,
     mapping: Mapping,
@@ -94,7 +95,7 @@ fn check_material(
     doc: &Doc,
     key: &str,
     name: &str,
-    materials: &BTreeMap<String, Resolved>,
+    materials: &BTreeMap<String, ResolvedMaterial>,
 ) -> Result<()> {
     if materials.contains_key(name) {
         return Ok(());
@@ -159,9 +160,9 @@ pub(crate) fn load(path: &Path, wavelength_nm: f64) -> Result<Scene> {
 fn plan_objects(
     doc: &Doc,
     file: &SceneFile,
-    materials: &BTreeMap<String, Resolved>,
+    materials: &BTreeMap<String, ResolvedMaterial>,
     files: &mut Vec<PathBuf>,
-) -> Result<(Vec<Source>, Vec<Plan>)> {
+) -> Result<(Vec<Source>, Vec<ObjectPlan>)> {
     let mut objects = Objects {
         doc,
         materials,
@@ -169,7 +170,7 @@ fn plan_objects(
         sources: Vec::new(),
         mesh_sources: HashMap::new(),
     };
-    let mut plans: Vec<Plan> = Vec::new();
+    let mut plans: Vec<ObjectPlan> = Vec::new();
     for (i, obj) in file.objects.iter().enumerate() {
         let key = format!("objects[{i}].{}", obj.kind());
         plans.push(match obj {
@@ -184,7 +185,7 @@ fn plan_objects(
 /// What [`plan_objects`] gathers while it checks objects one by one.
 struct Objects<'a> {
     doc: &'a Doc,
-    materials: &'a BTreeMap<String, Resolved>,
+    materials: &'a BTreeMap<String, ResolvedMaterial>,
     /// Every file the scene reads (for the run's fingerprint).
     files: &'a mut Vec<PathBuf>,
     sources: Vec<Source>,
@@ -193,7 +194,7 @@ struct Objects<'a> {
 }
 
 impl Objects<'_> {
-    fn plane(&mut self, key: String, p: &PlaneSpec) -> Result<Plan> {
+    fn plane(&mut self, key: String, p: &PlaneSpec) -> Result<ObjectPlan> {
         let doc = self.doc;
         check_material(doc, &format!("{key}.material"), &p.material, self.materials)?;
         let [a, b] = p.extent;
@@ -205,7 +206,7 @@ impl Objects<'_> {
             ));
         }
         self.sources.push(Source::Plane { z: p.z, a, b });
-        Ok(Plan {
+        Ok(ObjectPlan {
             key,
             source: self.sources.len() - 1,
             mapping: Mapping::One(p.material.clone()),
@@ -216,7 +217,7 @@ impl Objects<'_> {
         })
     }
 
-    fn heightfield(&mut self, key: String, h: &HeightfieldSpec) -> Result<Plan> {
+    fn heightfield(&mut self, key: String, h: &HeightfieldSpec) -> Result<ObjectPlan> {
         let doc = self.doc;
         check_material(doc, &format!("{key}.material"), &h.material, self.materials)?;
         if !(h.cell_m.is_finite() && h.cell_m > 0.0) {
@@ -240,7 +241,7 @@ impl Objects<'_> {
             origin,
             named_at: format!("{key}.file"),
         });
-        Ok(Plan {
+        Ok(ObjectPlan {
             key,
             source: self.sources.len() - 1,
             mapping: Mapping::One(h.material.clone()),
@@ -251,7 +252,7 @@ impl Objects<'_> {
         })
     }
 
-    fn mesh(&mut self, key: String, m: &MeshSpec) -> Result<Plan> {
+    fn mesh(&mut self, key: String, m: &MeshSpec) -> Result<ObjectPlan> {
         let doc = self.doc;
         let mapping = match (&m.material, &m.materials) {
             (Some(name), None) => {
@@ -296,7 +297,7 @@ impl Objects<'_> {
             }
             None => None,
         };
-        Ok(Plan {
+        Ok(ObjectPlan {
             key,
             source,
             mapping,
@@ -320,9 +321,9 @@ struct Slots {
 /// (material, class) pair.
 fn assign_surfaces(
     doc: &Doc,
-    plans: &[Plan],
+    plans: &[ObjectPlan],
     meshes: &[Blas],
-    materials: &BTreeMap<String, Resolved>,
+    materials: &BTreeMap<String, ResolvedMaterial>,
 ) -> Result<Slots> {
     let mut surfaces: Vec<Surface> = Vec::new();
     let mut surface_index: HashMap<(String, SurfaceClass), u32> = HashMap::new();
@@ -369,7 +370,7 @@ fn assign_surfaces(
 }
 
 /// One instance placed in the world, in f64.
-struct Placed {
+struct PlacedInstance {
     translation: DVec3,
     cos: f64,
     sin: f64,
@@ -381,7 +382,11 @@ struct Placed {
 }
 
 /// World transforms and bounds of every instance of every object, in f64.
-fn place_instances(plans: &[Plan], meshes: &[Blas], object_base: &[u32]) -> Vec<Placed> {
+fn place_instances(
+    plans: &[ObjectPlan],
+    meshes: &[Blas],
+    object_base: &[u32],
+) -> Vec<PlacedInstance> {
     let identity = [InstanceRow {
         x: 0.0,
         y: 0.0,
@@ -389,7 +394,7 @@ fn place_instances(plans: &[Plan], meshes: &[Blas], object_base: &[u32]) -> Vec<
         rotation_deg: 0.0,
         scale: 1.0,
     }];
-    let mut placed: Vec<Placed> = Vec::new();
+    let mut placed: Vec<PlacedInstance> = Vec::new();
     for (plan, &base) in plans.iter().zip(object_base) {
         let blas = &meshes[plan.source];
         let rows: &[InstanceRow] = plan.rows.as_deref().unwrap_or(&identity);
@@ -409,7 +414,7 @@ fn place_instances(plans: &[Plan], meshes: &[Blas], object_base: &[u32]) -> Vec<
                 lo = lo.min(w);
                 hi = hi.max(w);
             }
-            placed.push(Placed {
+            placed.push(PlacedInstance {
                 translation,
                 cos,
                 sin,
@@ -437,7 +442,7 @@ struct TopLevel {
 }
 
 impl TopLevel {
-    fn build(placed: Vec<Placed>, meshes: &[Blas]) -> TopLevel {
+    fn build(placed: Vec<PlacedInstance>, meshes: &[Blas]) -> TopLevel {
         let mut world_lo = DVec3::splat(f64::INFINITY);
         let mut world_hi = DVec3::splat(f64::NEG_INFINITY);
         for p in &placed {
@@ -506,7 +511,7 @@ impl TopLevel {
 /// so that typos do not pass silently.
 fn map_slots<'a>(
     doc: &Doc,
-    plan: &Plan,
+    plan: &ObjectPlan,
     blas: &Blas,
     map: &'a BTreeMap<String, String>,
 ) -> Result<Vec<&'a str>> {

@@ -260,6 +260,9 @@ impl Scene {
 
     /// Closest hit along the ray `origin + t dir`, `dir` a unit vector, with 0 < t < t_max,
     /// ignoring the facet `skip` (the one the ray leaves).
+    ///
+    /// The top-level traversal with each instance's traversal nested in its closure: the hot
+    /// path, kept in one place so that the two levels' skip and coplanar rules read together.
     pub fn intersect(&self, origin: DVec3, dir: DVec3, t_max: f64, skip: FacetId) -> Option<Hit> {
         let lr = self.local_ray(origin, dir, t_max)?;
         // only a ray that starts on a facet (not one clipped to the box) can meet its

@@ -169,6 +169,9 @@ impl Scene {
         items
     }
 
+    /// The highest surface of one run of an instance's triangles over the cells it covers:
+    /// two passes (the cells reached, then each triangle clipped to each cell), kept together
+    /// because the second reuses the first's bounds and transform.
     fn rasterise_top(&self, grid: &Grid, item: &Item) -> Option<Patch> {
         let inst = &self.instances[item.instance];
         let tris = &self.meshes[inst.mesh as usize].tris[item.start..item.end];

@@ -4,7 +4,7 @@
 use super::bsdf::{bsdf, sample_bsdf};
 use super::mis::{link, mis_weight};
 use super::tally::Accum;
-use super::{Kind, PulseSetup, Rng, Vertex, ROULETTE_AFTER};
+use super::{PulseSetup, Rng, Vertex, VertexKind, ROULETTE_AFTER};
 use crate::scene::FacetId;
 use glam::DVec3;
 
@@ -32,7 +32,7 @@ pub(super) struct Buffers {
 
 pub(super) fn surface_vertex(hit: &crate::scene::Hit, beta: f64, len: f64) -> Vertex {
     Vertex {
-        kind: Kind::Surface,
+        kind: VertexKind::Surface,
         p: hit.position,
         n: hit.normal,
         surface: hit.surface,
@@ -83,14 +83,18 @@ pub(super) fn walk(
         if light && surfaces >= 1 {
             if let Some(tq) = recv.hit_distance(last.p, dir) {
                 if hit.as_ref().is_none_or(|h| tq < h.t) && recv.accepts(-dir).is_some() {
-                    let mut q =
-                        Vertex::endpoint(Kind::Aperture, last.p + dir * tq, recv.frame.w, 0.0);
+                    let mut q = Vertex::endpoint(
+                        VertexKind::Aperture,
+                        last.p + dir * tq,
+                        recv.frame.w,
+                        0.0,
+                    );
                     q.beta = beta;
                     q.len = last.len + tq;
                     path.push(q);
                     link(setup, path);
                     let w = mis_weight(setup, path, &[], scratch);
-                    if path[0].kind == Kind::Sun {
+                    if path[0].kind == VertexKind::Sun {
                         acc.add_solar(beta * w);
                     } else {
                         acc.add(q.len, beta * w, surfaces, class_of(setup, &path[1]));
@@ -135,7 +139,7 @@ pub(super) fn contribution(
     }
     let r = r2.sqrt();
     let w = d / r; // from the light side towards the receiver side
-    if s == 1 && x.kind == Kind::Sun {
+    if s == 1 && x.kind == VertexKind::Sun {
         // irradiance E Δλ from a fixed direction: no distance, no falloff
         let sun = setup.sun?;
         let towards_prev = (cam[t - 2].p - y.p).normalize();
@@ -189,7 +193,7 @@ fn light_subpath(setup: &PulseSetup, rng: &mut Rng, acc: &mut Accum, b: &mut Buf
     if let Some(sun) = sun {
         let x0 = sun.sample_origin(rng.uniform(), rng.uniform());
         b.light
-            .push(Vertex::endpoint(Kind::Sun, x0, sun.dir, q_sun));
+            .push(Vertex::endpoint(VertexKind::Sun, x0, sun.dir, q_sun));
         if s_cap > 1 {
             let beta = sun.band_irradiance * sun.disk_area() / q_sun;
             walk(
@@ -207,7 +211,7 @@ fn light_subpath(setup: &PulseSetup, rng: &mut Rng, acc: &mut Accum, b: &mut Buf
     } else {
         let q_laser = 1.0 - q_sun;
         b.light.push(Vertex::endpoint(
-            Kind::Laser,
+            VertexKind::Laser,
             laser.position,
             laser.frame.w,
             q_laser,
@@ -239,7 +243,7 @@ fn receiver_subpath(setup: &PulseSetup, rng: &mut Rng, acc: &mut Accum, b: &mut 
         let q0 = recv.sample_point(rng.uniform(), rng.uniform());
         let (dir, w) = recv.sample_direction(rng.uniform(), rng.uniform());
         b.cam.push(Vertex::endpoint(
-            Kind::Aperture,
+            VertexKind::Aperture,
             q0,
             recv.frame.w,
             1.0 / recv.area,
@@ -263,7 +267,12 @@ fn connect_to_lights(setup: &PulseSetup, acc: &mut Accum, b: &mut Buffers) {
     let (laser, scene) = (&setup.laser, setup.scene);
     let max_order = setup.max_order as usize;
     let q_sun = setup.sun.map_or(0.0, |s| s.probability);
-    let laser_end = Vertex::endpoint(Kind::Laser, laser.position, laser.frame.w, 1.0 - q_sun);
+    let laser_end = Vertex::endpoint(
+        VertexKind::Laser,
+        laser.position,
+        laser.frame.w,
+        1.0 - q_sun,
+    );
     for t in 2..=b.cam.len().min(max_order + 1) {
         let cam = &b.cam[..t];
         let y = &cam[t - 1];
@@ -277,7 +286,7 @@ fn connect_to_lights(setup: &PulseSetup, acc: &mut Accum, b: &mut Buffers) {
         if let Some(sun) = setup.sun {
             // the sun's point for this connection is the one up-sun of the vertex
             let sun_light = [Vertex::endpoint(
-                Kind::Sun,
+                VertexKind::Sun,
                 y.p - sun.dir * (4.0 * sun.radius),
                 sun.dir,
                 q_sun,
@@ -308,7 +317,7 @@ fn connect_subpaths(
     let (recv, scene) = (&setup.receiver, setup.scene);
     let max_order = setup.max_order as usize;
     let mut q = [Vertex::endpoint(
-        Kind::Aperture,
+        VertexKind::Aperture,
         recv.center,
         recv.frame.w,
         1.0 / recv.area,

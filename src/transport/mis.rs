@@ -2,7 +2,7 @@
 //! forwards and in reverse, and one weight for every strategy.
 
 use super::bsdf::bsdf_pdf;
-use super::{Kind, PulseSetup, Vertex};
+use super::{PulseSetup, Vertex, VertexKind};
 use crate::campaign::MisHeuristic;
 
 /// Area density at `to` of sampling it from `from`, itself reached from `prev` (the end
@@ -21,14 +21,14 @@ pub(super) fn pdf_area(
     let w = d / r2.sqrt();
     let pdf_dir = match from.kind {
         // the disk's uniform density, projected onto the surface: no 1/r² for a direction
-        Kind::Sun => {
+        VertexKind::Sun => {
             return setup
                 .sun
                 .map_or(0.0, |sun| to.n.dot(sun.dir).abs() / sun.disk_area());
         }
-        Kind::Laser => setup.laser.pdf(w),
-        Kind::Aperture => setup.receiver.pdf_dir(w),
-        Kind::Surface => match prev {
+        VertexKind::Laser => setup.laser.pdf(w),
+        VertexKind::Aperture => setup.receiver.pdf_dir(w),
+        VertexKind::Surface => match prev {
             Some(pv) => {
                 let surf = &setup.scene.surfaces[from.surface as usize];
                 bsdf_pdf(surf, from.n, (pv.p - from.p).normalize(), w)

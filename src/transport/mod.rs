@@ -85,7 +85,7 @@ impl PulseSetup<'_> {
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Kind {
+pub enum VertexKind {
     Laser,
     /// A point of the sun's disk: a delta direction, so its position is fixed by the next
     /// vertex and the density that matters is that of the first surface point.
@@ -97,7 +97,7 @@ pub enum Kind {
 /// A vertex of a light or receiver sub-path.
 #[derive(Clone, Copy, Debug)]
 pub struct Vertex {
-    pub kind: Kind,
+    pub kind: VertexKind,
     pub p: DVec3,
     /// Front normal of a facet, or the sensor axis for the laser and the aperture.
     pub n: DVec3,
@@ -115,7 +115,7 @@ pub struct Vertex {
 }
 
 impl Vertex {
-    pub fn endpoint(kind: Kind, p: DVec3, axis: DVec3, pdf_fwd: f64) -> Vertex {
+    pub fn endpoint(kind: VertexKind, p: DVec3, axis: DVec3, pdf_fwd: f64) -> Vertex {
         Vertex {
             kind,
             p,

@@ -46,7 +46,7 @@ fn setup<'a>(scene: &'a Scene, method: Method, heuristic: MisHeuristic) -> Pulse
 /// and last surface vertices lie inside the footprint and the field of view.
 fn random_path(st: &PulseSetup, rng: &mut Rng, order: usize) -> Vec<Vertex> {
     let mut v = vec![Vertex::endpoint(
-        Kind::Laser,
+        VertexKind::Laser,
         st.laser.position,
         -DVec3::Z,
         1.0,
@@ -67,13 +67,13 @@ fn random_path(st: &PulseSetup, rng: &mut Rng, order: usize) -> Vec<Vertex> {
         .normalize();
         // material 0 reflects on both sides (differently) and transmits: every path is
         // possible, so every strategy has a density
-        let mut s = Vertex::endpoint(Kind::Surface, p, n, 0.0);
+        let mut s = Vertex::endpoint(VertexKind::Surface, p, n, 0.0);
         s.surface = 0;
         v.push(s);
     }
     let q = st.receiver.sample_point(rng.uniform(), rng.uniform());
     v.push(Vertex::endpoint(
-        Kind::Aperture,
+        VertexKind::Aperture,
         q,
         -DVec3::Z,
         1.0 / st.receiver.area,

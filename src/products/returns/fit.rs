@@ -8,6 +8,9 @@ use crate::waveform::normal_cdf;
 /// A Gaussian's parameters during the fit: centre, sigma (bins), area (photons).
 pub(super) type Params = [f64; 3];
 
+/// Fits every return: seeds grouped where their windows overlap, each group fitted with the
+/// other groups' components held fixed, twice, so that neighbours settle together. One pass
+/// over the groups in time order, which is why it stays one function.
 pub(super) fn fit_all(y: &[f64], peaks: &[Component], threshold: f64, hint: f64) -> Vec<Component> {
     let floor = hint.max(SIGMA_FLOOR);
     let mut seeds: Vec<Params> = peaks

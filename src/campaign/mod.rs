@@ -180,10 +180,32 @@ pub struct Beam {
     pub cross_track_m: f64,
 }
 
+/// How an ALS scanner sweeps its beam across the track.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ScanPattern {
+    /// Back and forth between the scan angles (a galvanometer mirror).
+    Oscillating,
+    /// From one scan angle to the other, then again (a rotating polygon).
+    Line,
+    /// Around a cone at the largest scan angle (a Palmer scanner).
+    Conic,
+}
+
+impl ScanPattern {
+    /// Scan lines per period of `scan_frequency_hz`.
+    pub fn lines_per_period(self) -> f64 {
+        match self {
+            ScanPattern::Oscillating => 2.0,
+            ScanPattern::Line | ScanPattern::Conic => 1.0,
+        }
+    }
+}
+
 #[derive(Clone, Debug, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct Scanner {
-    pub pattern: String,
+    pub pattern: ScanPattern,
     pub scan_angle_deg: [f64; 2],
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub scan_frequency_hz: Option<f64>,

@@ -31,43 +31,15 @@
 //!   keep increasing with emission order. `line` = index of the flight line.
 
 use super::{need, whole_steps, GroundPath, Pulse};
-use crate::campaign::{Platform, PlatformKind, Segment};
+use crate::campaign::{Platform, PlatformKind, ScanPattern, Segment};
 use crate::error::{Error, Result};
 use glam::DVec3;
-
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Pattern {
-    Oscillating,
-    Line,
-    Conic,
-}
-
-impl Pattern {
-    pub const NAMES: &'static str = "oscillating, line, conic";
-
-    pub fn parse(name: &str) -> Option<Pattern> {
-        match name {
-            "oscillating" => Some(Pattern::Oscillating),
-            "line" => Some(Pattern::Line),
-            "conic" => Some(Pattern::Conic),
-            _ => None,
-        }
-    }
-
-    /// Scan lines per period of `scan_frequency_hz`.
-    fn lines_per_period(self) -> f64 {
-        match self {
-            Pattern::Oscillating => 2.0,
-            Pattern::Line | Pattern::Conic => 1.0,
-        }
-    }
-}
 
 pub(crate) struct Als<'a> {
     lines: &'a [Segment],
     altitude: f64,
     speed: f64,
-    pattern: Pattern,
+    pattern: ScanPattern,
     min_deg: f64,
     max_deg: f64,
     cone_deg: f64,
@@ -86,13 +58,7 @@ impl<'a> Als<'a> {
             .scanner
             .as_ref()
             .ok_or_else(|| Error::msg("an als platform needs scanner"))?;
-        let pattern = Pattern::parse(&s.pattern).ok_or_else(|| {
-            Error::msg(format!(
-                "unknown scan pattern `{}`; use one of {}",
-                s.pattern,
-                Pattern::NAMES
-            ))
-        })?;
+        let pattern = s.pattern;
         let speed = need(p.speed_m_s, kind, "speed_m_s")?;
         let [min_deg, max_deg] = s.scan_angle_deg;
         let lines_per_s = match s.along_track_step_m {
@@ -104,8 +70,8 @@ impl<'a> Als<'a> {
         };
         let line_step_m = s.along_track_step_m.unwrap_or(speed / lines_per_s);
         let sweep_deg = match pattern {
-            Pattern::Conic => 360.0,
-            Pattern::Line | Pattern::Oscillating => max_deg - min_deg,
+            ScanPattern::Conic => 360.0,
+            ScanPattern::Line | ScanPattern::Oscillating => max_deg - min_deg,
         };
         let look_step_deg = match s.look_angle_step_deg {
             Some(a) => a,
@@ -141,9 +107,9 @@ impl<'a> Als<'a> {
         let step = i as f64 * self.look_step_deg;
         let down = DVec3::NEG_Z;
         match self.pattern {
-            Pattern::Line | Pattern::Oscillating => {
+            ScanPattern::Line | ScanPattern::Oscillating => {
                 // Clamped because whole_steps tolerates a last step overshooting by 1e-9.
-                let theta = if self.pattern == Pattern::Oscillating && j % 2 == 1 {
+                let theta = if self.pattern == ScanPattern::Oscillating && j % 2 == 1 {
                     (self.max_deg - step).max(self.min_deg)
                 } else {
                     (self.min_deg + step).min(self.max_deg)
@@ -151,7 +117,7 @@ impl<'a> Als<'a> {
                 let (s, c) = theta.to_radians().sin_cos();
                 (g.right * s + down * c, theta)
             }
-            Pattern::Conic => {
+            ScanPattern::Conic => {
                 let (s, c) = self.cone_deg.to_radians().sin_cos();
                 let (sa, ca) = step.to_radians().sin_cos();
                 ((g.along * ca + g.right * sa) * s + down * c, self.cone_deg)

@@ -27,7 +27,7 @@ pub mod validate;
 #[cfg(test)]
 mod tests;
 
-pub use als::Pattern;
+pub use crate::campaign::ScanPattern;
 
 pub use pulses_file::write_pulses;
 

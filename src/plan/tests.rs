@@ -29,7 +29,9 @@ fn validate(platform: &str) -> Result<()> {
         path: PathBuf::from("campaign.yaml"),
         text: text(platform),
     };
-    super::check_campaign(&doc, &campaign(platform))
+    // as a run reads it: parsed with located errors, then checked
+    let campaign: Campaign = doc.parse()?;
+    super::check_campaign(&doc, &campaign)
 }
 
 fn error(platform: &str) -> String {
@@ -336,7 +338,10 @@ fn validation_errors_are_located() {
 ",
     );
     assert!(e.starts_with("campaign.yaml:13:"), "{e}");
-    assert!(e.contains("platform.scanner.pattern: unknown scan pattern `zigzag`; use one of oscillating, line, conic"), "{e}");
+    assert!(
+        e.contains("platform.scanner.pattern: unknown variant `zigzag`, expected one of `oscillating`, `line`, `conic`"),
+        "{e}"
+    );
 
     let e = error(
         "platform:

@@ -4,7 +4,7 @@
 //! short for one scan line, a step larger than its range, a plan too big) need the same
 //! derived quantities the planners compute.
 
-use super::{als::Als, kind_phrase, Pattern, MAX_PULSES};
+use super::{als::Als, kind_phrase, ScanPattern, MAX_PULSES};
 use crate::campaign::{Check, Doc, Platform, PlatformKind, Segment};
 use crate::error::Result;
 
@@ -239,16 +239,7 @@ fn als(c: &Check, p: &Platform) -> Result<()> {
     let doc = c.doc;
     c.opt_positive("platform.speed_m_s", p.speed_m_s)?;
     let Some(s) = &p.scanner else { return Ok(()) };
-    let pattern = Pattern::parse(&s.pattern).ok_or_else(|| {
-        doc.error(
-            "platform.scanner.pattern",
-            format!(
-                "unknown scan pattern `{}`; use one of {}",
-                s.pattern,
-                Pattern::NAMES
-            ),
-        )
-    })?;
+    let pattern = s.pattern;
     let key = "platform.scanner.scan_angle_deg";
     let [lo, hi] = s.scan_angle_deg;
     for a in [lo, hi] {
@@ -298,7 +289,7 @@ fn als(c: &Check, p: &Platform) -> Result<()> {
                 "prf_hz is too low: the derived look angle step is",
             ),
         };
-        let sweep = if pattern == Pattern::Conic {
+        let sweep = if pattern == ScanPattern::Conic {
             "a turn (360°)".to_string()
         } else {
             format!("the scan range ({}°)", hi - lo)

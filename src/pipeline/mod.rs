@@ -172,8 +172,10 @@ impl<'a> RunFolder<'a> {
     fn open(loaded: &Loaded, out: &'a Path, opts: &'a RunOptions) -> Result<RunFolder<'a>> {
         std::fs::create_dir_all(out).map_err(|e| Error::io(out, "cannot create run folder", e))?;
         let manifest_path = out.join("manifest.json");
-        // shards share the folder with each other: they keep what is there, like a resume
-        let keep = opts.resume || opts.shard.is_some();
+        // shards share the folder with each other, and `--stages` picks up where earlier
+        // stages left off: both keep what is there, like a resume (the fingerprints still
+        // decide what is trusted)
+        let keep = opts.resume || opts.shard.is_some() || opts.stages.is_some();
         let mut manifest = if keep {
             Manifest::read(&manifest_path).unwrap_or_else(|| {
                 if manifest_path.exists() {

@@ -8,15 +8,104 @@ use arrow_array::{ArrayRef, RecordBatch};
 use arrow_schema::{DataType, Field, Schema};
 use parquet::arrow::ArrowWriter;
 use parquet::basic::{Compression, ZstdLevel};
-use parquet::file::properties::WriterProperties;
+use parquet::file::properties::{EnabledStatistics, WriterProperties};
+use parquet::schema::types::ColumnPath;
 use std::path::Path;
 use std::sync::Arc;
 
+/// How a Parquet file is encoded. Every file lidarsim writes uses [`ENCODING`]; the others
+/// exist to be measured against it (`lidarsim bench`, "Writing waveform parts").
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Encoding {
+    pub name: &'static str,
+    /// Dictionary pages: they pay only for repeated values, which float waveforms rarely have.
+    pub dictionary: bool,
+    /// Min/max statistics on every column, per page (true) or on `pulse_id` alone, per
+    /// column chunk (false): a reader selects pulses by id, never by a bin's value.
+    pub all_statistics: bool,
+    /// zstd level, or None for no compression.
+    pub zstd: Option<i32>,
+    /// BYTE_STREAM_SPLIT for the columns (floats compress better with their bytes grouped).
+    pub byte_stream_split: bool,
+}
+
+/// The encoding of every file lidarsim writes, chosen by measurement (README, "Writing
+/// waveform parts"): no dictionary, statistics on `pulse_id` only, zstd level 1.
+pub const ENCODING: Encoding = Encoding {
+    name: "no dictionary, pulse_id statistics, zstd 1",
+    dictionary: false,
+    all_statistics: false,
+    zstd: Some(1),
+    byte_stream_split: false,
+};
+
+/// The encodings `lidarsim bench` compares, the chosen one among them.
+pub const CANDIDATES: [Encoding; 6] = [
+    Encoding {
+        name: "parquet defaults (dictionary, page statistics), zstd 1",
+        dictionary: true,
+        all_statistics: true,
+        zstd: Some(1),
+        byte_stream_split: false,
+    },
+    Encoding {
+        name: "no dictionary, page statistics, zstd 1",
+        dictionary: false,
+        all_statistics: true,
+        zstd: Some(1),
+        byte_stream_split: false,
+    },
+    ENCODING,
+    Encoding {
+        name: "no dictionary, pulse_id statistics, zstd 3",
+        zstd: Some(3),
+        ..ENCODING
+    },
+    Encoding {
+        name: "no dictionary, pulse_id statistics, byte stream split, zstd 1",
+        byte_stream_split: true,
+        ..ENCODING
+    },
+    Encoding {
+        name: "no dictionary, pulse_id statistics, uncompressed",
+        zstd: None,
+        ..ENCODING
+    },
+];
+
+impl Encoding {
+    pub fn props(&self) -> WriterProperties {
+        let mut b = WriterProperties::builder()
+            .set_created_by(format!("lidarsim {}", env!("CARGO_PKG_VERSION")))
+            .set_dictionary_enabled(self.dictionary)
+            .set_compression(match self.zstd {
+                Some(level) => Compression::ZSTD(ZstdLevel::try_new(level).unwrap_or_default()),
+                None => Compression::UNCOMPRESSED,
+            });
+        if !self.all_statistics {
+            b = b
+                .set_statistics_enabled(EnabledStatistics::None)
+                .set_column_statistics_enabled(
+                    ColumnPath::from("pulse_id"),
+                    EnabledStatistics::Chunk,
+                );
+        }
+        if self.byte_stream_split {
+            b = b.set_encoding(parquet::basic::Encoding::BYTE_STREAM_SPLIT);
+        }
+        b.build()
+    }
+}
+
 pub fn props() -> WriterProperties {
-    WriterProperties::builder()
-        .set_compression(Compression::ZSTD(ZstdLevel::default()))
-        .set_created_by(format!("lidarsim {}", env!("CARGO_PKG_VERSION")))
-        .build()
+    ENCODING.props()
+}
+
+/// Encodes a table as a whole Parquet file in memory.
+pub fn encode(batch: &RecordBatch, props: WriterProperties) -> parquet::errors::Result<Vec<u8>> {
+    let mut w = ArrowWriter::try_new(Vec::new(), batch.schema(), Some(props))?;
+    w.write(batch)?;
+    w.into_inner()
 }
 
 pub fn write_batch(path: &Path, batch: RecordBatch) -> Result<()> {
@@ -65,4 +154,51 @@ pub fn batch(columns: Vec<(&str, ArrayRef)>) -> RecordBatch {
         columns.into_iter().map(|(_, a)| a).collect(),
     )
     .expect("columns of one batch have equal lengths")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use parquet::file::reader::{FileReader, SerializedFileReader};
+
+    /// The files get the chosen encoding: no dictionary page on any column, statistics on
+    /// `pulse_id` and nowhere else, zstd.
+    #[test]
+    fn files_carry_the_chosen_encoding() {
+        let ids: ArrayRef = Arc::new(arrow_array::UInt64Array::from(vec![7u64, 8, 9]));
+        let lists = list_f32((0..3).map(|k| vec![0.0, k as f32, 0.0, 0.0]));
+        let b = batch(vec![("pulse_id", ids), ("laser_photons", lists)]);
+        let reader = |bytes: Vec<u8>, name: &str| {
+            let path = std::env::temp_dir().join(format!("lidarsim_{}_{name}", std::process::id()));
+            std::fs::write(&path, bytes).unwrap();
+            let r = SerializedFileReader::new(std::fs::File::open(&path).unwrap()).unwrap();
+            let _ = std::fs::remove_file(&path);
+            r
+        };
+        let r = reader(encode(&b, props()).unwrap(), "chosen.parquet");
+        let rg = r.metadata().row_group(0);
+        for c in rg.columns() {
+            let name = c.column_path().string();
+            assert!(
+                c.dictionary_page_offset().is_none(),
+                "{name} has a dictionary"
+            );
+            assert_eq!(
+                c.compression(),
+                Compression::ZSTD(ZstdLevel::try_new(1).unwrap())
+            );
+            assert_eq!(c.statistics().is_some(), name == "pulse_id", "{name}");
+        }
+        // and Parquet's defaults would have put a dictionary on the list
+        let r = reader(
+            encode(&b, CANDIDATES[0].props()).unwrap(),
+            "defaults.parquet",
+        );
+        assert!(r
+            .metadata()
+            .row_group(0)
+            .columns()
+            .iter()
+            .any(|c| c.dictionary_page_offset().is_some()));
+    }
 }

@@ -295,7 +295,60 @@ pub fn run(opts: &BenchOptions) -> Result<String> {
     if opts.campaigns {
         text += &campaigns_section(opts)?;
     }
+    text += &parquet_section(opts)?;
     Ok(text)
+}
+
+/// Writing waveform parts: every candidate encoding on one part of the ALS campaign row,
+/// timed (median of 5 writes to memory) and sized, each read back and compared with the
+/// waveforms it was given.
+fn parquet_section(opts: &BenchOptions) -> Result<String> {
+    use crate::parquet_io::{encode, CANDIDATES, ENCODING};
+    use crate::waveform::file::{part_name, read_waveforms, waveform_batch};
+    let mut s = String::from("\n### Writing waveform parts: encoding against size\n\n");
+    let part = opts.dir.join("als_forest/run").join(part_name(0));
+    if !part.is_file() {
+        s += "Skipped: no waveform part of the als_forest row (the campaign rows did not run).\n";
+        return Ok(s);
+    }
+    let waves = read_waveforms(&part)?;
+    let batch = waveform_batch(&waves);
+    let bins: usize = waves.iter().map(|w| w.laser_photons.len()).sum();
+    let _ = writeln!(
+        s,
+        "Part 0 of the als_forest row: {} waveforms, {:.0} bins each on average; median of 5 writes to memory; every encoding reads back equal to what it was given.\n\n| encoding | write ms | size MB |\n| --- | ---: | ---: |",
+        waves.len(),
+        bins as f64 / waves.len().max(1) as f64
+    );
+    let check = opts.dir.join("encoding_check.parquet");
+    for e in CANDIDATES {
+        let mut times = Vec::new();
+        let mut bytes = Vec::new();
+        for _ in 0..5 {
+            let t = Instant::now();
+            bytes = encode(&batch, e.props())
+                .map_err(|err| Error::data(&part, format!("{}: {err}", e.name)))?;
+            times.push(t.elapsed().as_secs_f64());
+        }
+        std::fs::write(&check, &bytes).map_err(|err| Error::io(&check, "cannot write", err))?;
+        // compared as text: a NaN (a figure with no meaning for the run) equals itself there
+        if format!("{:?}", read_waveforms(&check)?) != format!("{waves:?}") {
+            return Err(Error::data(
+                &check,
+                format!("{}: read back differs", e.name),
+            ));
+        }
+        let _ = writeln!(
+            s,
+            "| {}{} | {:.1} | {:.3} |",
+            e.name,
+            if e == ENCODING { " (lidarsim's)" } else { "" },
+            1e3 * median(&mut times),
+            bytes.len() as f64 / 1e6
+        );
+    }
+    let _ = std::fs::remove_file(&check);
+    Ok(s)
 }
 
 /// Where the figures come from: the command, the commit and the machine, so that a table

@@ -26,7 +26,12 @@ pub fn part_name(k: usize) -> String {
 /// "Outputs"), in the file's column order: the function is as long as the contract, and
 /// splitting it would scatter the contract over several places.
 pub fn write_waveforms(path: &Path, w: &[Waveform]) -> Result<()> {
-    let b = batch(vec![
+    write_batch(path, waveform_batch(w))
+}
+
+/// The waveforms as the table a part file holds.
+pub fn waveform_batch(w: &[Waveform]) -> arrow_array::RecordBatch {
+    batch(vec![
         (
             "pulse_id",
             Arc::new(UInt64Array::from_iter_values(w.iter().map(|r| r.pulse_id))),
@@ -133,8 +138,7 @@ pub fn write_waveforms(path: &Path, w: &[Waveform]) -> Result<()> {
                 w.iter().map(|r| r.paths_per_ray),
             )),
         ),
-    ]);
-    write_batch(path, b)
+    ])
 }
 
 /// Reads a waveform part back (used by tests and later stages).

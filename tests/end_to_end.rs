@@ -936,4 +936,15 @@ fn resume_over_damaged_or_foreign_part_files() {
     let log = resume_redoes(&camp, &complete, &clean);
     assert!(log.contains("a part file is missing or damaged"), "{log}");
     assert!(log.contains("1 parts simulated"), "{log}");
+
+    // the plan's and the products' files damaged under their final names: the manifest's
+    // checksums catch them and their stages are redone
+    truncate_half(&complete.join("pulses.parquet"));
+    std::fs::write(complete.join("points.las"), b"not a LAS file").unwrap();
+    let log = resume_redoes(&camp, &complete, &clean);
+    assert!(
+        log.contains("pulses.parquet is not what the plan stage wrote"),
+        "{log}"
+    );
+    assert!(log.contains("0 parts simulated"), "{log}");
 }

@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Compares two folders of runs (from tools/run_bundled.sh, or two run folders) file by file.
-# Every file must be byte-identical, except that in manifest.json (`wall_time_s`) and report.md
-# (`simulation wall time`) the lines that hold wall times are masked before comparing, and
+# Every file must be byte-identical, except that in manifest.json (`wall_time_s`, and the
+# checksum of report.md, which holds a wall time) and report.md (`simulation wall time`) the
+# lines that hold wall times are masked before comparing, and
 # waveforms/*.stats.csv (seconds per pulse) and *.log are not compared at all.
 # Exit 0 when all compared files are identical, 1 otherwise.
 set -uo pipefail
@@ -19,7 +20,7 @@ timed() {
 # the file with its wall-time lines masked
 masked() {
   case "$1" in
-    *manifest.json) sed -E 's/"wall_time_s": [0-9.e+-]+/"wall_time_s": _/' "$1" ;;
+    *manifest.json) sed -E 's/"wall_time_s": [0-9.e+-]+/"wall_time_s": _/; s/"report.md": "[0-9a-f]+"/"report.md": _/' "$1" ;;
     *report.md) sed -E 's/^\| simulation wall time \|.*$/| simulation wall time | _ |/' "$1" ;;
     *) cat "$1" ;;
   esac

@@ -17,6 +17,11 @@ pub struct StageRecord {
     pub wall_time_s: f64,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub note: Option<String>,
+    /// FNV-1a of each output file as the stage wrote it (waveform parts excepted: each is
+    /// checked whole by its footer and row count), so that `--resume` never trusts a file
+    /// damaged or replaced since.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub checksums: BTreeMap<String, String>,
 }
 
 #[derive(Clone, Debug, Default, Serialize, Deserialize, PartialEq)]
@@ -56,14 +61,26 @@ pub(super) fn fingerprint(parts: &[&[u8]]) -> String {
     format!("{h:016x}")
 }
 
+/// The checksum of a file's bytes, or None when it cannot be read.
+pub(super) fn file_checksum(path: &Path) -> Option<String> {
+    let bytes = std::fs::read(path).ok()?;
+    Some(fingerprint(&[&bytes]))
+}
+
 pub(super) fn record(
     m: &mut Manifest,
+    out: &Path,
     stage: Stage,
     fp: &str,
     outputs: Vec<String>,
     t: Instant,
     note: Option<String>,
 ) {
+    let checksums = outputs
+        .iter()
+        .filter(|o| !o.starts_with("waveforms/"))
+        .filter_map(|o| Some((o.clone(), file_checksum(&out.join(o))?)))
+        .collect();
     m.stages.insert(
         stage.name().into(),
         StageRecord {
@@ -72,8 +89,30 @@ pub(super) fn record(
             outputs,
             wall_time_s: (t.elapsed().as_secs_f64() * 1000.0).round() / 1000.0,
             note,
+            checksums,
         },
     );
+}
+
+/// Forgets every stage one of whose files no longer matches what it wrote (damaged,
+/// truncated, replaced), with every later stage; returns each such stage and its file.
+pub(super) fn forget_damaged(m: &mut Manifest, out: &Path) -> Vec<(Stage, String)> {
+    let mut damaged = Vec::new();
+    for stage in Stage::ALL {
+        let Some(r) = m.stages.get(stage.name()) else {
+            continue;
+        };
+        let bad = r
+            .checksums
+            .iter()
+            .find(|(f, sum)| file_checksum(&out.join(f)).as_deref() != Some(sum.as_str()));
+        if let Some((f, _)) = bad {
+            damaged.push((stage, f.clone()));
+            m.stages.remove(stage.name());
+            invalidate_after(m, stage);
+        }
+    }
+    damaged
 }
 
 /// A stage redone makes every later stage stale.

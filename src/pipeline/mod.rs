@@ -13,7 +13,7 @@ mod simulate;
 pub mod sweep;
 
 pub use manifest::StageRecord;
-use manifest::{fingerprint, invalidate_after, record, save, Manifest};
+use manifest::{fingerprint, forget_damaged, invalidate_after, record, save, Manifest};
 use simulate::{part_range, simulate_parts};
 pub use simulate::{probe_rays_per_second, simulate};
 use sweep::run_sweep;
@@ -191,6 +191,13 @@ impl<'a> RunFolder<'a> {
             Manifest::default()
         };
         if keep {
+            for (stage, file) in forget_damaged(&mut manifest, out) {
+                log(&format!(
+                    "{}: {file} is not what the {} stage wrote: that stage is redone",
+                    out.display(),
+                    stage.name()
+                ));
+            }
             // another shard may be writing beside a shard: only a plain resume, alone on the
             // folder, removes temporary files (left by a crash or a kill)
             if opts.shard.is_none() {
@@ -236,7 +243,7 @@ impl<'a> RunFolder<'a> {
         note: Option<String>,
         status: &str,
     ) -> Result<()> {
-        record(&mut self.manifest, stage, fp, outputs, t, note);
+        record(&mut self.manifest, self.out, stage, fp, outputs, t, note);
         if let Some(r) = self.manifest.stages.get_mut(stage.name()) {
             r.status = status.into();
         }

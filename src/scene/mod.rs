@@ -344,6 +344,15 @@ impl Scene {
         })
     }
 
+    /// True when the ray from `a` along the unit vector `dir` meets any facet other than
+    /// `skip_a` before it leaves the scene: an any-hit query (the traversal stops at the first
+    /// blocker), for visibility towards a light at infinity such as the sun.
+    pub fn occluded_towards(&self, a: DVec3, dir: DVec3, skip_a: FacetId) -> bool {
+        // a point beyond the clip box: no facet lies between it and the box
+        let beyond = (self.clip_hi - self.clip_lo).length() + (a - self.clip_lo).length() + 1.0;
+        self.occluded(a, a + dir * beyond, skip_a, FacetId::NONE)
+    }
+
     /// True when the open segment from `a` to `b` crosses any facet other than `skip_a`
     /// (the facet `a` lies on) and `skip_b` (the facet `b` lies on).
     pub fn occluded(&self, a: DVec3, b: DVec3, skip_a: FacetId, skip_b: FacetId) -> bool {

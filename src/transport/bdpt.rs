@@ -292,10 +292,7 @@ fn connect_to_lights(setup: &PulseSetup, acc: &mut Accum, b: &mut Buffers) {
                 q_sun,
             )];
             if let Some((c, _)) = contribution(setup, &sun_light, cam) {
-                if scene
-                    .intersect(y.p, -sun.dir, f64::INFINITY, y.facet)
-                    .is_none()
-                {
+                if !scene.occluded_towards(y.p, -sun.dir, y.facet) {
                     let w = mis_weight(setup, &sun_light, cam, &mut b.scratch);
                     acc.add_solar(c * w);
                 }

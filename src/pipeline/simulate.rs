@@ -3,7 +3,7 @@
 
 use super::PART_PULSES;
 use crate::campaign::Loaded;
-use crate::error::Result;
+use crate::error::{Error, Result};
 use crate::plan::Pulse;
 use crate::progress::{log, progress};
 use crate::scene::Scene;
@@ -18,7 +18,9 @@ use std::path::Path;
 use std::time::Instant;
 
 /// Simulates the given parts, each written when complete. Pulses within a part and each
-/// pulse's ray chunks run in parallel. Returns (rays traced, parts written).
+/// pulse's ray chunks run in parallel, and a finished part is encoded and written on a thread
+/// of its own while the workers go on with the next one: the queue holds one finished part
+/// at most, so memory stays at about two parts. Returns (rays traced, parts written).
 pub(super) fn simulate_parts(
     loaded: &Loaded,
     scene: &Scene,
@@ -35,30 +37,46 @@ pub(super) fn simulate_parts(
     let mut rays = 0u64;
     let mut done_pulses = 0usize;
     let terminal = std::io::stderr().is_terminal();
-    for (i, &k) in todo.iter().enumerate() {
-        let range = part_range(k, pulses.len());
-        let (waveforms, secs) = simulate(loaded, scene, &pulses[range], &bar);
-        write_waveforms(&out.join(part_name(k)), &waveforms)?;
-        write_pulse_stats(
-            &out.join(format!("waveforms/part-{k:05}.stats.csv")),
-            &waveforms,
-            &secs,
-        )?;
-        rays += waveforms.iter().map(|w| w.rays as u64).sum::<u64>();
-        done_pulses += waveforms.len();
-        let elapsed = t.elapsed().as_secs_f64();
-        let rate = done_pulses as f64 / elapsed;
-        if !terminal {
-            log(&format!(
-                "simulate: part {} ({}/{} parts) done, {:.0} pulses/s, {:.0} s left",
-                k,
-                i + 1,
-                todo.len(),
-                rate,
-                (total - done_pulses) as f64 / rate
-            ));
+    std::thread::scope(|scope| -> Result<()> {
+        let (queue, finished) =
+            std::sync::mpsc::sync_channel::<(usize, Vec<Waveform>, Vec<f64>)>(1);
+        let writer = scope.spawn(move || -> Result<()> {
+            for (k, waveforms, secs) in finished {
+                write_waveforms(&out.join(part_name(k)), &waveforms)?;
+                write_pulse_stats(
+                    &out.join(format!("waveforms/part-{k:05}.stats.csv")),
+                    &waveforms,
+                    &secs,
+                )?;
+            }
+            Ok(())
+        });
+        for (i, &k) in todo.iter().enumerate() {
+            let range = part_range(k, pulses.len());
+            let (waveforms, secs) = simulate(loaded, scene, &pulses[range], &bar);
+            rays += waveforms.iter().map(|w| w.rays as u64).sum::<u64>();
+            done_pulses += waveforms.len();
+            let elapsed = t.elapsed().as_secs_f64();
+            let rate = done_pulses as f64 / elapsed;
+            if !terminal {
+                log(&format!(
+                    "simulate: part {} ({}/{} parts) simulated, {:.0} pulses/s, {:.0} s left",
+                    k,
+                    i + 1,
+                    todo.len(),
+                    rate,
+                    (total - done_pulses) as f64 / rate
+                ));
+            }
+            if queue.send((k, waveforms, secs)).is_err() {
+                break; // the writer stopped on an error, which join returns below
+            }
         }
-    }
+        drop(queue);
+        writer
+            .join()
+            .unwrap_or_else(|_| Err(Error::msg("internal error: the part writer stopped")))
+    })?;
     bar.finish_and_clear();
     let secs = t.elapsed().as_secs_f64();
     if done_pulses > 0 {

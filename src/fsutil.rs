@@ -5,6 +5,11 @@ use std::fs::File;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
+/// What to do when the system refuses a write: nothing half-written is left under a final
+/// name, so a run can be resumed once the cause is gone.
+pub const WRITE_ADVICE: &str =
+    "check the free space and the permissions of that folder (a run resumes with --resume)";
+
 /// The temporary name a file is written under before it is renamed into place.
 pub fn temp_name(path: &Path) -> PathBuf {
     let mut name = path.file_name().unwrap_or_default().to_os_string();
@@ -15,7 +20,8 @@ pub fn temp_name(path: &Path) -> PathBuf {
 /// Writes a file through `write` under a temporary name, syncs it, then renames it.
 pub fn write_atomic<T>(path: &Path, write: impl FnOnce(File) -> Result<T>) -> Result<T> {
     write_atomic_at(path, "", |tmp| {
-        let file = File::create(tmp).map_err(|e| Error::io(tmp, "cannot create file", e))?;
+        let file = File::create(tmp)
+            .map_err(|e| Error::io(tmp, "cannot create file", e).advise(WRITE_ADVICE))?;
         write(file)
     })
 }
@@ -29,7 +35,8 @@ pub fn write_atomic_at<T>(
     write: impl FnOnce(&Path) -> Result<T>,
 ) -> Result<T> {
     if let Some(dir) = path.parent() {
-        std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, "cannot create folder", e))?;
+        std::fs::create_dir_all(dir)
+            .map_err(|e| Error::io(dir, "cannot create folder", e).advise(WRITE_ADVICE))?;
     }
     let mut tmp = temp_name(path).into_os_string();
     tmp.push(suffix);
@@ -46,7 +53,7 @@ pub fn write_atomic_at<T>(
     }
     if let Err(e) = std::fs::rename(&tmp, path) {
         let _ = std::fs::remove_file(&tmp);
-        return Err(Error::io(path, "cannot move file into place", e));
+        return Err(Error::io(path, "cannot move file into place", e).advise(WRITE_ADVICE));
     }
     Ok(out)
 }
@@ -54,7 +61,7 @@ pub fn write_atomic_at<T>(
 pub fn write_text_atomic(path: &Path, text: &str) -> Result<()> {
     write_atomic(path, |mut f| {
         f.write_all(text.as_bytes())
-            .map_err(|e| Error::io(path, "cannot write", e))
+            .map_err(|e| Error::io(path, "cannot write", e).advise(WRITE_ADVICE))
     })
 }
 
@@ -76,7 +83,7 @@ where
         .map_err(|e| Error::data(path, format!("cannot encode CSV: {e}")))?;
     write_atomic(path, |mut f| {
         f.write_all(&bytes)
-            .map_err(|e| Error::io(path, "cannot write", e))
+            .map_err(|e| Error::io(path, "cannot write", e).advise(WRITE_ADVICE))
     })
 }
 

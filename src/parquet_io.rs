@@ -110,7 +110,9 @@ pub fn encode(batch: &RecordBatch, props: WriterProperties) -> parquet::errors::
 
 pub fn write_batch(path: &Path, batch: RecordBatch) -> Result<()> {
     write_atomic(path, |file| {
-        let err = |e: parquet::errors::ParquetError| Error::io(path, "cannot write Parquet", e);
+        let err = |e: parquet::errors::ParquetError| {
+            Error::io(path, "cannot write Parquet", e).advise(crate::fsutil::WRITE_ADVICE)
+        };
         let mut w = ArrowWriter::try_new(file, batch.schema(), Some(props())).map_err(err)?;
         w.write(&batch).map_err(err)?;
         w.close().map_err(err)?;

@@ -170,7 +170,9 @@ struct RunFolder<'a> {
 impl<'a> RunFolder<'a> {
     /// Creates the folder, or takes it over with its manifest when resuming or sharding.
     fn open(loaded: &Loaded, out: &'a Path, opts: &'a RunOptions) -> Result<RunFolder<'a>> {
-        std::fs::create_dir_all(out).map_err(|e| Error::io(out, "cannot create run folder", e))?;
+        std::fs::create_dir_all(out).map_err(|e| {
+            Error::io(out, "cannot create run folder", e).advise(crate::fsutil::WRITE_ADVICE)
+        })?;
         let manifest_path = out.join("manifest.json");
         // shards share the folder with each other, and `--stages` picks up where earlier
         // stages left off: both keep what is there, like a resume (the fingerprints still

@@ -948,3 +948,47 @@ fn resume_over_damaged_or_foreign_part_files() {
     );
     assert!(log.contains("0 parts simulated"), "{log}");
 }
+
+/// One run per folder: a second run started while the first works exits 1 naming the first's
+/// PID; once the first is killed (SIGKILL leaves its lock behind), a resume takes the stale
+/// lock over, finishes, and leaves no lock.
+#[test]
+fn a_busy_folder_is_refused_and_a_stale_lock_taken_over() {
+    let dir = tmp("e2e_lock");
+    plane_scene(&dir, 0.3, 30.0);
+    // long enough (thousands of pulses at 2000 rays) that the second run starts before it ends
+    let camp = write(
+        &dir,
+        "campaign.yaml",
+        "name: busy\nscene: plane.yaml\nseed: 8\nwavelength_nm: 1064\ninstrument: { kind: waveform, pulse_energy_j: 0.00001, pulse_fwhm_ns: 3, footprint_half_angle_mrad: 0.3, fov_half_angle_mrad: 0.5, receiver_area_m2: 0.01, bin_ns: 1 }\nplatform: { kind: track, altitude_m: 100, track: { start: [-20, 0], end: [20, 0] }, along_track_step_m: 0.005 }\nsimulation: { method: forward, rays_per_pulse: 2000, max_order: 1 }\n",
+    );
+    let out = dir.join("run");
+    let (c, o) = (camp.to_str().unwrap(), out.to_str().unwrap());
+    let mut first = std::process::Command::new(env!("CARGO_BIN_EXE_lidarsim"))
+        .args(["run", c, "--out", o])
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let lock = out.join("run.lock");
+    let t = std::time::Instant::now();
+    while !lock.exists() && t.elapsed().as_secs() < 30 {
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+    assert!(lock.exists(), "the first run never took the folder");
+    let (code, _, err) = lidarsim(&["run", c, "--out", o, "--resume"]);
+    assert_eq!(code, 1, "{err}");
+    assert!(
+        err.contains(&format!(
+            "another lidarsim run (PID {}) is working in this folder",
+            first.id()
+        )),
+        "{err}"
+    );
+    first.kill().unwrap();
+    first.wait().unwrap();
+    assert!(lock.exists(), "SIGKILL leaves the lock behind");
+    let log = run_ok(&camp, &out, &["--resume"]);
+    assert!(log.contains("complete"), "{log}");
+    assert!(!lock.exists(), "the lock goes when the run ends");
+}

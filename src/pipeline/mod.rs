@@ -165,6 +165,82 @@ struct RunFolder<'a> {
     opts: &'a RunOptions,
     manifest_path: PathBuf,
     manifest: Manifest,
+    /// Held while the run works in the folder (none for a shard: shards share it).
+    _lock: Option<FolderLock>,
+}
+
+/// An exclusive claim on a run folder: `run.lock` holds the owner's process id and goes when
+/// the run ends. A lock whose process is gone (killed) is stale and taken over.
+struct FolderLock {
+    path: PathBuf,
+}
+
+impl FolderLock {
+    fn take(out: &Path) -> Result<FolderLock> {
+        let path = out.join("run.lock");
+        // the lock appears with its content or not at all: written aside, then hard-linked
+        // into place, which fails when a lock is there
+        let mine = crate::fsutil::temp_name(&path);
+        std::fs::write(&mine, std::process::id().to_string()).map_err(|e| {
+            Error::io(&mine, "cannot write the folder's lock", e)
+                .advise(crate::fsutil::WRITE_ADVICE)
+        })?;
+        let taken = (|| {
+            for _ in 0..3 {
+                match std::fs::hard_link(&mine, &path) {
+                    Ok(()) => return Ok(FolderLock { path: path.clone() }),
+                    Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {
+                        let holder = std::fs::read_to_string(&path)
+                            .ok()
+                            .and_then(|t| t.trim().parse::<u32>().ok());
+                        if let Some(pid) = holder.filter(|pid| process_alive(*pid)) {
+                            return Err(Error::file(
+                                out,
+                                format!(
+                                    "another lidarsim run (PID {pid}) is working in this folder"
+                                ),
+                            )
+                            .advise(
+                                "wait for it to end or stop it, then run again with --resume",
+                            ));
+                        }
+                        // stale: left by a run that was killed
+                        let _ = std::fs::remove_file(&path);
+                    }
+                    // a file system without hard links: create it in place instead
+                    Err(_) => {
+                        use std::io::Write as _;
+                        let mut f = std::fs::OpenOptions::new()
+                            .write(true)
+                            .create_new(true)
+                            .open(&path)
+                            .map_err(|e| {
+                                Error::io(&path, "cannot take the folder's lock", e)
+                                    .advise(crate::fsutil::WRITE_ADVICE)
+                            })?;
+                        let _ = write!(f, "{}", std::process::id());
+                        return Ok(FolderLock { path: path.clone() });
+                    }
+                }
+            }
+            Err(Error::file(&path, "cannot take the folder's lock")
+                .advise("remove it and run again"))
+        })();
+        let _ = std::fs::remove_file(&mine);
+        taken
+    }
+}
+
+impl Drop for FolderLock {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_file(&self.path);
+    }
+}
+
+/// Whether a process with this id runs (Linux: /proc; elsewhere a lock is never held against
+/// another run).
+fn process_alive(pid: u32) -> bool {
+    pid != std::process::id() && Path::new(&format!("/proc/{pid}")).exists()
 }
 
 impl<'a> RunFolder<'a> {
@@ -173,6 +249,10 @@ impl<'a> RunFolder<'a> {
         std::fs::create_dir_all(out).map_err(|e| {
             Error::io(out, "cannot create run folder", e).advise(crate::fsutil::WRITE_ADVICE)
         })?;
+        let lock = match opts.shard {
+            None => Some(FolderLock::take(out)?),
+            Some(_) => None,
+        };
         let manifest_path = out.join("manifest.json");
         // shards share the folder with each other, and `--stages` picks up where earlier
         // stages left off: both keep what is there, like a resume (the fingerprints still
@@ -222,6 +302,7 @@ impl<'a> RunFolder<'a> {
             opts,
             manifest_path,
             manifest,
+            _lock: lock,
         })
     }
 

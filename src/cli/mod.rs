@@ -116,10 +116,10 @@ pub struct GenerateArgs {
     /// Output folder (the scene file is OUT/scene.yaml or similar, printed at the end).
     #[arg(long)]
     out: PathBuf,
-    /// Trees (forest, orchard).
+    /// Trees (forest, orchard, town).
     #[arg(long)]
     trees: Option<usize>,
-    /// Leaf area index to aim for (forest, orchard).
+    /// Leaf area index to aim for (forest, orchard, town).
     #[arg(long)]
     lai: Option<f64>,
     /// Scene size in metres, `X` or `X,Y`.

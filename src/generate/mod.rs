@@ -3,7 +3,8 @@
 //!
 //! - [`generate`] / [`generate_with_summary`] write a [`SceneKind`]: a forest after the RAMI-IV
 //!   Järvselja birch stand (1029 trees of 7 species on a sloping hectare, over 10^8 facets
-//!   once instanced), an orchard after the RAMI-V Wellington Citrus Orchard, or flat soil.
+//!   once instanced), an orchard after the RAMI-V Wellington Citrus Orchard, flat soil, or a
+//!   town of box buildings and sparse trees.
 //! - [`canopy`] is the older, simpler crown generator the benchmark uses.
 //!
 //! The same kind, seed and options give byte-identical files: every random number comes from
@@ -35,10 +36,19 @@ pub enum SceneKind {
     Orchard,
     /// One soil plane, for DSM and calibration tests.
     Flat,
+    /// Flat ground with box buildings (five per hectare) and sparse broadleaf trees: the
+    /// airborne survey of the throughput bench, where first returns come from roofs, crowns
+    /// and open ground alike.
+    Town,
 }
 
 impl SceneKind {
-    pub const ALL: [SceneKind; 3] = [SceneKind::Forest, SceneKind::Orchard, SceneKind::Flat];
+    pub const ALL: [SceneKind; 4] = [
+        SceneKind::Forest,
+        SceneKind::Orchard,
+        SceneKind::Flat,
+        SceneKind::Town,
+    ];
 
     /// The lowercase name used on the command line and in file names.
     pub fn name(self) -> &'static str {
@@ -46,6 +56,7 @@ impl SceneKind {
             SceneKind::Forest => "forest",
             SceneKind::Orchard => "orchard",
             SceneKind::Flat => "flat",
+            SceneKind::Town => "town",
         }
     }
 }
@@ -106,6 +117,15 @@ impl GenerateOptions {
             SceneKind::Flat => GenerateOptions {
                 size_m: Some([100.0, 100.0]),
                 ..GenerateOptions::default()
+            },
+            SceneKind::Town => GenerateOptions {
+                size_m: Some([100.0, 100.0]),
+                trees: Some(60),
+                templates: Some(3),
+                leaves: Some(250),
+                lai: Some(0.4),
+                slope: None,
+                min_spacing_m: Some(4.0),
             },
         }
     }
@@ -220,6 +240,8 @@ pub struct GeneratedSummary {
     /// Total size of the files written, bytes.
     pub bytes: u64,
     pub trees: usize,
+    /// Box buildings (a town), all in one mesh.
+    pub buildings: usize,
     /// The templates (species) in the scene file's order; empty for a flat scene.
     pub templates: Vec<TemplateSummary>,
     /// Facets once instanced.
@@ -260,6 +282,7 @@ pub fn generate_with_summary(
         SceneKind::Forest => stand::forest(seed, out_dir, &o),
         SceneKind::Orchard => stand::orchard(seed, out_dir, &o),
         SceneKind::Flat => stand::flat(seed, out_dir, &o),
+        SceneKind::Town => stand::town(seed, out_dir, &o),
     }
 }
 

@@ -1,4 +1,4 @@
-//! Stand layouts (forest, orchard, flat ground), their materials and scene files.
+//! Stand layouts (forest, orchard, flat ground, town), their materials and scene files.
 
 use super::tree::{self, fmt4, LeafAngle, Profile, TreeShape};
 use super::{write_file, GeneratedSummary, SceneKind, TemplateSummary};
@@ -309,6 +309,17 @@ fn material_line(yaml: &mut String, o: &Optics) {
         let _ = write!(yaml, ", transmittance: {{ 532: {t1}, 1064: {t2} }}");
     }
     let _ = writeln!(yaml, " }}   # {}", o.source);
+}
+
+/// The bark and leaf materials of the templates, each once, in the templates' order.
+fn template_materials(yaml: &mut String, plans: &[TemplatePlan]) {
+    let mut names: Vec<&str> = Vec::new();
+    for m in plans.iter().flat_map(|p| [p.bark, p.leaf]) {
+        if !names.contains(&m.name) {
+            names.push(m.name);
+            material_line(yaml, m);
+        }
+    }
 }
 
 fn round4(v: f64) -> f64 {
@@ -675,13 +686,7 @@ pub(super) fn forest(seed: u64, dir: &Path, o: &StandOptions) -> Result<Generate
     );
     yaml.push_str("name: forest\nmaterials:\n");
     material_line(&mut yaml, &SOIL);
-    let mut names: Vec<&str> = Vec::new();
-    for m in plans.iter().flat_map(|p| [p.bark, p.leaf]) {
-        if !names.contains(&m.name) {
-            names.push(m.name);
-            material_line(&mut yaml, m);
-        }
-    }
+    template_materials(&mut yaml, plans.as_slice());
     let _ = writeln!(
         yaml,
         "objects:\n  - heightfield: {{ file: terrain.csv, cell_m: {}, material: soil, class: ground }}",
@@ -834,6 +839,233 @@ pub(super) fn flat(seed: u64, dir: &Path, o: &StandOptions) -> Result<GeneratedS
     finish(summary, dir.join("flat.yaml"), &yaml)
 }
 
+/// Roofs: concrete and bitumen roofing, rounded (ASTER/ECOSTRESS man-made materials).
+static ROOF: Optics = Optics {
+    name: "roof",
+    reflectance: [0.15, 0.25],
+    transmittance: [0.0, 0.0],
+    source: "typical concrete/bitumen roofing, rounded (ASTER/ECOSTRESS man-made materials)",
+};
+
+/// Walls: light render and brick, rounded (ASTER/ECOSTRESS man-made materials).
+static WALL: Optics = Optics {
+    name: "wall",
+    reflectance: [0.30, 0.40],
+    transmittance: [0.0, 0.0],
+    source: "typical light render and brick, rounded (ASTER/ECOSTRESS man-made materials)",
+};
+
+/// One box building: centre, half sizes along its own axes, rotation about z and height.
+struct Building {
+    x: f64,
+    y: f64,
+    half: [f64; 2],
+    rotation: f64,
+    height: f64,
+}
+
+impl Building {
+    /// Radius of the circle around its footprint.
+    fn reach(&self) -> f64 {
+        self.half[0].hypot(self.half[1])
+    }
+
+    /// Corners of the footprint, counter-clockwise seen from above.
+    fn corners(&self) -> [[f64; 2]; 4] {
+        let (s, c) = self.rotation.sin_cos();
+        [[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]].map(|[u, v]| {
+            let (a, b) = (u * self.half[0], v * self.half[1]);
+            [
+                round4(self.x + a * c - b * s),
+                round4(self.y + a * s + b * c),
+            ]
+        })
+    }
+}
+
+/// A town: flat ground, box buildings (five per hectare, flat roofs, 6-15 m tall, at least
+/// 3 m apart) and sparse trees (the forest's first species, at least `min_spacing_m` apart and
+/// clear of the buildings by their crown radius); long for the same reason as [`forest`].
+pub(super) fn town(seed: u64, dir: &Path, o: &StandOptions) -> Result<GeneratedSummary> {
+    let mut out = Written::default();
+    let mut rng = stream(seed, 0);
+    let ground_area = o.size[0] * o.size[1];
+    let n_buildings = ((5.0 * ground_area / 1e4).round() as usize).max(1);
+    let mut buildings: Vec<Building> = Vec::with_capacity(n_buildings);
+    let mut attempts = 0usize;
+    while buildings.len() < n_buildings {
+        attempts += 1;
+        if attempts > 100_000 {
+            return Err(Error::msg(format!(
+                "generate: cannot place {n_buildings} buildings on {} × {} m; make the town larger",
+                o.size[0], o.size[1]
+            )));
+        }
+        let half = [5.0 + 5.0 * rng.uniform(), 4.0 + 4.0 * rng.uniform()];
+        let b = Building {
+            x: o.size[0] * rng.uniform(),
+            y: o.size[1] * rng.uniform(),
+            half,
+            rotation: PI * rng.uniform(),
+            height: round4(6.0 + 9.0 * rng.uniform()),
+        };
+        let r = b.reach();
+        let inside =
+            b.x - r >= 0.0 && b.y - r >= 0.0 && b.x + r <= o.size[0] && b.y + r <= o.size[1];
+        let apart = buildings
+            .iter()
+            .all(|q| (q.x - b.x).hypot(q.y - b.y) >= q.reach() + r + 3.0);
+        if inside && apart {
+            buildings.push(b);
+        }
+    }
+    let mut obj = format!(
+        "# {n_buildings} box buildings (lidarsim generate, seed {seed})
+"
+    );
+    for b in &buildings {
+        for [x, y] in b.corners() {
+            for z in [0.0, b.height] {
+                obj.push_str("v ");
+                fmt4(&mut obj, x);
+                obj.push(' ');
+                fmt4(&mut obj, y);
+                obj.push(' ');
+                fmt4(&mut obj, z);
+                obj.push('\n');
+            }
+        }
+    }
+    // vertex 8k + 2c + 1 is corner c of building k at ground, + 1 the same at the roof
+    obj.push_str("g roof\nusemtl roof\n");
+    for k in 0..buildings.len() {
+        let top = |c: usize| 8 * k + 2 * c + 2;
+        let _ = writeln!(obj, "f {} {} {}", top(0), top(1), top(2));
+        let _ = writeln!(obj, "f {} {} {}", top(0), top(2), top(3));
+    }
+    obj.push_str("g wall\nusemtl wall\n");
+    for k in 0..buildings.len() {
+        for c in 0..4 {
+            let d = (c + 1) % 4;
+            let (g0, t0) = (8 * k + 2 * c + 1, 8 * k + 2 * c + 2);
+            let (g1, t1) = (8 * k + 2 * d + 1, 8 * k + 2 * d + 2);
+            // outward: corners run counter-clockwise, so (g0, g1, t1) faces away from the centre
+            let _ = writeln!(obj, "f {g0} {g1} {t1}");
+            let _ = writeln!(obj, "f {g0} {t1} {t0}");
+        }
+    }
+    out.write(dir.join("buildings.obj"), &obj)?;
+
+    let templates = o.templates.min(o.trees);
+    let plans: Vec<TemplatePlan> = (0..templates)
+        .map(|k| {
+            let sp = &SPECIES[k % SPECIES.len()];
+            let mut shape = sp.shape.clone();
+            let mut r = stream(seed, 500 + k as u64);
+            shape.height *= 0.5 + 0.2 * r.uniform();
+            shape.crown_base *= 0.4 + 0.2 * r.uniform();
+            // a garden tree: fewer, shorter branches than one grown in a stand
+            shape.branches /= 3;
+            TemplatePlan {
+                stem: format!("{}{}", sp.name, k + 1),
+                species: format!("{} ({})", sp.name, sp.latin),
+                shape,
+                leaf: &sp.leaf,
+                bark: sp.bark,
+            }
+        })
+        .collect();
+    let crown = plans
+        .iter()
+        .map(|p| p.shape.crown_radius * 1.2)
+        .fold(0.0, f64::max);
+    let mut placed: Vec<PlacedTree> = Vec::with_capacity(o.trees);
+    let mut attempts = 0usize;
+    while placed.len() < o.trees {
+        attempts += 1;
+        if attempts > 1000 * o.trees + 10_000 {
+            return Err(Error::msg(format!(
+                "generate: cannot place {} trees at least {} m apart and clear of {n_buildings} buildings on {} × {} m (placed {}); lower the tree count or the spacing",
+                o.trees, o.min_spacing_m, o.size[0], o.size[1], placed.len()
+            )));
+        }
+        // crowns stay inside the scene
+        let (x, y) = (
+            round4(crown + (o.size[0] - 2.0 * crown).max(0.0) * rng.uniform()),
+            round4(crown + (o.size[1] - 2.0 * crown).max(0.0) * rng.uniform()),
+        );
+        let clear = buildings
+            .iter()
+            .all(|b| (b.x - x).hypot(b.y - y) >= b.reach() + crown)
+            && placed
+                .iter()
+                .all(|t| (t.x - x).hypot(t.y - y) >= o.min_spacing_m);
+        let (rotation, scale) = (rng.uniform(), rng.uniform());
+        let template = if placed.len() < templates {
+            placed.len()
+        } else {
+            (templates as f64 * rng.uniform()) as usize % templates
+        };
+        if clear {
+            placed.push(PlacedTree {
+                x,
+                y,
+                z: 0.0,
+                rotation_deg: (36_000.0 * rotation).round() / 100.0,
+                scale: round4(0.8 + 0.4 * scale),
+                template,
+            });
+        }
+    }
+    let (summaries, objects) = trees(
+        seed,
+        dir,
+        &plans,
+        &placed,
+        o.leaves,
+        o.lai,
+        ground_area,
+        &mut out,
+    )?;
+    let mut summary = summarize(SceneKind::Town, seed, dir, out, summaries, 2, ground_area);
+    let building_facets = 10 * buildings.len() as u64;
+    summary.facets += building_facets;
+    summary.buildings = buildings.len();
+    summary.distinct_facets += building_facets;
+    let mut yaml = header(
+        SceneKind::Town,
+        seed,
+        &[
+            format!(
+                "{n_buildings} box buildings and {} trees of {} templates on flat ground, {} × {} m;",
+                summary.trees,
+                summary.templates.len(),
+                o.size[0],
+                o.size[1]
+            ),
+            format!(
+                "leaf area index {:.3} over the whole ground, {} facets once instanced.",
+                summary.lai, summary.facets
+            ),
+        ],
+    );
+    yaml.push_str("name: town\nmaterials:\n");
+    material_line(&mut yaml, &SOIL);
+    material_line(&mut yaml, &ROOF);
+    material_line(&mut yaml, &WALL);
+    template_materials(&mut yaml, plans.as_slice());
+    let _ = writeln!(
+        yaml,
+        "objects:\n  - plane: {{ z: 0, extent: [[0, 0], [{}, {}]], material: soil, class: ground }}",
+        o.size[0], o.size[1]
+    );
+    yaml.push_str(
+        "  - mesh: { file: buildings.obj, materials: { roof: roof, wall: wall }, class: building }\n",
+    );
+    yaml.push_str(&objects);
+    finish(summary, dir.join("town.yaml"), &yaml)
+}
+
 fn summarize(
     kind: SceneKind,
     seed: u64,
@@ -851,6 +1083,7 @@ fn summarize(
         files: out.files,
         bytes: out.bytes,
         trees: templates.iter().map(|t| t.trees).sum(),
+        buildings: 0,
         facets: ground_facets
             + templates
                 .iter()

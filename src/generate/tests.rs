@@ -46,6 +46,12 @@ fn small(kind: SceneKind) -> GenerateOptions {
             size_m: Some([12.0, 30.0]),
             ..Default::default()
         },
+        SceneKind::Town => GenerateOptions {
+            size_m: Some([40.0, 50.0]),
+            trees: Some(12),
+            leaves: Some(300),
+            ..Default::default()
+        },
     }
 }
 
@@ -90,7 +96,8 @@ fn small_scenes_load_with_their_figures() {
         let s = generate_with_summary(kind, 3, &dir, &small(kind)).unwrap();
         let scene = Scene::load(&s.scene, 532.0).unwrap();
         let st = scene.stats();
-        assert_eq!(st.instances, s.trees as u64 + 1, "{kind}");
+        let buildings = u64::from(s.buildings > 0);
+        assert_eq!(st.instances, s.trees as u64 + 1 + buildings, "{kind}");
         assert_eq!(st.instanced_triangles, s.facets, "{kind}");
         assert_eq!(st.distinct_triangles, s.distinct_facets, "{kind}");
         let lai = leaf_area_index(&scene).unwrap();

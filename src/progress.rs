@@ -32,6 +32,18 @@ pub fn peak_rss_bytes() -> Option<u64> {
     Some(kb * 1024)
 }
 
+/// CPU time of this process so far, user and system, all threads, s (Linux: fields 14 and 15
+/// of /proc/self/stat, in the kernel ABI's fixed 100 ticks per second; None elsewhere).
+pub fn process_cpu_seconds() -> Option<f64> {
+    let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
+    // the command name (field 2) may hold spaces: count fields after its closing parenthesis
+    let rest = &stat[stat.rfind(')')? + 1..];
+    let mut fields = rest.split_whitespace().skip(11);
+    let user: f64 = fields.next()?.parse().ok()?;
+    let system: f64 = fields.next()?.parse().ok()?;
+    Some((user + system) / 100.0)
+}
+
 /// Resets the peak-memory mark to the current resident size, so that each measured piece of
 /// work reports its own peak (Linux >= 4.0: writing 5 to clear_refs).
 pub fn reset_peak_rss() {

@@ -25,6 +25,10 @@ pub struct CampaignRow {
     /// Wall time of the simulate stage, s, and pulses per second in it.
     pub simulate_s: f64,
     pub pulses_per_s: f64,
+    /// Pulses per second over the whole run (plan to products).
+    pub run_pulses_per_s: f64,
+    /// Simulate stage: process CPU time over wall time and threads (1 = every core busy).
+    pub cpu_utilisation: Option<f64>,
     /// Peak resident memory during the run, MB (None where the OS does not tell).
     pub peak_mb: Option<f64>,
     /// What the run measured: solar photons per bin, photons per shot, points per pulse.
@@ -49,38 +53,54 @@ pub fn peak_memory_mb() -> Option<f64> {
     crate::progress::peak_rss_bytes().map(|b| b as f64 / (1024.0 * 1024.0))
 }
 
+/// The scene a bench campaign flies over.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum BenchScene {
+    /// The RAMI orchard (skipped without its files).
+    Orchard,
+    /// The generated forest.
+    Forest,
+    /// The generated town of buildings and sparse trees.
+    Town,
+}
+
 /// The bench's campaigns, in the order of its table: file stem under the campaigns folder
-/// (`pipelines/bench/`), what it measures, and whether it flies over the RAMI orchard.
-pub const CAMPAIGNS: [(&str, &str, bool); 6] = [
+/// (`pipelines/bench/`), what it measures, and the scene it flies over.
+pub const CAMPAIGNS: [(&str, &str, BenchScene); 7] = [
     (
         "orchard_gedi_sun",
         "orchard, GEDI-like waveform, sun 50°/180° (section 3.3)",
-        true,
+        BenchScene::Orchard,
     ),
     (
         "mabel_532",
         "orchard, MABEL-like photon counting, 532 nm, sun off (section 3.4)",
-        true,
+        BenchScene::Orchard,
     ),
     (
         "mabel_532_sun",
         "orchard, MABEL-like photon counting, 532 nm, sun on (section 3.4)",
-        true,
+        BenchScene::Orchard,
     ),
     (
         "mabel_1064",
         "orchard, MABEL-like photon counting, 1064 nm, sun off (section 3.4)",
-        true,
+        BenchScene::Orchard,
     ),
     (
         "mabel_1064_sun",
         "orchard, MABEL-like photon counting, 1064 nm, sun on (section 3.4)",
-        true,
+        BenchScene::Orchard,
     ),
     (
         "als_forest",
         "forest, Riegl VUX-1UAV-like discrete return (section 3.2)",
-        false,
+        BenchScene::Forest,
+    ),
+    (
+        "als_town",
+        "town, airborne discrete return at 19 rays per pulse, bdpt (issue 11's survey)",
+        BenchScene::Town,
     ),
 ];
 
@@ -160,9 +180,9 @@ pub fn plan(dir: &Path, campaigns: &Path, rami: &Path, full: bool) -> Result<Vec
     }
     let rami = find_rami(rami);
     let mut out = Vec::new();
-    for (name, what, orchard) in CAMPAIGNS {
-        let (scene, what) = if orchard {
-            match &rami {
+    for (name, what, source) in CAMPAIGNS {
+        let (scene, what) = match source {
+            BenchScene::Orchard => match &rami {
                 Ok(scene) => (scene.clone(), what.to_string()),
                 Err(why) => {
                     out.push(Planned::Skipped {
@@ -171,10 +191,12 @@ pub fn plan(dir: &Path, campaigns: &Path, rami: &Path, full: bool) -> Result<Vec
                     });
                     continue;
                 }
+            },
+            BenchScene::Forest => {
+                let (scene, size) = forest_scene(dir, full)?;
+                (scene, format!("{what}, {size} m stand"))
             }
-        } else {
-            let (scene, size) = forest_scene(dir, full)?;
-            (scene, format!("{what}, {size} m stand"))
+            BenchScene::Town => (town_scene(dir)?, what.to_string()),
         };
         let overrides = if full {
             serde_yaml::Mapping::new()
@@ -214,6 +236,18 @@ pub fn forest_scene(dir: &Path, full: bool) -> Result<(PathBuf, f64)> {
     Ok((scene, opts.size_m.map_or(100.0, |s| s[0])))
 }
 
+/// The generated town of the bench (made once, then reused): 100 m, 5 buildings, 60 trees.
+pub fn town_scene(dir: &Path) -> Result<PathBuf> {
+    let town_dir = dir.join("town");
+    let scene = match std::fs::metadata(town_dir.join("town.yaml")) {
+        Ok(_) => town_dir.join("town.yaml"),
+        Err(_) => {
+            generate_with_summary(SceneKind::Town, 1, &town_dir, &GenerateOptions::default())?.scene
+        }
+    };
+    Ok(scene.canonicalize().unwrap_or(scene))
+}
+
 /// Runs one planned campaign in `dir/name` and measures it.
 pub fn run_row(dir: &Path, name: &str, what: &str, text: &str) -> Result<CampaignRow> {
     let folder = dir.join(name);
@@ -251,6 +285,14 @@ pub fn run_row(dir: &Path, name: &str, what: &str, text: &str) -> Result<Campaig
         }
         if let Some(pts) = &p.points {
             let _ = write!(result, "{:.2} points per pulse", pts.points_per_pulse);
+            if let Some(d) = &pts.surface_distance {
+                let _ = write!(
+                    result,
+                    ", {:.2}% / {:.3}% within 5 / 25 cm of a surface",
+                    100.0 * d.within_5cm,
+                    100.0 * d.within_25cm
+                );
+            }
             if let Some(d) = DsmReport::read(&run.join("dsm/report.json")) {
                 let _ = write!(
                     result,
@@ -281,6 +323,11 @@ pub fn run_row(dir: &Path, name: &str, what: &str, text: &str) -> Result<Campaig
         run_s,
         simulate_s,
         pulses_per_s: summary.pulses as f64 / simulate_s,
+        run_pulses_per_s: summary.pulses as f64 / run_s,
+        cpu_utilisation: summary
+            .simulate_cpu_s
+            .zip(summary.simulate_wall_s)
+            .map(|(cpu, wall)| cpu / wall / rayon::current_num_threads() as f64),
         peak_mb,
         result,
     })
@@ -289,12 +336,12 @@ pub fn run_row(dir: &Path, name: &str, what: &str, text: &str) -> Result<Campaig
 /// The markdown table of the campaign rows and the skipped ones.
 pub fn table(rows: &[CampaignRow], skipped: &[(String, String)]) -> String {
     let mut s = String::from(
-        "\n### Campaigns (paper sections 3.2-3.4), whole runs through the pipeline\n\n| campaign | what | pulses | rays/pulse | run s | simulate s | pulses/s | peak memory MB | result |\n| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | --- |\n",
+        "\n### Campaigns (paper sections 3.2-3.4 and an airborne survey), whole runs through the pipeline\n\nCPU is the simulate stage's process CPU time over its wall time and the threads.\n\n| campaign | what | pulses | rays/pulse | run s | simulate s | pulses/s simulate | pulses/s run | CPU | peak memory MB | result |\n| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | --- |\n",
     );
     for r in rows {
         let _ = writeln!(
             s,
-            "| {} | {} | {} | {} | {:.1} | {:.1} | {:.0} | {} | {} |",
+            "| {} | {} | {} | {} | {:.1} | {:.1} | {:.0} | {:.0} | {} | {} | {} |",
             r.name,
             r.what,
             r.pulses,
@@ -302,12 +349,15 @@ pub fn table(rows: &[CampaignRow], skipped: &[(String, String)]) -> String {
             r.run_s,
             r.simulate_s,
             r.pulses_per_s,
+            r.run_pulses_per_s,
+            r.cpu_utilisation
+                .map_or("–".to_string(), |u| format!("{:.0}%", 100.0 * u)),
             r.peak_mb.map_or("–".to_string(), |m| format!("{m:.0}")),
             r.result
         );
     }
     for (name, why) in skipped {
-        let _ = writeln!(s, "| {name} | skipped: {why} | | | | | | | |");
+        let _ = writeln!(s, "| {name} | skipped: {why} | | | | | | | | | |");
     }
     s
 }

@@ -74,6 +74,10 @@ pub struct RunSummary {
     pub parts_done: usize,
     /// Whether every stage asked for is complete.
     pub complete: bool,
+    /// Wall and process CPU time of this invocation's simulate stage, s (None where it did
+    /// not run or the OS does not tell): CPU / wall / threads is how busy the cores were.
+    pub simulate_wall_s: Option<f64>,
+    pub simulate_cpu_s: Option<f64>,
 }
 
 /// Runs a campaign file into its run folder (each combination of a sweep into a sub-folder).
@@ -356,6 +360,8 @@ fn run_single(
         seconds: 0.0,
         parts_done: 0,
         complete: true,
+        simulate_wall_s: None,
+        simulate_cpu_s: None,
     };
     let later = [Stage::Simulate, Stage::Products, Stage::Report];
     if !later.iter().any(|s| run.wanted(*s)) {
@@ -372,7 +378,12 @@ fn run_single(
         invalidate_after(&mut run.manifest, Stage::Simulate);
     }
     if run.wanted(Stage::Simulate) && !run.done(Stage::Simulate, &fp_sim) {
+        let (t, cpu) = (Instant::now(), crate::progress::process_cpu_seconds());
         let (rays, parts_done) = simulate_stage(&mut run, loaded, scene, &pulses, &fp_sim)?;
+        summary.simulate_wall_s = Some(t.elapsed().as_secs_f64());
+        summary.simulate_cpu_s = cpu
+            .zip(crate::progress::process_cpu_seconds())
+            .map(|(a, b)| b - a);
         summary.rays = rays;
         summary.parts_done = parts_done;
     } else if run.done(Stage::Simulate, &fp_sim) {

@@ -1,6 +1,7 @@
 //! Products derived from waveforms (section 2.5): discrete returns and their points, the
 //! LAS file, and photon-counting events.
 
+pub mod accuracy;
 pub mod dsm;
 pub mod figures;
 pub mod las;

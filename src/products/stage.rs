@@ -65,8 +65,15 @@ fn class_of(w: &Waveform, centre: f64, sigma: f64) -> u8 {
 /// The decomposition of one waveform as the campaign asks for it.
 fn components(loaded: &Loaded, w: &Waveform) -> Vec<Component> {
     let inst = &loaded.campaign.instrument;
+    let hv = crate::photon_energy_j(loaded.campaign.wavelength_nm);
+    let mc_se: Vec<f32> = w
+        .impulse_energy_se_j
+        .iter()
+        .map(|&s| (s as f64 / hv) as f32)
+        .collect();
     decompose(
         &w.laser_photons,
+        &mc_se,
         inst.detection_threshold_photons,
         inst.max_returns as usize,
         Decomposition::Gaussian,
@@ -280,7 +287,10 @@ pub fn run(
         write_las(&out.join("points.las"), &points)?;
         outputs.push("points.las".to_string());
         outputs.extend(point_figures(loaded, out, examples, &points)?);
-        summary.points = Some(points_summary(&points, pulses.len()));
+        let mut points_summary = points_summary(&points, pulses.len());
+        let distances = crate::products::accuracy::distances(scene, &points, pulses);
+        points_summary.surface_distance = crate::products::accuracy::summarize(&distances);
+        summary.points = Some(points_summary);
         if let Some(res) = want.dsm {
             let dsm_outputs = crate::products::dsm::write_dsm(scene, out, &points, pulses, res)?;
             outputs.extend(dsm_outputs);
@@ -333,5 +343,6 @@ fn points_summary(points: &[Point], pulses: usize) -> PointsSummary {
         area_m2: Some(area).filter(|a| a.is_finite()),
         pulse_density_per_m2: (area > 0.0).then(|| pulses as f64 / area),
         points_by_class,
+        surface_distance: None,
     }
 }

@@ -26,6 +26,9 @@ pub struct PointsSummary {
     pub pulse_density_per_m2: Option<f64>,
     /// Points by LAS class name (`SurfaceClass::las_name`).
     pub points_by_class: BTreeMap<String, usize>,
+    /// How far the points lie from the scene's surfaces; null without points.
+    #[serde(default)]
+    pub surface_distance: Option<crate::products::accuracy::SurfaceDistance>,
 }
 
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
@@ -66,6 +69,7 @@ mod tests {
                 area_m2: Some(0.0),
                 pulse_density_per_m2: None,
                 points_by_class: [("ground".to_string(), 6)].into(),
+                surface_distance: None,
             }),
             photons: None,
         };

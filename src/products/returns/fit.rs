@@ -2,7 +2,7 @@
 //! extra components accepted only when they pay for their parameters in deviance.
 
 use super::detect::{smooth, smoothing_sigma};
-use super::{Component, COLLAPSED_SIGMA, MAX_JOINT, MIN_DEVIANCE_GAIN, SIGMA_FLOOR};
+use super::{Component, Noise, COLLAPSED_SIGMA, MAX_JOINT, MIN_DEVIANCE_GAIN, SIGMA_FLOOR};
 use crate::waveform::normal_cdf;
 
 /// A Gaussian's parameters during the fit: centre, sigma (bins), area (photons).
@@ -11,7 +11,13 @@ pub(super) type Params = [f64; 3];
 /// Fits every return: seeds grouped where their windows overlap, each group fitted with the
 /// other groups' components held fixed, twice, so that neighbours settle together. One pass
 /// over the groups in time order, which is why it stays one function.
-pub(super) fn fit_all(y: &[f64], peaks: &[Component], threshold: f64, hint: f64) -> Vec<Component> {
+pub(super) fn fit_all(
+    y: &[f64],
+    peaks: &[Component],
+    threshold: f64,
+    hint: f64,
+    noise: &Noise,
+) -> Vec<Component> {
     let floor = hint.max(SIGMA_FLOOR);
     let mut seeds: Vec<Params> = peaks
         .iter()
@@ -62,13 +68,20 @@ pub(super) fn fit_all(y: &[f64], peaks: &[Component], threshold: f64, hint: f64)
             .filter(|p| p[0] + 8.0 * p[1] > lo as f64 && p[0] - 8.0 * p[1] < hi as f64)
             .collect()
     };
+    let earliest = groups.first().map_or(f64::INFINITY, |g| g[0][0]);
     let mut fitted: Vec<Vec<Params>> = vec![Vec::new(); groups.len()];
     for (k, g) in groups.iter().enumerate() {
         let others = match bounds(g, hint, y.len()) {
             Some((lo, hi)) => reaching(&fitted, k, lo, hi),
             None => Vec::new(),
         };
-        fitted[k] = fit_group(y, g.clone(), threshold, hint, floor, &others);
+        let limits = Limits {
+            threshold,
+            hint,
+            floor,
+            earliest,
+        };
+        fitted[k] = fit_group(y, g.clone(), &limits, &others, noise);
     }
     {
         for k in 0..fitted.len() {
@@ -102,6 +115,20 @@ pub(super) fn fit_all(y: &[f64], peaks: &[Component], threshold: f64, hint: f64)
     out
 }
 
+/// What a group's fit is held to.
+#[derive(Clone, Copy)]
+struct Limits {
+    /// Least area of a component, photons.
+    threshold: f64,
+    /// The pulse's sigma, bins.
+    hint: f64,
+    /// Least sigma of a component, bins.
+    floor: f64,
+    /// Centre of the waveform's earliest seed: an excess before it may be the first return,
+    /// which the simulation's noise cannot have made (see `decompose`).
+    earliest: f64,
+}
+
 /// Fits one group, then looks in the residual for returns that peak detection missed
 /// (a weak return on the flank of a strong one makes a shoulder, not a maximum).
 ///
@@ -110,11 +137,16 @@ pub(super) fn fit_all(y: &[f64], peaks: &[Component], threshold: f64, hint: f64)
 fn fit_group(
     y: &[f64],
     seeds: Vec<Params>,
-    threshold: f64,
-    hint: f64,
-    floor: f64,
+    limits: &Limits,
     others: &[Params],
+    noise: &Noise,
 ) -> Vec<Params> {
+    let Limits {
+        threshold,
+        hint,
+        floor,
+        earliest,
+    } = *limits;
     let Some((lo, hi)) = bounds(&seeds, hint, y.len()) else {
         return Vec::new();
     };
@@ -156,9 +188,14 @@ fn fit_group(
             let half = (2.0 * hint.max(1.0)).ceil() as usize;
             let (a, b) = (j.saturating_sub(half), (j + half + 1).min(r.len()));
             let area: f64 = r[a..b].iter().sum();
-            let noise = (m[a..b].iter().sum::<f64>() + 1.0).sqrt();
+            let lo = win.offset as usize;
+            let mut var = m[a..b].iter().sum::<f64>() + 1.0;
+            if win.offset + j as f64 + 0.5 > earliest {
+                var += noise.mc_var(lo + a, lo + b);
+            }
+            let sd = var.sqrt();
             // Only a loose screen: the deviance test below decides.
-            if area > threshold && area > 2.0 * noise {
+            if area > threshold && area > 2.0 * sd {
                 let mut t = params.clone();
                 t.push([win.offset + j as f64 + 0.5, hint.max(1.0), area]);
                 trials.push(t);

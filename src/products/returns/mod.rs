@@ -55,8 +55,18 @@ const SIGMA_FLOOR: f64 = 0.1;
 /// parameters): χ²₃ exceeds 16 with probability 0.1%, so noise rarely breeds components,
 /// while two weak returns (~100 photons each) 3.3σ apart still separate.
 const MIN_DEVIANCE_GAIN: f64 = 16.0;
+/// Standard errors a return's area must exceed: below two, a "return" is as likely a draw
+/// of the estimator (one rare multiple-scattering path among a pulse's few rays makes a
+/// spike of its own) or of the photon noise as a surface.
+const MIN_SIGNIFICANCE: f64 = 2.0;
 
 /// Decomposes a waveform into at most `max_returns` returns, ordered by time.
+///
+/// What a detector could resolve decides what is one return (see [`resolve`]): a component
+/// that does not stand out from the noise is part of the return it touches, or no return.
+/// `mc_se_photons` is the Monte Carlo standard error of each bin's photons before the pulse
+/// convolution (empty: an exact waveform): the simulation's own noise, which a few-ray pulse
+/// has plenty of, besides the photon noise a real detector has.
 ///
 /// `threshold_photons` is both the minimum peak height (photons per bin) for detection and
 /// the minimum area (photons) of a reported component. `pulse_sigma_bins` is the emitted
@@ -66,6 +76,7 @@ const MIN_DEVIANCE_GAIN: f64 = 16.0;
 /// the weakest are the least reliable, and a dense canopy must not hide the ground.
 pub fn decompose(
     photons: &[f32],
+    mc_se_photons: &[f32],
     threshold_photons: f64,
     max_returns: usize,
     method: Decomposition,
@@ -94,12 +105,158 @@ pub fn decompose(
     } else {
         0.0
     };
+    let mc_se: Vec<f64> = mc_se_photons
+        .iter()
+        .map(|&s| {
+            if s.is_finite() {
+                s.max(0.0) as f64
+            } else {
+                0.0
+            }
+        })
+        .collect();
+    let noise = Noise { mc_se: &mc_se };
     let peaks = detect_peaks(&y, threshold, hint);
+    let peaks = resolve(peaks, &y, threshold, &noise);
     let comps = match method {
         Decomposition::PeakDetection => peaks,
-        Decomposition::Gaussian => fit_all(&y, &peaks, threshold, hint),
+        Decomposition::Gaussian => fit_all(&y, &peaks, threshold, hint, &noise),
     };
+    let comps = resolve(comps, &y, threshold, &noise);
     select(comps, threshold, max_returns)
+}
+
+/// What a return must stand out from besides its own photon noise: the simulation's.
+pub(super) struct Noise<'a> {
+    /// Monte Carlo standard error of each bin's photons (impulse, before the pulse
+    /// convolution).
+    pub(super) mc_se: &'a [f64],
+}
+
+impl Noise<'_> {
+    /// Monte Carlo variance of the photons in bins [lo, hi). The bins' errors are added as if
+    /// fully correlated, as they are where one ray's paths make a spike over a few bins: the
+    /// one case the test must not miss, and an upper bound otherwise.
+    pub(super) fn mc_var(&self, lo: usize, hi: usize) -> f64 {
+        let hi = hi.min(self.mc_se.len());
+        self.mc_se
+            .get(lo..hi)
+            .map_or(0.0, |v| v.iter().sum::<f64>().powi(2))
+    }
+
+    /// Whether a component's area exceeds [`MIN_SIGNIFICANCE`] standard errors: Poisson noise
+    /// of the area and, with `mc`, the Monte Carlo noise of the bins within one sigma (at
+    /// least one bin) of its centre, where its photons are.
+    pub(super) fn significant(&self, c: &Component, mc: bool) -> bool {
+        let half = c.sigma_bins.max(1.0);
+        let lo = (c.centre_bin - half).floor().max(0.0) as usize;
+        let hi = (c.centre_bin + half).ceil().max(0.0) as usize;
+        let mut var = c.area_photons.max(0.0);
+        if mc {
+            var += self.mc_var(lo, hi);
+        }
+        c.area_photons >= MIN_SIGNIFICANCE * var.sqrt()
+    }
+}
+
+/// The returns a detector could tell apart, in time order, from fitted or detected
+/// components:
+/// 1. components joined by signal above the threshold make a run; in a run, a component
+///    within its photon noise is dropped, and one that does not stand out from the
+///    simulation's noise joins its nearest neighbour that does (all join into one if none
+///    does): the rays of a few-ray pulse on a steep surface make a comb of spikes whose sum
+///    is one return;
+/// 2. a run with no significant component is dropped, unless it is the first: the first
+///    return is light scattered once by the nearest surface the rays met (any longer path
+///    arrives later), a surface however few rays found it, as in any first-hit simulator,
+///    where a later run may be one rare multiple-scattering path.
+pub(super) fn resolve(
+    mut comps: Vec<Component>,
+    y: &[f64],
+    threshold: f64,
+    noise: &Noise,
+) -> Vec<Component> {
+    comps.retain(|c| {
+        c.area_photons > 0.0
+            && c.centre_bin.is_finite()
+            && c.sigma_bins.is_finite()
+            && c.area_photons.is_finite()
+    });
+    comps.sort_by(|a, b| a.centre_bin.total_cmp(&b.centre_bin));
+    let close = comps;
+    let joined = |a: &Component, b: &Component| {
+        let lo = (a.centre_bin.max(0.0) as usize).min(y.len());
+        let hi = (b.centre_bin.max(0.0) as usize).min(y.len());
+        y[lo..hi].iter().all(|&v| v > threshold)
+    };
+    let mut out = Vec::new();
+    let mut start = 0;
+    while start < close.len() {
+        let mut end = start + 1;
+        while end < close.len() && joined(&close[end - 1], &close[end]) {
+            end += 1;
+        }
+        // photon noise is no part of any return; the simulation's noise is part of the
+        // return it sits on
+        let run: Vec<Component> = close[start..end]
+            .iter()
+            .filter(|c| noise.significant(c, false))
+            .copied()
+            .collect();
+        let run = &run[..];
+        let strong: Vec<usize> = (0..run.len())
+            .filter(|&k| noise.significant(&run[k], true))
+            .collect();
+        if strong.is_empty() {
+            if out.is_empty() && !run.is_empty() {
+                out.push(merged(run));
+            }
+        } else {
+            // each weak component joins the significant one nearest in time
+            let mut parts: Vec<Vec<Component>> = strong.iter().map(|&k| vec![run[k]]).collect();
+            for (k, c) in run.iter().enumerate() {
+                if strong.contains(&k) {
+                    continue;
+                }
+                let nearest = (0..strong.len())
+                    .min_by(|&a, &b| {
+                        (run[strong[a]].centre_bin - c.centre_bin)
+                            .abs()
+                            .total_cmp(&(run[strong[b]].centre_bin - c.centre_bin).abs())
+                    })
+                    .unwrap_or(0);
+                parts[nearest].push(*c);
+            }
+            out.extend(parts.iter().map(|p| merged(p)));
+        }
+        start = end;
+    }
+    out
+}
+
+/// One component with the area, centroid and spread (second moment) of several.
+fn merged(parts: &[Component]) -> Component {
+    if let [one] = parts {
+        return *one;
+    }
+    let area: f64 = parts.iter().map(|c| c.area_photons).sum();
+    let centre = parts
+        .iter()
+        .map(|c| c.area_photons * c.centre_bin)
+        .sum::<f64>()
+        / area;
+    let var = parts
+        .iter()
+        .map(|c| c.area_photons * (c.sigma_bins.powi(2) + (c.centre_bin - centre).powi(2)))
+        .sum::<f64>()
+        / area;
+    let sigma = var.sqrt();
+    Component {
+        centre_bin: centre,
+        sigma_bins: sigma,
+        area_photons: area,
+        amplitude: area / (sigma * (2.0 * std::f64::consts::PI).sqrt()),
+    }
 }
 
 fn select(mut comps: Vec<Component>, threshold: f64, max_returns: usize) -> Vec<Component> {

@@ -53,7 +53,7 @@ fn noise_free_gaussians_are_recovered_exactly() {
         for case in 0..200 {
             let (t, len) = random_case(&mut r, count, 5000.0, 100.0);
             let y: Vec<f32> = mean_waveform(&t, len).iter().map(|&v| v as f32).collect();
-            let c = decompose(&y, 2.0, 4, Decomposition::Gaussian, 1.5);
+            let c = decompose(&y, &[], 2.0, 4, Decomposition::Gaussian, 1.5);
             if c.len() != count {
                 missed.push(format!("count {count} case {case}: {c:?} truth {t:?}"));
                 continue;
@@ -93,7 +93,7 @@ fn noisy_gaussians_meet_a_tenth_of_a_bin_and_two_percent() {
                 .iter()
                 .map(|&v| r.poisson(v) as f32)
                 .collect();
-            let c = decompose(&y, 5.0, 4, Decomposition::Gaussian, 1.5);
+            let c = decompose(&y, &[], 5.0, 4, Decomposition::Gaussian, 1.5);
             if c.len() != count {
                 missed.push(format!("count {count} case {case}: {c:?} truth {t:?}"));
                 continue;
@@ -145,7 +145,7 @@ fn poisson_gaussians_are_recovered_to_their_noise() {
                 }
                 real.push((c1 / a, a));
             }
-            let c = decompose(&y, 2.0, 4, Decomposition::Gaussian, 1.5);
+            let c = decompose(&y, &[], 2.0, 4, Decomposition::Gaussian, 1.5);
             if c.len() != count {
                 missed.push(format!("count {count} case {case}: {c:?} truth {t:?}"));
                 continue;
@@ -202,11 +202,15 @@ fn weak_return_below_threshold_is_not_reported() {
     ];
     let y: Vec<f32> = mean_waveform(&t, 90).iter().map(|&v| v as f32).collect();
     for method in [Decomposition::Gaussian, Decomposition::PeakDetection] {
-        let c = decompose(&y, 3.0, 4, method, 2.0);
+        let c = decompose(&y, &[], 3.0, 4, method, 2.0);
         assert_eq!(c.len(), 1, "{method:?}: {c:?}");
         assert!((c[0].centre_bin - 30.5).abs() < 0.05);
         // Lower the threshold and it is there.
-        assert_eq!(decompose(&y, 0.5, 4, method, 2.0).len(), 2, "{method:?}");
+        assert_eq!(
+            decompose(&y, &[], 0.5, 4, method, 2.0).len(),
+            2,
+            "{method:?}"
+        );
     }
 }
 
@@ -235,10 +239,10 @@ fn max_returns_keeps_the_strongest_in_time_order() {
         },
     ];
     let y: Vec<f32> = mean_waveform(&t, 100).iter().map(|&v| v as f32).collect();
-    let c = decompose(&y, 2.0, 2, Decomposition::Gaussian, 2.0);
+    let c = decompose(&y, &[], 2.0, 2, Decomposition::Gaussian, 2.0);
     assert_eq!(c.len(), 2);
     assert!((c[0].centre_bin - 40.5).abs() < 0.01 && (c[1].centre_bin - 80.5).abs() < 0.01);
-    assert!(decompose(&y, 2.0, 0, Decomposition::Gaussian, 2.0).is_empty());
+    assert!(decompose(&y, &[], 2.0, 0, Decomposition::Gaussian, 2.0).is_empty());
 }
 
 #[test]
@@ -256,7 +260,7 @@ fn peak_detection_finds_centres_and_areas() {
         },
     ];
     let y: Vec<f32> = mean_waveform(&t, 80).iter().map(|&v| v as f32).collect();
-    let c = decompose(&y, 2.0, 4, Decomposition::PeakDetection, 2.0);
+    let c = decompose(&y, &[], 2.0, 4, Decomposition::PeakDetection, 2.0);
     assert_eq!(c.len(), 2);
     for (g, f) in t.iter().zip(&c) {
         assert!((f.centre_bin - g.centre).abs() < 0.05, "{f:?}");
@@ -279,19 +283,82 @@ fn shoulder_on_a_strong_return_is_found() {
         },
     ];
     let y: Vec<f32> = mean_waveform(&t, 90).iter().map(|&v| v as f32).collect();
-    let c = decompose(&y, 2.0, 4, Decomposition::Gaussian, 1.5);
+    let c = decompose(&y, &[], 2.0, 4, Decomposition::Gaussian, 1.5);
     assert_eq!(c.len(), 2, "{c:?}");
     assert!((c[1].centre_bin - 52.0).abs() < 0.01 && (c[1].area_photons / 50.0 - 1.0).abs() < 0.01);
 }
 
 #[test]
 fn bad_input_gives_no_returns_and_no_panic() {
-    assert!(decompose(&[], 1.0, 4, Decomposition::Gaussian, 1.0).is_empty());
+    assert!(decompose(&[], &[], 1.0, 4, Decomposition::Gaussian, 1.0).is_empty());
     let y = [f32::NAN, f32::INFINITY, -3.0, 0.0, 5.0, 0.0];
     for m in [Decomposition::Gaussian, Decomposition::PeakDetection] {
-        for c in decompose(&y, 1.0, 4, m, f64::NAN) {
+        for c in decompose(&y, &[], 1.0, 4, m, f64::NAN) {
             assert!(c.centre_bin.is_finite() && c.area_photons.is_finite());
         }
-        assert!(decompose(&[0.0; 50], 1.0, 4, m, 2.0).is_empty());
+        assert!(decompose(&[0.0; 50], &[], 1.0, 4, m, 2.0).is_empty());
     }
+}
+
+/// A strong return and, 17 bins later, a weak one of 230 photons: a surface when the
+/// simulation's error of its bins is small, an estimator spike when that error is as large
+/// as the bump itself (one path among few rays), as in a ground return followed by one
+/// third-order path.
+#[test]
+fn a_later_return_must_stand_out_from_the_simulations_noise() {
+    let sigma = 2.55;
+    let strong = Truth {
+        centre: 40.3,
+        sigma,
+        area: 7.8e6,
+    };
+    let weak = Truth {
+        centre: 57.7,
+        sigma,
+        area: 230.0,
+    };
+    let y: Vec<f32> = mean_waveform(&[strong, weak], 80)
+        .iter()
+        .map(|&v| v as f32)
+        .collect();
+    let mut se = vec![0.0f32; 80];
+    // binning noise of the strong return: ~10 % of its bins, well below its area
+    for (i, s) in se.iter_mut().enumerate().take(44).skip(37) {
+        *s = 0.1 * y[i];
+    }
+    se[57] = 1.0; // a well-sampled weak surface
+    let c = decompose(&y, &se, 5.0, 4, Decomposition::Gaussian, sigma);
+    assert_eq!(c.len(), 2, "{c:?}");
+    se[57] = 230.0; // one path of one ray made it
+    let c = decompose(&y, &se, 5.0, 4, Decomposition::Gaussian, sigma);
+    assert_eq!(c.len(), 1, "{c:?}");
+    assert!((c[0].centre_bin - 40.3).abs() < 0.01, "{c:?}");
+    let c = decompose(&y, &se, 5.0, 4, Decomposition::PeakDetection, sigma);
+    assert_eq!(c.len(), 1, "{c:?}");
+}
+
+/// The earliest return is light scattered once by the nearest surface: kept however noisy
+/// the simulation's estimate of it, where a later one of the same size and error is not.
+#[test]
+fn the_first_return_is_judged_by_its_photon_noise_only() {
+    let sigma = 2.55;
+    let early = Truth {
+        centre: 20.0,
+        sigma,
+        area: 300.0,
+    };
+    let late = Truth {
+        centre: 45.0,
+        sigma,
+        area: 5e5,
+    };
+    let y: Vec<f32> = mean_waveform(&[early, late], 70)
+        .iter()
+        .map(|&v| v as f32)
+        .collect();
+    let mut se = vec![0.0f32; 70];
+    se[20] = 300.0;
+    let c = decompose(&y, &se, 5.0, 4, Decomposition::Gaussian, sigma);
+    assert_eq!(c.len(), 2, "{c:?}");
+    assert!((c[0].centre_bin - 20.0).abs() < 0.05, "{c:?}");
 }

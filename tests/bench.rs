@@ -82,12 +82,19 @@ fn campaign_rows_are_measured_and_missing_data_is_skipped() {
     assert_eq!(row.pulses, 20);
     assert_eq!(row.rays_per_pulse, 50);
     assert!(row.simulate_s > 0.0 && row.pulses_per_s > 0.0);
+    assert!(row.run_pulses_per_s > 0.0 && row.run_pulses_per_s <= row.pulses_per_s);
+    if std::path::Path::new("/proc/self/stat").exists() {
+        // CPU time over wall time and threads: a fraction of the cores, never above all of
+        // them (two 10 ms ticks of slack: a run this short may read as 0)
+        let u = row.cpu_utilisation.unwrap();
+        assert!((0.0..=1.0 + 0.02 / row.simulate_s).contains(&u), "{u}");
+    }
     assert!(row.result.contains("laser") && row.result.contains("photons per shot"));
     if std::path::Path::new("/proc/self/status").exists() {
         assert!(row.peak_mb.unwrap() > 1.0);
     }
     let planned = bc::plan(&dir, &campaigns, &dir.join("no_such_rami.yaml"), false);
-    // the forest row generates a small forest: only check the orchard rows here
+    // the forest and town rows generate their scenes: only check the orchard rows here
     let skipped: Vec<String> = planned
         .unwrap()
         .into_iter()
@@ -100,7 +107,7 @@ fn campaign_rows_are_measured_and_missing_data_is_skipped() {
     assert!(skipped[0].contains("no_such_rami.yaml not found"));
     let table = bc::table(&[row], &[("mabel_532".into(), "absent".into())]);
     assert!(table.contains(
-        "| campaign | what | pulses | rays/pulse | run s | simulate s | pulses/s | peak memory MB | result |"
+        "| campaign | what | pulses | rays/pulse | run s | simulate s | pulses/s simulate | pulses/s run | CPU | peak memory MB | result |"
     ));
     assert!(table.contains("| mabel_plane | plane track | 20 | 50 |"));
     assert!(table.contains("| mabel_532 | skipped: absent |"));

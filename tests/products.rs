@@ -274,9 +274,9 @@ fn a_plane_gives_one_return_at_any_incidence_at_few_rays() {
             ),
         );
     }
-    // 19 rays: the airborne survey of issue 11. With 2000 rays a steep view (≥ 30°) still
-    // splits into several returns: the residual search fits the smeared pulse with more
-    // Gaussians, each significant at 10^6 photons (open in issue 11).
+    // 19 rays: the airborne survey of issue 11. With 2000 rays the views of 30° and steeper
+    // still split into 2-3 returns: the smeared pulse's flat top is fitted with Gaussians
+    // 2.5-3 of their widths apart, each significant at 10^5-10^6 photons (open in issue 11).
     for rays in [19] {
         let text = format!(
             "name: t\nscene: {}\nseed: 9\nwavelength_nm: 1064\ninstrument:\n  kind: discrete_return\n  pulse_energy_j: 0.0001\n  pulse_fwhm_ns: 1.0\n  footprint_half_angle_mrad: 2.5\n  fov_half_angle_mrad: 3.0\n  receiver_area_m2: 0.01\n  bin_ns: 0.25\n  max_returns: 4\n  detection_threshold_photons: 5\nplatform:\n  kind: static\n  pulses:\n{pulses}simulation: {{ method: bdpt, rays_per_pulse: {rays}, max_order: 3 }}\n",

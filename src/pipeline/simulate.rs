@@ -37,6 +37,7 @@ pub(super) fn simulate_parts(
     let mut rays = 0u64;
     let mut done_pulses = 0usize;
     let terminal = std::io::stderr().is_terminal();
+    let mut last_log = 0.0;
     std::thread::scope(|scope| -> Result<()> {
         let (queue, finished) =
             std::sync::mpsc::sync_channel::<(usize, Vec<Waveform>, Vec<f64>)>(1);
@@ -58,7 +59,10 @@ pub(super) fn simulate_parts(
             done_pulses += waveforms.len();
             let elapsed = t.elapsed().as_secs_f64();
             let rate = done_pulses as f64 / elapsed;
-            if !terminal {
+            // a log, not a terminal: a line per tenth of the work, or per minute if slower
+            let tenth = (i + 1) % todo.len().div_ceil(10).max(1) == 0;
+            if !terminal && (tenth || elapsed - last_log >= 60.0) && i + 1 < todo.len() {
+                last_log = elapsed;
                 log(&format!(
                     "simulate: part {} ({}/{} parts) simulated, {:.0} pulses/s, {:.0} s left",
                     k,

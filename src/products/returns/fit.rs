@@ -151,8 +151,10 @@ fn fit_group(
         return Vec::new();
     };
     let win = Window::new(y, lo, hi, Some(others));
-    let Some((mut params, mut dev)) = fit_clean(&win, seeds, floor) else {
-        return Vec::new();
+    // a fit that fails (diverges, or leaves its window) keeps the detector's seeds: it must
+    // not erase a return
+    let Some((mut params, mut dev)) = fit_clean(&win, seeds.clone(), floor) else {
+        return seeds;
     };
     let sk = smoothing_sigma(hint);
     for _ in 0..3 {

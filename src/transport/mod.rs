@@ -135,19 +135,22 @@ impl Vertex {
 /// same whatever the number of threads.
 pub fn simulate_pulse(setup: &PulseSetup, rays: u64) -> Tally {
     let chunks = rays.div_ceil(CHUNK_RAYS);
-    let parts: Vec<Tally> = (0..chunks)
-        .into_par_iter()
-        .map(|c| {
-            let mut rng = Rng::new(setup.seed, setup.pulse_id, c);
-            let mut acc = Accum::new(setup);
-            let mut bufs = Buffers::default();
-            for _ in 0..CHUNK_RAYS.min(rays - c * CHUNK_RAYS) {
-                trace_ray(setup, &mut rng, &mut acc, &mut bufs);
-                acc.end_ray();
-            }
-            acc.tally
-        })
-        .collect();
+    let chunk = |c: u64| {
+        let mut rng = Rng::new(setup.seed, setup.pulse_id, c);
+        let mut acc = Accum::new(setup);
+        let mut bufs = Buffers::default();
+        for _ in 0..CHUNK_RAYS.min(rays - c * CHUNK_RAYS) {
+            trace_ray(setup, &mut rng, &mut acc, &mut bufs);
+            acc.end_ray();
+        }
+        acc.tally
+    };
+    if chunks == 1 {
+        // the common case of a campaign pulse: its one chunk is the total (adding it to
+        // zeros would change no bit: every tallied value is ≥ 0)
+        return chunk(0);
+    }
+    let parts: Vec<Tally> = (0..chunks).into_par_iter().map(chunk).collect();
     let mut total = Tally::new(setup.gate.bins, setup.sub_bins, setup.max_order);
     for p in &parts {
         total.merge(p);

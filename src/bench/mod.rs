@@ -37,7 +37,7 @@ pub struct BenchOptions {
     pub table2_footprints: Vec<f64>,
     /// Largest ray count tried per method in the Table 2 rows.
     pub table2_max_rays: u64,
-    /// Run the campaign rows (orchard GEDI and MABEL, ALS over a forest).
+    /// Run the campaign rows (orchard GEDI and MABEL, ALS over a forest and over a town).
     pub campaigns: bool,
     /// The paper's sizes for the campaign rows (`--full`).
     pub full: bool,

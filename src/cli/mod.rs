@@ -32,8 +32,9 @@ pub enum Command {
     },
     /// The paper's experiments as a benchmark: rays and seconds each method needs for
     /// rRMSE ≤ 5% on a GEDI-like pulse (also by footprint, Table 2), the sun's cost, and whole
-    /// campaigns (orchard GEDI with sun, MABEL tracks, ALS over a forest) with pulses/s and
-    /// peak memory. Quick by default; prints a markdown table and writes bench.md.
+    /// campaigns (orchard GEDI with sun, MABEL tracks, ALS over a forest and over a town)
+    /// with pulses/s, CPU use and peak memory. Quick by default; prints a markdown table and
+    /// writes bench.md.
     Bench(BenchArgs),
 }
 

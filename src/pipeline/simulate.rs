@@ -8,7 +8,7 @@ use crate::plan::Pulse;
 use crate::progress::{log, progress};
 use crate::scene::Scene;
 use crate::sensor::{pulse_sigma_s, Gate, Laser, Receiver, SunSource};
-use crate::transport::{simulate_pulse, PulseSetup};
+use crate::transport::{simulate_pulse_in, PulseSetup, Scratch};
 use crate::waveform::file::{part_name, write_waveforms};
 use crate::waveform::{self, Radiometry, Waveform};
 use indicatif::ProgressBar;
@@ -144,7 +144,7 @@ pub fn simulate(
     };
     pulses
         .par_iter()
-        .map(|p| {
+        .map_init(Scratch::default, |scratch, p| {
             let gate = Gate::for_pulse(inst, p.origin, p.direction, bounds);
             let sub_bins = waveform::sub_bins_per_bin(gate.dt, sigma);
             let sun = sun.map(|s| s.for_gate(inst.pulse_energy_j, gate.dt * gate.bins as f64));
@@ -162,11 +162,11 @@ pub fn simulate(
                 pulse_id: p.id,
             };
             let t = Instant::now();
-            let tally = simulate_pulse(&setup, c.simulation.rays_per_pulse);
+            let tally = simulate_pulse_in(&setup, c.simulation.rays_per_pulse, scratch);
             let secs = t.elapsed().as_secs_f64();
             bar.inc(1);
             (
-                waveform::waveform(p.id, &tally, &gate, sub_bins, sigma, hv, &radiometry),
+                waveform::waveform(p.id, tally, &gate, sub_bins, sigma, hv, &radiometry),
                 secs,
             )
         })

@@ -130,30 +130,50 @@ impl Vertex {
     }
 }
 
+/// What a worker reuses from one pulse to the next: the tally and the sub-paths' buffers, so
+/// that a pulse of few rays allocates nothing but its output.
+#[derive(Default)]
+pub struct Scratch {
+    acc: Option<Accum>,
+    bufs: Buffers,
+}
+
 /// Traces `rays` samples of one pulse, in chunks of [`CHUNK_RAYS`] run in parallel; each
 /// chunk has its own random stream and the chunks are merged in order, so the result is the
 /// same whatever the number of threads.
 pub fn simulate_pulse(setup: &PulseSetup, rays: u64) -> Tally {
+    simulate_pulse_in(setup, rays, &mut Scratch::default()).clone()
+}
+
+/// [`simulate_pulse`] in a worker's scratch: the tally returned lives there until its next
+/// pulse.
+pub fn simulate_pulse_in<'s>(setup: &PulseSetup, rays: u64, scratch: &'s mut Scratch) -> &'s Tally {
     let chunks = rays.div_ceil(CHUNK_RAYS);
-    let chunk = |c: u64| {
+    let acc = scratch.acc.get_or_insert_with(|| Accum::new(setup));
+    acc.reset(setup);
+    let trace = |c: u64, acc: &mut Accum, bufs: &mut Buffers| {
         let mut rng = Rng::new(setup.seed, setup.pulse_id, c);
-        let mut acc = Accum::new(setup);
-        let mut bufs = Buffers::default();
         for _ in 0..CHUNK_RAYS.min(rays - c * CHUNK_RAYS) {
-            trace_ray(setup, &mut rng, &mut acc, &mut bufs);
+            trace_ray(setup, &mut rng, acc, bufs);
             acc.end_ray();
         }
-        acc.tally
     };
     if chunks == 1 {
         // the common case of a campaign pulse: its one chunk is the total (adding it to
         // zeros would change no bit: every tallied value is ≥ 0)
-        return chunk(0);
+        trace(0, acc, &mut scratch.bufs);
+        return &acc.tally;
     }
-    let parts: Vec<Tally> = (0..chunks).into_par_iter().map(chunk).collect();
-    let mut total = Tally::new(setup.gate.bins, setup.sub_bins, setup.max_order);
+    let parts: Vec<Tally> = (0..chunks)
+        .into_par_iter()
+        .map(|c| {
+            let mut part = Accum::new(setup);
+            trace(c, &mut part, &mut Buffers::default());
+            part.tally
+        })
+        .collect();
     for p in &parts {
-        total.merge(p);
+        acc.tally.merge(p);
     }
-    total
+    &acc.tally
 }

@@ -150,6 +150,35 @@ impl Accum {
         }
     }
 
+    /// Ready for another pulse: every sum zero, sized for `setup`'s gate and orders, the
+    /// memory kept.
+    pub(super) fn reset(&mut self, setup: &PulseSetup) {
+        let (bins, sub_bins) = (setup.gate.bins, setup.sub_bins);
+        let zero = |v: &mut Vec<f64>, n: usize| {
+            v.clear();
+            v.resize(n, 0.0);
+        };
+        let t = &mut self.tally;
+        zero(&mut t.sub, bins * sub_bins);
+        zero(&mut t.sub_moment, bins * sub_bins);
+        zero(&mut t.bin_sq, bins);
+        for c in &mut t.class_bins {
+            zero(c, bins);
+        }
+        zero(&mut t.order_sum, setup.max_order as usize);
+        zero(&mut t.order_sq, setup.max_order as usize);
+        (t.outside, t.total_sq, t.rays, t.paths) = (0.0, 0.0, 0, 0);
+        (t.solar_sum, t.solar_sq) = (0.0, 0.0);
+        self.t0 = setup.gate.t0;
+        self.sub_dt = setup.gate.dt / sub_bins as f64;
+        self.sub_bins = sub_bins;
+        zero(&mut self.ray_order, setup.max_order as usize);
+        zero(&mut self.ray_bin, bins);
+        self.touched_orders.clear();
+        self.touched_bins.clear();
+        self.ray_solar = 0.0;
+    }
+
     /// A solar path carrying `power` watts (the sun is continuous: no time, no bin).
     pub(super) fn add_solar(&mut self, power: f64) {
         if power > 0.0 && power.is_finite() {

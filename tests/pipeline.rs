@@ -255,3 +255,40 @@ fn bad_shard_and_stage_arguments() {
         assert!(err.contains(words), "{err}");
     }
 }
+
+/// The same campaign run from another folder is the same run: the scene's path as found from
+/// the working folder is no part of a stage's fingerprint, so `--resume` finds it up to date.
+#[test]
+fn a_campaign_run_from_another_folder_is_the_same_run() {
+    let dir = tmp("pipeline-elsewhere");
+    write(
+        &dir,
+        "plane.yaml",
+        "name: p\nmaterials:\n  soil: { reflectance: 0.3 }\nobjects:\n  - plane: { z: 0, extent: [[0, 0], [100, 100]], material: soil }\n",
+    );
+    write(
+        &dir,
+        "campaign.yaml",
+        "name: elsewhere\nscene: plane.yaml\nseed: 2\nwavelength_nm: 1064\ninstrument: { pulse_energy_j: 0.001, pulse_fwhm_ns: 2, footprint_half_angle_mrad: 0.5, fov_half_angle_mrad: 0.6, receiver_area_m2: 0.1 }\nplatform: { kind: track, altitude_m: 300, track: { start: [10, 50], end: [90, 50] }, along_track_step_m: 0.5 }\nsimulation: { method: forward, rays_per_pulse: 20, max_order: 1 }\n",
+    );
+    let out = dir.join("run");
+    let run_in = |cwd: &Path, campaign: &str, resume: bool| {
+        let mut args = vec!["run", campaign, "--out", out.to_str().unwrap()];
+        if resume {
+            args.push("--resume");
+        }
+        let o = Command::new(env!("CARGO_BIN_EXE_lidarsim"))
+            .current_dir(cwd)
+            .args(&args)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&o.stderr).into_owned();
+        assert_eq!(o.status.code(), Some(0), "{err}");
+        err
+    };
+    run_in(&dir, "campaign.yaml", false);
+    let parent = dir.parent().unwrap();
+    let name = dir.file_name().unwrap().to_str().unwrap();
+    let again = run_in(parent, &format!("{name}/campaign.yaml"), true);
+    assert!(again.contains("nothing to do"), "{again}");
+}

@@ -353,6 +353,12 @@ impl Loaded {
     }
 
     /// The campaign with every default filled in, as YAML.
+    /// The campaign with every default filled in and its scene as the campaign file names it
+    /// (relative to that file): the same text from whatever folder the campaign is run.
+    pub fn campaign_yaml(&self) -> String {
+        serde_yaml::to_string(&self.campaign).expect("a campaign always serialises")
+    }
+
     pub fn resolved_yaml(&self) -> String {
         let mut c = self.campaign.clone();
         c.scene = self.scene_path.display().to_string();

@@ -350,7 +350,11 @@ fn run_single(
     let before = run.manifest.clone();
     let resolved = loaded.resolved_yaml();
     write_text_atomic(&out.join("campaign.resolved.yaml"), &resolved)?;
-    let fp_plan = fingerprint(&[resolved.as_bytes(), env!("CARGO_PKG_VERSION").as_bytes()]);
+    // the campaign with its scene as the file names it, not as found from the working folder:
+    // the same campaign run from elsewhere is the same run (the scene's bytes are in the
+    // simulate stage's fingerprint)
+    let as_written = loaded.campaign_yaml();
+    let fp_plan = fingerprint(&[as_written.as_bytes(), env!("CARGO_PKG_VERSION").as_bytes()]);
     let pulses = plan_stage(&mut run, &loaded.campaign, &fp_plan)?;
 
     let mut summary = RunSummary {
@@ -478,8 +482,13 @@ fn plan_stage(run: &mut RunFolder, c: &Campaign, fp: &str) -> Result<Vec<Pulse>>
             t.elapsed().as_secs_f64()
         ));
     } else if !run.done(Stage::Plan, fp) {
+        let why = if run.manifest.stages.contains_key(Stage::Plan.name()) {
+            "is out of date (the campaign, its scene or lidarsim changed since it ran)"
+        } else {
+            "has not run"
+        };
         return Err(Error::msg(format!(
-            "{}: stage plan has not run: include it in --stages",
+            "{}: stage plan {why}: include it in --stages",
             run.out.display()
         )));
     } else {
@@ -500,14 +509,14 @@ fn simulate_fingerprint(fp_plan: &str, scene: &Scene) -> Result<String> {
     Ok(fingerprint(&inputs))
 }
 
-/// The simulate stage: the parts this invocation owns (all, or its shard's) that are not
-/// written yet. Returns (rays traced, parts written).
 /// Whether every part of a run of `pulses` pulses is on disk and whole.
 fn parts_whole(out: &Path, pulses: usize) -> bool {
     (0..part_count(pulses))
         .all(|k| part_is_whole(&out.join(part_name(k)), part_range(k, pulses).len()))
 }
 
+/// The simulate stage: the parts this invocation owns (all, or its shard's) that are not
+/// written yet. Returns (rays traced, parts written).
 fn simulate_stage(
     run: &mut RunFolder,
     loaded: &Loaded,

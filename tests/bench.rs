@@ -93,6 +93,18 @@ fn campaign_rows_are_measured_and_missing_data_is_skipped() {
     if std::path::Path::new("/proc/self/status").exists() {
         assert!(row.peak_mb.unwrap() > 1.0);
     }
+    // the traversal figures of the same campaign: every query counted, replayed and timed
+    let tr = lidarsim::bench::traversal::measure(
+        "mabel_plane",
+        &dir.join("mabel_plane/campaign.yaml"),
+        8,
+    )
+    .unwrap();
+    assert_eq!(tr.pulses, 8);
+    assert!(tr.closest > 0 && tr.any_hit > 0, "{tr:?}");
+    assert!(tr.inside_per_s > 0.0 && tr.bare_per_s > 0.0, "{tr:?}");
+    let t = lidarsim::bench::traversal::table(&[tr]);
+    assert!(t.contains("| mabel_plane | 8 |"), "{t}");
     let planned = bc::plan(&dir, &campaigns, &dir.join("no_such_rami.yaml"), false);
     // the forest and town rows generate their scenes: only check the orchard rows here
     let skipped: Vec<String> = planned

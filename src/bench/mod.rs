@@ -6,6 +6,7 @@
 //! rRMSE ≤ 5% against it (median over several seeds), with their wall time.
 
 pub mod campaigns;
+pub mod traversal;
 
 use crate::campaign::{Instrument, Method, MisHeuristic, SunSelection};
 use crate::error::{Error, Result};
@@ -459,12 +460,17 @@ fn sun_section(opts: &BenchOptions, b: &Bench, reference: &Waveform) -> String {
 /// reason it was skipped.
 fn campaigns_section(opts: &BenchOptions) -> Result<String> {
     let planned = campaigns::plan(&opts.dir, &opts.campaigns_dir, &opts.rami_scene, opts.full)?;
-    let (mut rows, mut skipped) = (Vec::new(), Vec::new());
+    let (mut rows, mut skipped, mut traversals) = (Vec::new(), Vec::new(), Vec::new());
     for p in planned {
         match p {
             campaigns::Planned::Run { name, what, text } => {
                 eprintln!("lidarsim bench: campaign {name}");
                 rows.push(campaigns::run_row(&opts.dir, &name, &what, &text)?);
+                if name.starts_with("als_") {
+                    // 2000 pulses spread over the campaign, with its rays per pulse
+                    let path = opts.dir.join(&name).join("campaign.yaml");
+                    traversals.push(traversal::measure(&name, &path, 2000)?);
+                }
             }
             campaigns::Planned::Skipped { name, why } => {
                 eprintln!("lidarsim bench: campaign {name} skipped: {why}");
@@ -472,7 +478,7 @@ fn campaigns_section(opts: &BenchOptions) -> Result<String> {
             }
         }
     }
-    Ok(campaigns::table(&rows, &skipped))
+    Ok(campaigns::table(&rows, &skipped) + &traversal::table(&traversals))
 }
 
 /// Table 2 of the paper: rays (and wall seconds) each method needs for rRMSE ≤ 5% by

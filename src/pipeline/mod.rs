@@ -9,7 +9,7 @@
 //! uninterrupted one, since every random draw derives from (seed, pulse, chunk).
 
 pub mod manifest;
-mod simulate;
+pub mod simulate;
 pub mod sweep;
 
 pub use manifest::StageRecord;

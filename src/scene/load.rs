@@ -152,6 +152,7 @@ pub(crate) fn load(path: &Path, wavelength_nm: f64) -> Result<Scene> {
         clip_lo: top.clip_lo,
         clip_hi: top.clip_hi,
         instanced_triangles: top.instanced_triangles,
+        ray_log: None,
     })
 }
 

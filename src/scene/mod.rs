@@ -143,6 +143,27 @@ pub struct Scene {
     clip_lo: DVec3,
     clip_hi: DVec3,
     instanced_triangles: u64,
+    /// Every query while on (`start_ray_log`): the bench replays them against the bare BVH.
+    ray_log: Option<std::sync::Mutex<Vec<LoggedRay>>>,
+}
+
+/// A query the scene answered, as the bench replays it.
+#[derive(Clone, Copy, Debug)]
+pub enum LoggedRay {
+    /// [`Scene::intersect`]'s arguments.
+    Closest {
+        origin: DVec3,
+        dir: DVec3,
+        t_max: f64,
+        skip: FacetId,
+    },
+    /// [`Scene::occluded`]'s arguments.
+    Occluded {
+        a: DVec3,
+        b: DVec3,
+        skip_a: FacetId,
+        skip_b: FacetId,
+    },
 }
 
 /// One placement of a mesh. Scene-local point x maps to mesh storage coordinates as
@@ -264,6 +285,16 @@ impl Scene {
     /// The top-level traversal with each instance's traversal nested in its closure: the hot
     /// path, kept in one place so that the two levels' skip and coplanar rules read together.
     pub fn intersect(&self, origin: DVec3, dir: DVec3, t_max: f64, skip: FacetId) -> Option<Hit> {
+        if let Some(log) = &self.ray_log {
+            if let Ok(mut v) = log.lock() {
+                v.push(LoggedRay::Closest {
+                    origin,
+                    dir,
+                    t_max,
+                    skip,
+                });
+            }
+        }
         let lr = self.local_ray(origin, dir, t_max)?;
         // only a ray that starts on a facet (not one clipped to the box) can meet its
         // facet's coplanar neighbours at distance 0
@@ -356,6 +387,16 @@ impl Scene {
     /// True when the open segment from `a` to `b` crosses any facet other than `skip_a`
     /// (the facet `a` lies on) and `skip_b` (the facet `b` lies on).
     pub fn occluded(&self, a: DVec3, b: DVec3, skip_a: FacetId, skip_b: FacetId) -> bool {
+        if let Some(log) = &self.ray_log {
+            if let Ok(mut v) = log.lock() {
+                v.push(LoggedRay::Occluded {
+                    a,
+                    b,
+                    skip_a,
+                    skip_b,
+                });
+            }
+        }
         let delta = b - a;
         let len = delta.length();
         if len.is_nan() || len <= 0.0 || !len.is_finite() {
@@ -427,6 +468,19 @@ impl Scene {
                 }
             });
         !miss
+    }
+
+    /// Starts keeping every query the scene answers (for the bench; costs a lock per query).
+    pub fn start_ray_log(&mut self) {
+        self.ray_log = Some(std::sync::Mutex::new(Vec::new()));
+    }
+
+    /// The queries kept since [`Scene::start_ray_log`], which stops.
+    pub fn take_ray_log(&mut self) -> Vec<LoggedRay> {
+        self.ray_log
+            .take()
+            .and_then(|m| m.into_inner().ok())
+            .unwrap_or_default()
     }
 
     /// World-space bounding box (min, max) of all geometry.

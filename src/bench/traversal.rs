@@ -1,0 +1,113 @@
+//! How close the transport comes to the speed of its BVH: the queries a campaign's pulses make
+//! (closest hits and visibility tests), counted and timed inside the transport, then replayed
+//! alone against the same scene on the same threads.
+
+use crate::error::Result;
+use crate::pipeline::simulate::simulate;
+use crate::scene::{LoggedRay, Scene};
+use indicatif::ProgressBar;
+use rayon::prelude::*;
+use std::fmt::Write as _;
+use std::path::Path;
+use std::time::Instant;
+
+/// One campaign's traversal figures.
+#[derive(Clone, Debug)]
+pub struct TraversalRow {
+    pub name: String,
+    pub pulses: usize,
+    pub closest: usize,
+    pub any_hit: usize,
+    /// Queries per second within the simulation of those pulses (everything included).
+    pub inside_per_s: f64,
+    /// Replayed alone: closest-hit and any-hit queries per second.
+    pub closest_per_s: f64,
+    pub any_hit_per_s: f64,
+    /// All queries replayed alone, per second.
+    pub bare_per_s: f64,
+}
+
+/// Simulates up to `max_pulses` of the campaign at `path` (spread over its plan) twice, once
+/// timed and once logging the scene's queries, then replays the log.
+pub fn measure(name: &str, path: &Path, max_pulses: usize) -> Result<TraversalRow> {
+    let loaded = crate::plan::read_campaign(path)?;
+    let mut scene = Scene::load(&loaded.scene_path, loaded.campaign.wavelength_nm)?;
+    let all = crate::plan::plan(&loaded.campaign)?;
+    let n = all.len().min(max_pulses).max(1);
+    let pulses: Vec<_> = (0..n.min(all.len()))
+        .map(|i| all[i * all.len() / n])
+        .collect();
+    let hidden = ProgressBar::hidden();
+    let t = Instant::now();
+    let _ = simulate(&loaded, &scene, &pulses, &hidden);
+    let inside_s = t.elapsed().as_secs_f64();
+    scene.start_ray_log();
+    let _ = simulate(&loaded, &scene, &pulses, &hidden);
+    let log = scene.take_ray_log();
+    let closest: Vec<LoggedRay> = log
+        .iter()
+        .filter(|r| matches!(r, LoggedRay::Closest { .. }))
+        .copied()
+        .collect();
+    let any: Vec<LoggedRay> = log
+        .iter()
+        .filter(|r| matches!(r, LoggedRay::Occluded { .. }))
+        .copied()
+        .collect();
+    let replay = |rays: &[LoggedRay]| {
+        let t = Instant::now();
+        let hits: usize = rays
+            .par_iter()
+            .map(|r| match *r {
+                LoggedRay::Closest {
+                    origin,
+                    dir,
+                    t_max,
+                    skip,
+                } => scene.intersect(origin, dir, t_max, skip).is_some() as usize,
+                LoggedRay::Occluded {
+                    a,
+                    b,
+                    skip_a,
+                    skip_b,
+                } => scene.occluded(a, b, skip_a, skip_b) as usize,
+            })
+            .sum();
+        std::hint::black_box(hits);
+        t.elapsed().as_secs_f64().max(1e-9)
+    };
+    let (tc, ta) = (replay(&closest), replay(&any));
+    Ok(TraversalRow {
+        name: name.to_string(),
+        pulses: pulses.len(),
+        closest: closest.len(),
+        any_hit: any.len(),
+        inside_per_s: log.len() as f64 / inside_s.max(1e-9),
+        closest_per_s: closest.len() as f64 / tc,
+        any_hit_per_s: any.len() as f64 / ta,
+        bare_per_s: log.len() as f64 / (tc + ta),
+    })
+}
+
+/// The markdown table of the traversal rows.
+pub fn table(rows: &[TraversalRow]) -> String {
+    let mut s = String::from(
+        "\n### Traversals: inside the transport against the bare BVH\n\nThe queries a campaign's pulses make (closest hits and visibility tests), counted in a timed simulation of those pulses, then replayed alone on the same threads.\n\n| campaign | pulses | closest-hit queries | any-hit queries | inside the transport /s | closest hit alone /s | any hit alone /s | all alone /s | inside / alone |\n| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n",
+    );
+    for r in rows {
+        let _ = writeln!(
+            s,
+            "| {} | {} | {} | {} | {:.3e} | {:.3e} | {:.3e} | {:.3e} | {:.0}% |",
+            r.name,
+            r.pulses,
+            r.closest,
+            r.any_hit,
+            r.inside_per_s,
+            r.closest_per_s,
+            r.any_hit_per_s,
+            r.bare_per_s,
+            100.0 * r.inside_per_s / r.bare_per_s
+        );
+    }
+    s
+}

@@ -18,6 +18,9 @@ pub enum Kind {
     /// A file lidarsim reads back (a run folder's parts, manifest, products) is damaged or
     /// not its own: redo it (`run --resume` redoes what it cannot trust).
     Data,
+    /// A signal (SIGINT, SIGTERM) stopped the work at a boundary, everything written kept:
+    /// the CLI exits with 128 + the signal's number.
+    Interrupted(i32),
 }
 
 /// One error: boxed, so that a `Result` stays two words wide on the happy path.
@@ -107,6 +110,18 @@ impl Error {
     /// `file: what: cause` for a file lidarsim reads back and cannot trust.
     pub fn data(path: &Path, text: impl fmt::Display) -> Self {
         Error::new(Kind::Data, Some(path), text.to_string())
+    }
+
+    /// Work stopped by `signal` at a boundary; `done` says what was kept.
+    pub fn interrupted(signal: i32, done: impl fmt::Display) -> Self {
+        Error::new(
+            Kind::Interrupted(signal),
+            None,
+            format!(
+                "stopped by {}: {done}; run again with --resume to finish",
+                crate::interrupt::name(signal)
+            ),
+        )
     }
 
     /// The same error with what to do about it.

@@ -5,6 +5,7 @@
 
 pub mod error;
 pub mod fsutil;
+pub mod interrupt;
 pub mod parquet_io;
 pub mod progress;
 pub mod rng;

@@ -157,13 +157,17 @@ pub fn main() -> i32 {
         Ok(()) => 0,
         Err(e) => {
             eprintln!("error: {e}");
-            1
+            match e.kind {
+                crate::error::Kind::Interrupted(signal) => 128 + signal,
+                _ => 1,
+            }
         }
     }
 }
 
 fn run(args: RunArgs) -> Result<()> {
     require_file(&args.campaign)?;
+    crate::interrupt::install();
     let shard = args.shard.map(|s| parse_shard(&s)).transpose()?;
     let opts = RunOptions {
         out: args.out,

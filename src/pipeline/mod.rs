@@ -543,7 +543,7 @@ fn simulate_stage(
         .filter(|k| shard.is_none_or(|(i, n)| k % n == i))
         .filter(|&k| !whole(k))
         .collect();
-    let (rays, done) = simulate_parts(loaded, scene, pulses, &todo, out)?;
+    let (rays, done, stopped) = simulate_parts(loaded, scene, pulses, &todo, out)?;
     let missing = (0..parts).filter(|&k| !whole(k)).count();
     if missing == 0 {
         run.finish(Stage::Simulate, fp, part_files, t, None, "done")?;
@@ -551,6 +551,16 @@ fn simulate_stage(
         let note = format!("{missing} of {parts} parts missing: run again with --resume to finish");
         log(&format!("simulate: {note}"));
         run.finish(Stage::Simulate, fp, part_files, t, Some(note), "partial")?;
+    }
+    if let Some(signal) = stopped {
+        return Err(Error::interrupted(
+            signal,
+            format!(
+                "{} of {parts} parts of waveforms are written in {}",
+                parts - missing,
+                out.display()
+            ),
+        ));
     }
     Ok((rays, done))
 }

@@ -20,14 +20,16 @@ use std::time::Instant;
 /// Simulates the given parts, each written when complete. Pulses within a part and each
 /// pulse's ray chunks run in parallel, and a finished part is encoded and written on a thread
 /// of its own while the workers go on with the next one: the queue holds one finished part
-/// at most, so memory stays at about two parts. Returns (rays traced, parts written).
+/// at most, so memory stays at about two parts. A signal (see [`crate::interrupt`]) stops it
+/// before the next part, the parts in flight written. Returns (rays traced, parts written,
+/// the signal that stopped it).
 pub(super) fn simulate_parts(
     loaded: &Loaded,
     scene: &Scene,
     pulses: &[Pulse],
     todo: &[usize],
     out: &Path,
-) -> Result<(u64, usize)> {
+) -> Result<(u64, usize, Option<i32>)> {
     let total: usize = todo
         .iter()
         .map(|&k| part_range(k, pulses.len()).len())
@@ -38,6 +40,8 @@ pub(super) fn simulate_parts(
     let mut done_pulses = 0usize;
     let terminal = std::io::stderr().is_terminal();
     let mut last_log = 0.0;
+    let mut written = 0usize;
+    let mut stopped = None;
     std::thread::scope(|scope| -> Result<()> {
         let (queue, finished) =
             std::sync::mpsc::sync_channel::<(usize, Vec<Waveform>, Vec<f64>)>(1);
@@ -53,6 +57,10 @@ pub(super) fn simulate_parts(
             Ok(())
         });
         for (i, &k) in todo.iter().enumerate() {
+            if let Some(signal) = crate::interrupt::requested() {
+                stopped = Some(signal);
+                break;
+            }
             let range = part_range(k, pulses.len());
             let (waveforms, secs) = simulate(loaded, scene, &pulses[range], &bar);
             rays += waveforms.iter().map(|w| w.rays as u64).sum::<u64>();
@@ -75,6 +83,7 @@ pub(super) fn simulate_parts(
             if queue.send((k, waveforms, secs)).is_err() {
                 break; // the writer stopped on an error, which join returns below
             }
+            written += 1;
         }
         drop(queue);
         writer
@@ -90,7 +99,7 @@ pub(super) fn simulate_parts(
             rays as f64 / secs
         ));
     }
-    Ok((rays, todo.len()))
+    Ok((rays, written, stopped))
 }
 
 pub(super) fn part_range(k: usize, n: usize) -> std::ops::Range<usize> {

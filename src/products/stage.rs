@@ -243,6 +243,12 @@ pub fn run(
     let start = std::time::Instant::now();
     let every = parts.div_ceil(10).max(1);
     for k in 0..parts {
+        if let Some(signal) = crate::interrupt::requested() {
+            return Err(Error::interrupted(
+                signal,
+                "the products stage stopped before writing anything; the waveforms are kept",
+            ));
+        }
         let part = read_waveforms(&out.join(part_name(k)))?;
         if part.iter().any(|w| w.pulse_id as usize >= pulses.len()) {
             return Err(Error::msg(format!(

@@ -1,0 +1,57 @@
+//! A stop asked for by a signal: SIGINT (Ctrl-C) or SIGTERM (a scheduler's time limit, `kill`).
+//! Long work checks [`requested`] at its boundaries (a part of waveforms), finishes what it has
+//! in flight, records it and ends, so the run folder stays whole and `--resume` goes on from
+//! there. A second signal ends the process at once, as a user pressing Ctrl-C twice expects.
+
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::sync::{Arc, OnceLock};
+
+struct Flags {
+    signal: Arc<AtomicUsize>,
+    seen: Arc<AtomicBool>,
+}
+
+static FLAGS: OnceLock<Flags> = OnceLock::new();
+
+/// Starts listening for SIGINT and SIGTERM (on Unix; elsewhere nothing is installed). Safe to
+/// call more than once.
+pub fn install() {
+    #[cfg(unix)]
+    {
+        use signal_hook::consts::{SIGINT, SIGTERM};
+        let flags = FLAGS.get_or_init(|| Flags {
+            signal: Arc::new(AtomicUsize::new(0)),
+            seen: Arc::new(AtomicBool::new(false)),
+        });
+        static INSTALLED: OnceLock<()> = OnceLock::new();
+        INSTALLED.get_or_init(|| {
+            for sig in [SIGINT, SIGTERM] {
+                // the second signal ends the process (128 + signal, the shell's convention);
+                // registered first, so it sees the flag as the first signal left it
+                let _ = signal_hook::flag::register_conditional_shutdown(
+                    sig,
+                    128 + sig,
+                    Arc::clone(&flags.seen),
+                );
+                let _ = signal_hook::flag::register(sig, Arc::clone(&flags.seen));
+                let _ =
+                    signal_hook::flag::register_usize(sig, Arc::clone(&flags.signal), sig as usize);
+            }
+        });
+    }
+}
+
+/// The signal that asked for a stop, if one did.
+pub fn requested() -> Option<i32> {
+    let s = FLAGS.get()?.signal.load(Ordering::Relaxed);
+    (s != 0).then_some(s as i32)
+}
+
+/// The signal's name, for messages.
+pub fn name(signal: i32) -> String {
+    match signal {
+        2 => "SIGINT".to_string(),
+        15 => "SIGTERM".to_string(),
+        s => format!("signal {s}"),
+    }
+}

@@ -13,8 +13,8 @@ struct Flags {
 
 static FLAGS: OnceLock<Flags> = OnceLock::new();
 
-/// Starts listening for SIGINT and SIGTERM (on Unix; elsewhere nothing is installed). Safe to
-/// call more than once.
+/// Starts listening for SIGINT and SIGTERM, and turns SIGXFSZ into a failed write (on Unix;
+/// elsewhere nothing is installed). Safe to call more than once.
 pub fn install() {
     #[cfg(unix)]
     {
@@ -25,6 +25,13 @@ pub fn install() {
         });
         static INSTALLED: OnceLock<()> = OnceLock::new();
         INSTALLED.get_or_init(|| {
+            // a file-size limit (RLIMIT_FSIZE, `ulimit -f`) would otherwise kill the process
+            // with SIGXFSZ and no word; with a handler the write fails with EFBIG instead, and
+            // the write's error names the file and says to free space and resume
+            let _ = signal_hook::flag::register(
+                signal_hook::consts::SIGXFSZ,
+                Arc::new(AtomicBool::new(false)),
+            );
             for sig in [SIGINT, SIGTERM] {
                 // the second signal ends the process (128 + signal, the shell's convention);
                 // registered first, so it sees the flag as the first signal left it

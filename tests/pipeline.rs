@@ -352,3 +352,50 @@ fn a_signal_stops_a_run_cleanly_and_resume_finishes_it() {
     }
     assert!(checked > 0, "no signal arrived while the run was going");
 }
+
+/// The disk filling mid-part, simulated with a file-size limit (RLIMIT_FSIZE, `ulimit -f`):
+/// the run ends with exit code 1 and one message naming the file and what to do, leaves no
+/// damaged file under a final name, and `--resume` without the limit finishes it with the same
+/// bytes as a run never stopped. Before, SIGXFSZ killed the process without a word.
+#[test]
+fn a_full_disk_ends_the_run_with_a_message_and_resume_finishes_it() {
+    let dir = tmp("pipe_fsize");
+    let camp = track_campaign(&dir, 200);
+    let camp = camp.to_str().unwrap();
+    let reference = dir.join("reference");
+    run_ok(&["run", camp, "--out", reference.to_str().unwrap()]);
+    let part = std::fs::metadata(reference.join("waveforms/part-00000.parquet"))
+        .unwrap()
+        .len();
+    let pulses = std::fs::metadata(reference.join("pulses.parquet"))
+        .unwrap()
+        .len();
+    // 60 blocks: 30 or 60 KiB as the shell counts them, room for the plan, none for a part
+    assert!(pulses < 30 * 1024 && part > 60 * 1024, "{pulses} {part}");
+    let out = dir.join("full");
+    let o = Command::new("sh")
+        .args([
+            "-c",
+            &format!(
+                "ulimit -f 60 && exec '{}' run '{camp}' --out '{}'",
+                env!("CARGO_BIN_EXE_lidarsim"),
+                out.display()
+            ),
+        ])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    let line = err
+        .lines()
+        .find(|l| l.starts_with("error:"))
+        .unwrap_or_default();
+    assert!(
+        line.contains("waveforms/part-00000") && line.contains("--resume"),
+        "{err}"
+    );
+    assert!(!out.join("waveforms/part-00000.parquet").exists());
+    no_temp_files(&out);
+    run_ok(&["run", camp, "--out", out.to_str().unwrap(), "--resume"]);
+    assert_eq!(products(&out), products(&reference));
+}

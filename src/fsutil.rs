@@ -87,6 +87,29 @@ where
     })
 }
 
+/// FNV-1a, 64 bits, over length-prefixed parts: a fingerprint that is stable across platforms
+/// and tool builds, for stage inputs and for checksums of the files a run wrote.
+pub fn fingerprint(parts: &[&[u8]]) -> String {
+    let mut h = 0xcbf2_9ce4_8422_2325u64;
+    let mut fnv = |bytes: &[u8]| {
+        for b in bytes {
+            h ^= *b as u64;
+            h = h.wrapping_mul(0x100_0000_01b3);
+        }
+    };
+    for p in parts {
+        fnv(&(p.len() as u64).to_le_bytes());
+        fnv(p);
+    }
+    format!("{h:016x}")
+}
+
+/// The checksum of a file's bytes ([`fingerprint`] of them), or None when it cannot be read.
+pub fn file_checksum(path: &Path) -> Option<String> {
+    let bytes = std::fs::read(path).ok()?;
+    Some(fingerprint(&[&bytes]))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -399,3 +399,28 @@ fn a_full_disk_ends_the_run_with_a_message_and_resume_finishes_it() {
     run_ok(&["run", camp, "--out", out.to_str().unwrap(), "--resume"]);
     assert_eq!(products(&out), products(&reference));
 }
+
+/// A part changed in the middle after its run finished (one flipped bit, which its Parquet
+/// footer does not notice) is caught by the checksum written beside it: `--resume` names it,
+/// simulates it again, and the run's files equal an untouched run's.
+#[test]
+fn a_part_damaged_after_the_run_is_found_and_redone() {
+    let dir = tmp("pipe_bitflip");
+    let camp = track_campaign(&dir, 200);
+    let camp = camp.to_str().unwrap();
+    let reference = dir.join("reference");
+    run_ok(&["run", camp, "--out", reference.to_str().unwrap()]);
+    let out = dir.join("damaged");
+    run_ok(&["run", camp, "--out", out.to_str().unwrap()]);
+    let part = out.join("waveforms/part-00002.parquet");
+    let mut bytes = std::fs::read(&part).unwrap();
+    let middle = bytes.len() / 2;
+    bytes[middle] ^= 0x01;
+    std::fs::write(&part, &bytes).unwrap();
+    let log = run_ok(&["run", camp, "--out", out.to_str().unwrap(), "--resume"]);
+    assert!(
+        log.contains("a part file is missing or damaged (waveforms/part-00002.parquet)"),
+        "{log}"
+    );
+    assert_eq!(products(&out), products(&reference));
+}

@@ -17,9 +17,9 @@ pub struct StageRecord {
     pub wall_time_s: f64,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub note: Option<String>,
-    /// FNV-1a of each output file as the stage wrote it (waveform parts excepted: each is
-    /// checked whole by its footer and row count), so that `--resume` never trusts a file
-    /// damaged or replaced since.
+    /// FNV-1a of each output file as the stage wrote it (waveform parts excepted: each has
+    /// its own beside it, written with it, see `waveform::file`), so that `--resume` never
+    /// trusts a file damaged or replaced since.
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
     pub checksums: BTreeMap<String, String>,
 }
@@ -44,28 +44,7 @@ impl Manifest {
     }
 }
 
-/// FNV-1a, 64 bits: a fingerprint that is stable across platforms and tool builds.
-pub(super) fn fnv(h: &mut u64, bytes: &[u8]) {
-    for b in bytes {
-        *h ^= *b as u64;
-        *h = h.wrapping_mul(0x100_0000_01b3);
-    }
-}
-
-pub(super) fn fingerprint(parts: &[&[u8]]) -> String {
-    let mut h = 0xcbf2_9ce4_8422_2325u64;
-    for p in parts {
-        fnv(&mut h, &(p.len() as u64).to_le_bytes());
-        fnv(&mut h, p);
-    }
-    format!("{h:016x}")
-}
-
-/// The checksum of a file's bytes, or None when it cannot be read.
-pub(super) fn file_checksum(path: &Path) -> Option<String> {
-    let bytes = std::fs::read(path).ok()?;
-    Some(fingerprint(&[&bytes]))
-}
+pub(super) use crate::fsutil::{file_checksum, fingerprint};
 
 pub(super) fn record(
     m: &mut Manifest,

@@ -375,11 +375,15 @@ fn run_single(
 
     let scene = cache.get(&loaded.scene_path, loaded.campaign.wavelength_nm)?;
     let fp_sim = simulate_fingerprint(&fp_plan, scene)?;
-    if run.done(Stage::Simulate, &fp_sim) && !parts_whole(out, pulses.len()) {
-        // the manifest says done, the files disagree: the files win
-        log("simulate: a part file is missing or damaged: it is simulated again");
-        run.manifest.stages.remove(Stage::Simulate.name());
-        invalidate_after(&mut run.manifest, Stage::Simulate);
+    if run.done(Stage::Simulate, &fp_sim) {
+        if let Some(bad) = first_broken_part(out, pulses.len()) {
+            // the manifest says done, the files disagree: the files win
+            log(&format!(
+                "simulate: a part file is missing or damaged ({bad}): it is simulated again"
+            ));
+            run.manifest.stages.remove(Stage::Simulate.name());
+            invalidate_after(&mut run.manifest, Stage::Simulate);
+        }
     }
     if run.wanted(Stage::Simulate) && !run.done(Stage::Simulate, &fp_sim) {
         let (t, cpu) = (Instant::now(), crate::progress::process_cpu_seconds());
@@ -509,10 +513,11 @@ fn simulate_fingerprint(fp_plan: &str, scene: &Scene) -> Result<String> {
     Ok(fingerprint(&inputs))
 }
 
-/// Whether every part of a run of `pulses` pulses is on disk and whole.
-fn parts_whole(out: &Path, pulses: usize) -> bool {
+/// The first part of a run of `pulses` pulses that is missing or not whole, by its name.
+fn first_broken_part(out: &Path, pulses: usize) -> Option<String> {
     (0..part_count(pulses))
-        .all(|k| part_is_whole(&out.join(part_name(k)), part_range(k, pulses).len()))
+        .find(|&k| !part_is_whole(&out.join(part_name(k)), part_range(k, pulses).len()))
+        .map(part_name)
 }
 
 /// The simulate stage: the parts this invocation owns (all, or its shard's) that are not

@@ -26,7 +26,17 @@ pub fn part_name(k: usize) -> String {
 /// "Outputs"), in the file's column order: the function is as long as the contract, and
 /// splitting it would scatter the contract over several places.
 pub fn write_waveforms(path: &Path, w: &[Waveform]) -> Result<()> {
-    write_batch(path, waveform_batch(w))
+    write_batch(path, waveform_batch(w))?;
+    // the part's checksum beside it, written after it: a part without one, or whose bytes
+    // disagree with it, is no part (see `part_is_whole`)
+    let sum = crate::fsutil::file_checksum(path)
+        .ok_or_else(|| Error::data(path, "cannot read back the part just written"))?;
+    crate::fsutil::write_text_atomic(&checksum_path(path), &sum)
+}
+
+/// Where a part's checksum is kept: `part-NNNNN.parquet` → `part-NNNNN.fnv`.
+pub fn checksum_path(part: &Path) -> std::path::PathBuf {
+    part.with_extension("fnv")
 }
 
 /// The waveforms as the table a part file holds.
@@ -273,11 +283,16 @@ pub fn read_waveforms(path: &Path) -> Result<Vec<Waveform>> {
     Ok(out)
 }
 
-/// Whether a part file is whole: its Parquet footer reads and it holds `rows` pulses. A part
-/// cut short (a kill mid-write that escaped the atomic rename, a full disk, a copy) fails;
+/// Whether a part file is whole: its bytes match the checksum written beside it, its Parquet
+/// footer reads and it holds `rows` pulses. A part cut short or changed in the middle (a kill
+/// mid-write that escaped the atomic rename, a full disk, a bad copy, a flipped bit) fails;
 /// `--resume` redoes such a part instead of trusting it.
 pub fn part_is_whole(path: &Path, rows: usize) -> bool {
     use parquet::file::reader::{FileReader, SerializedFileReader};
+    let sum = std::fs::read_to_string(checksum_path(path)).ok();
+    if sum.is_none() || sum != crate::fsutil::file_checksum(path) {
+        return false;
+    }
     let Ok(file) = std::fs::File::open(path) else {
         return false;
     };

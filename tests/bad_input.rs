@@ -326,3 +326,47 @@ fn bad_sweep_value_is_located_at_its_sweep_entry() {
         "a combination ran before the check"
     );
 }
+
+/// Coordinates beyond ±1000 km, an instance scale beyond 10^4 and heights beyond ±1000 km are
+/// typos or unit mistakes: each is one located message, never the BVH builder's panic (found
+/// by the fuzz test: `99999999999999999999` as a scale, `1e308` as a z, a height of 1e38).
+#[test]
+fn far_coordinates_and_huge_scales() {
+    let dir = tmp("bad_far");
+    write(&dir, "leaf.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
+    write(&dir, "far.obj", "v 0 0 0\nv 1 0 0\nv 0 1e9 0\nf 1 2 3\n");
+    write(
+        &dir,
+        "scale.csv",
+        "1 2 0 0 1\n3, 4, 0, 90, 99999999999999999999\n",
+    );
+    write(&dir, "z.csv", "# x y z\n1 2 1e308\n");
+    write(
+        &dir,
+        "dem.csv",
+        "1,2,3\n1,99999999999999999999999999999999999999,3\n",
+    );
+    let mesh = |obj: &str, table: &str| {
+        format!(
+            "{SCENE}  - mesh: {{ file: {}, material: soil, instances: {} }}\n",
+            dir.join(obj).display(),
+            dir.join(table).display()
+        )
+    };
+    let (code, err, _) = check("far_scale", CAMPAIGN, &mesh("leaf.obj", "scale.csv"));
+    assert_one_message(code, &err, &["scale.csv:2:", "column 5 (scale)"]);
+    let (code, err, _) = check("far_z", CAMPAIGN, &mesh("leaf.obj", "z.csv"));
+    assert_one_message(code, &err, &["z.csv:2:", "column 3 (z)", "1000 km"]);
+    let far = format!(
+        "{SCENE}  - mesh: {{ file: {}, material: soil }}\n",
+        dir.join("far.obj").display()
+    );
+    let (code, err, _) = check("far_vertex", CAMPAIGN, &far);
+    assert_one_message(code, &err, &["far.obj", "vertex", "1000 km"]);
+    let dem = format!(
+        "{SCENE}  - heightfield: {{ file: {}, cell_m: 1, material: soil }}\n",
+        dir.join("dem.csv").display()
+    );
+    let (code, err, _) = check("far_height", CAMPAIGN, &dem);
+    assert_one_message(code, &err, &["dem.csv:2:", "column 2", "1000 km"]);
+}

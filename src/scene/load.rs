@@ -18,7 +18,7 @@ use super::config::{
 };
 use super::mesh;
 use super::table::{parse_grid, parse_instances, InstanceRow};
-use super::{Instance, Scene, Surface, SurfaceClass};
+use super::{Instance, Scene, Surface, SurfaceClass, MAX_COORDINATE_M};
 
 /// Geometry to load once, shared by every object that names it.
 enum Source {
@@ -133,6 +133,24 @@ pub(crate) fn load(path: &Path, wavelength_nm: f64) -> Result<Scene> {
     let placed = place_instances(&plans, &meshes, &slots.object_base);
     if placed.len() >= u32::MAX as usize {
         return Err(Error::file(path, "too many instances"));
+    }
+    // each input is bounded, but a large scale on a far vertex can still carry an instance
+    // out of the tracer's reach
+    let reach = 10.0 * MAX_COORDINATE_M;
+    if let Some(p) = placed.iter().find(|p| {
+        !(p.lo.is_finite() && p.hi.is_finite())
+            || p.lo.abs().max_element() > reach
+            || p.hi.abs().max_element() > reach
+    }) {
+        return Err(Error::file(
+            path,
+            format!(
+                "an instance of an object reaches {} .. {} m, beyond ±{} km: check its instance table's positions and scales",
+                p.lo,
+                p.hi,
+                reach / 1e3
+            ),
+        ));
     }
     let top = TopLevel::build(placed, &meshes);
 

@@ -67,6 +67,15 @@ impl Builder {
                         format!("vertex {i} has a non-finite coordinate {v}"),
                     ));
                 }
+                if v.abs().max_element() > super::MAX_COORDINATE_M {
+                    return Err(Error::file(
+                        path,
+                        format!(
+                            "vertex {i} at {v} lies beyond ±{} km of the mesh's origin: coordinates are metres",
+                            super::MAX_COORDINATE_M / 1e3
+                        ),
+                    ));
+                }
                 lo = lo.min(v);
                 hi = hi.max(v);
             }

@@ -84,6 +84,13 @@ pub struct Surface {
     pub class: SurfaceClass,
 }
 
+/// Farthest a coordinate of a scene may lie from its frame's origin, m (1000 km): the tracer
+/// works in f32 around the scene's centre (6 cm steps at this distance), and a value beyond is
+/// a typo or a unit mistake, not a landscape.
+pub const MAX_COORDINATE_M: f64 = 1e6;
+/// Largest instance scale: a tree template scaled beyond this is a typo.
+pub const MAX_SCALE: f64 = 1e4;
+
 /// Identifies one facet of one instance; used to keep a ray from hitting the facet it leaves.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub struct FacetId {

@@ -60,13 +60,27 @@ pub fn parse_instances(path: &Path, text: &str) -> Result<Vec<InstanceRow>> {
             rotation_deg: v[3],
             scale: v[4],
         };
-        if row.scale.is_nan() || row.scale <= 0.0 || !row.scale.is_finite() {
+        if row.scale.is_nan() || row.scale <= 0.0 || row.scale > super::MAX_SCALE {
             return Err(Error::line(
                 path,
                 n,
                 format!(
-                    "column 5 (scale) must be a positive number, found {}",
+                    "column 5 (scale) must be a positive number up to {}, found {}",
+                    super::MAX_SCALE,
                     row.scale
+                ),
+            ));
+        }
+        if let Some(c) = (0..3).find(|&c| v[c].abs() > super::MAX_COORDINATE_M) {
+            return Err(Error::line(
+                path,
+                n,
+                format!(
+                    "column {} ({}): {} m lies beyond ±{} km of the scene's origin: coordinates are metres in the scene's local frame",
+                    c + 1,
+                    COLUMNS[c],
+                    v[c],
+                    super::MAX_COORDINATE_M / 1e3
                 ),
             ));
         }
@@ -115,14 +129,15 @@ pub fn parse_grid(path: &Path, text: &str) -> Result<HeightGrid> {
         let before = z.len();
         for (c, f) in fs.enumerate() {
             match f.parse::<f64>() {
-                Ok(v) if v.is_finite() => z.push(v),
+                Ok(v) if v.is_finite() && v.abs() <= super::MAX_COORDINATE_M => z.push(v),
                 _ => {
                     return Err(Error::line(
                         path,
                         n,
                         format!(
-                            "column {}: expected a height in metres, found \"{f}\"",
-                            c + 1
+                            "column {}: expected a height in metres within ±{} km, found \"{f}\"",
+                            c + 1,
+                            super::MAX_COORDINATE_M / 1e3
                         ),
                     ))
                 }

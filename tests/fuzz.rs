@@ -1,5 +1,5 @@
 //! Mutation fuzzing of every loader through `lidarsim check`, bounded so the suite stays quick
-//! (`LIDARSIM_FUZZ_CASES` sets the count; `tools/fuzz_loaders.py` runs longer campaigns of it).
+//! (`LIDARSIM_FUZZ_CASES` sets the count; `tools/fuzz_loaders.sh` runs a longer one).
 //!
 //! Each case mutates one file of a valid campaign (campaign YAML with a sweep, scene YAML, a
 //! heightfield, an OBJ, an instance table, an ASCII and a binary PLY) by byte flips, cuts,

@@ -68,11 +68,24 @@ pub fn write_las(path: &Path, points: &[Point]) -> Result<()> {
             0.0
         }
     };
+    let (x0, y0, z0) = (min(|p| p.x), min(|p| p.y), min(|p| p.z));
+    // every coordinate a whole number of millimetres from its offset within i32; checked
+    // here, because the las crate panics when a writer that failed a point is dropped
+    let fits = |v: f64, offset: f64| ((v - offset) / SCALE).abs() < i32::MAX as f64;
     for p in points {
         if !(p.x.is_finite() && p.y.is_finite() && p.z.is_finite()) {
             return Err(Error::file(
                 path,
                 format!("point of pulse {} has a non-finite coordinate", p.pulse_id),
+            ));
+        }
+        if !(fits(p.x, x0) && fits(p.y, y0) && fits(p.z, z0)) {
+            return Err(Error::file(
+                path,
+                format!(
+                    "point of pulse {} at ({}, {}, {}) m lies more than 2000 km from the others: LAS cannot hold it",
+                    p.pulse_id, p.x, p.y, p.z
+                ),
             ));
         }
     }
@@ -83,15 +96,15 @@ pub fn write_las(path: &Path, points: &[Point]) -> Result<()> {
     b.transforms = Vector {
         x: Transform {
             scale: SCALE,
-            offset: min(|p| p.x),
+            offset: x0,
         },
         y: Transform {
             scale: SCALE,
-            offset: min(|p| p.y),
+            offset: y0,
         },
         z: Transform {
             scale: SCALE,
-            offset: min(|p| p.z),
+            offset: z0,
         },
     };
     b.generating_software = format!("lidarsim {}", env!("CARGO_PKG_VERSION"));

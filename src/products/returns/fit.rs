@@ -98,7 +98,9 @@ pub(super) fn fit_all(
                 continue;
             }
             let win = Window::new(y, lo, hi, Some(&others));
-            if let Some((p, _)) = fit_clean(&win, start, floor) {
+            if let Some((p, _)) =
+                fit_clean(&win, start, floor).filter(|(p, _)| p.iter().any(|q| q[2] > threshold))
+            {
                 fitted[k] = p;
             }
         }
@@ -151,9 +153,11 @@ fn fit_group(
         return Vec::new();
     };
     let win = Window::new(y, lo, hi, Some(others));
-    // a fit that fails (diverges, or leaves its window) keeps the detector's seeds: it must
-    // not erase a return
-    let Some((mut params, mut dev)) = fit_clean(&win, seeds.clone(), floor) else {
+    // a fit that fails (diverges, leaves its window, or shrinks every component below the
+    // threshold) keeps the detector's seeds: it must not erase a return
+    let Some((mut params, mut dev)) =
+        fit_clean(&win, seeds.clone(), floor).filter(|(p, _)| p.iter().any(|q| q[2] > threshold))
+    else {
         return seeds;
     };
     let sk = smoothing_sigma(hint);
@@ -242,7 +246,8 @@ fn fit_group(
     params
 }
 
-/// Fits, then drops diverged, collapsed or duplicated components and refits the rest once.
+/// Fits, then drops diverged, collapsed or duplicated components and refits the rest, at most
+/// twice; what it returns lies within the window.
 fn fit_clean(win: &Window, seeds: Vec<Params>, floor: f64) -> Option<(Vec<Params>, f64)> {
     let mut params = seeds;
     for round in 0..3 {
@@ -275,12 +280,13 @@ fn fit_clean(win: &Window, seeds: Vec<Params>, floor: f64) -> Option<(Vec<Params
         if merged.len() == p.len() {
             return Some((p, dev));
         }
-        if merged.is_empty() || round == 2 {
-            return if merged.is_empty() {
-                None
-            } else {
-                win.fit(merged, floor)
-            };
+        if merged.is_empty() {
+            return None;
+        }
+        if round == 2 {
+            // a further refit may wander off again: the components that stayed in place
+            let dev = win.deviance(&win.model(&merged));
+            return Some((merged, dev));
         }
         params = merged;
     }

@@ -219,11 +219,14 @@ pub(super) fn resolve(
     noise: &Noise,
     by_shape: bool,
 ) -> Vec<Component> {
+    // a component the waveform cannot hold (a fit that wandered off) is no return
+    let n = y.len() as f64;
     comps.retain(|c| {
         c.area_photons > 0.0
-            && c.centre_bin.is_finite()
-            && c.sigma_bins.is_finite()
             && c.area_photons.is_finite()
+            && (-1.0..=n + 1.0).contains(&c.centre_bin)
+            && c.sigma_bins > 0.0
+            && c.sigma_bins <= n
     });
     comps.sort_by(|a, b| a.centre_bin.total_cmp(&b.centre_bin));
     let close = comps;

@@ -362,3 +362,38 @@ fn the_first_return_is_judged_by_its_photon_noise_only() {
     assert_eq!(c.len(), 2, "{c:?}");
     assert!((c[0].centre_bin - 20.0).abs() < 0.05, "{c:?}");
 }
+
+/// A forest ALS waveform (als_sweep, pulse 71648 at 250 m and 150 kHz, 32 rays: four returns
+/// with deep dips between them) on which a fit wandered to a centre of 8.8e8 bins and a width
+/// of 3e9, which became a point 2700 km away and a panic in the LAS writer: every component
+/// stays within its waveform, and a fit that fails keeps the detector's return. (The four
+/// merge into one here: each later return is as large as one ray's share of the Monte Carlo
+/// error, the open problem of issue 11's item 7.)
+#[test]
+fn no_component_leaves_its_waveform() {
+    let v: serde_json::Value = serde_json::from_str(include_str!(
+        "../../../tests/data/diverging_fit_waveform.json"
+    ))
+    .unwrap();
+    let list = |k: &str| -> Vec<f32> {
+        v[k].as_array()
+            .unwrap()
+            .iter()
+            .map(|x| x.as_f64().unwrap() as f32)
+            .collect()
+    };
+    let (y, se) = (list("photons"), list("mc_se_photons"));
+    let sigma = 3.0 / 2.354_820_045 / 0.5;
+    for method in [Decomposition::Gaussian, Decomposition::PeakDetection] {
+        let c = decompose(&y, &se, 5.0, 4, method, sigma);
+        assert!(!c.is_empty(), "{method:?}: the fit lost every return");
+        for k in &c {
+            assert!(
+                (-1.0..=y.len() as f64 + 1.0).contains(&k.centre_bin)
+                    && k.sigma_bins > 0.0
+                    && k.sigma_bins <= y.len() as f64,
+                "{method:?}: {k:?}"
+            );
+        }
+    }
+}

@@ -317,8 +317,9 @@ fn a_signal_stops_a_run_cleanly_and_resume_finishes_it() {
             assert!(t.elapsed() < Duration::from_secs(120), "no part appeared");
             std::thread::sleep(Duration::from_millis(5));
         }
-        let sent = Command::new("kill")
-            .args([signal, &child.id().to_string()])
+        // the shell's own kill: a fresh machine may have no kill binary (procps)
+        let sent = Command::new("sh")
+            .args(["-c", &format!("kill {signal} {}", child.id())])
             .status()
             .unwrap();
         assert!(sent.success());

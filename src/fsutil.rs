@@ -19,11 +19,10 @@ pub fn temp_name(path: &Path) -> PathBuf {
 
 /// Writes a file through `write` under a temporary name, syncs it, then renames it.
 pub fn write_atomic<T>(path: &Path, write: impl FnOnce(File) -> Result<T>) -> Result<T> {
-    write_atomic_at(path, "", |tmp| {
-        let file = File::create(tmp)
-            .map_err(|e| Error::io(tmp, "cannot create file", e).advise(WRITE_ADVICE))?;
-        write(file)
-    })
+    let (pending, file) = Pending::create(path)?;
+    let out = write(file)?;
+    pending.commit()?;
+    Ok(out)
 }
 
 /// The one way a file reaches its final name: `write` writes the temporary path given to it
@@ -34,28 +33,70 @@ pub fn write_atomic_at<T>(
     suffix: &str,
     write: impl FnOnce(&Path) -> Result<T>,
 ) -> Result<T> {
-    if let Some(dir) = path.parent() {
-        std::fs::create_dir_all(dir)
-            .map_err(|e| Error::io(dir, "cannot create folder", e).advise(WRITE_ADVICE))?;
-    }
-    let mut tmp = temp_name(path).into_os_string();
-    tmp.push(suffix);
-    let tmp = PathBuf::from(tmp);
-    let out = match write(&tmp) {
-        Ok(v) => v,
-        Err(e) => {
-            let _ = std::fs::remove_file(&tmp);
-            return Err(e);
-        }
-    };
-    if let Ok(f) = File::open(&tmp) {
-        let _ = f.sync_all();
-    }
-    if let Err(e) = std::fs::rename(&tmp, path) {
-        let _ = std::fs::remove_file(&tmp);
-        return Err(Error::io(path, "cannot move file into place", e).advise(WRITE_ADVICE));
-    }
+    let pending = Pending::new(path, suffix)?;
+    let out = write(&pending.tmp)?;
+    pending.commit()?;
     Ok(out)
+}
+
+/// A file being written under its temporary name, for writers that take many steps:
+/// [`Pending::commit`] syncs it and moves it into place; dropped before that (an error, a
+/// panic), it is removed.
+pub struct Pending {
+    tmp: PathBuf,
+    path: PathBuf,
+    committed: bool,
+}
+
+impl Pending {
+    /// Creates the folder of `path` and names the temporary file (the temporary name, then
+    /// `suffix`); the caller creates the file.
+    pub fn new(path: &Path, suffix: &str) -> Result<Pending> {
+        if let Some(dir) = path.parent() {
+            std::fs::create_dir_all(dir)
+                .map_err(|e| Error::io(dir, "cannot create folder", e).advise(WRITE_ADVICE))?;
+        }
+        let mut tmp = temp_name(path).into_os_string();
+        tmp.push(suffix);
+        Ok(Pending {
+            tmp: PathBuf::from(tmp),
+            path: path.to_path_buf(),
+            committed: false,
+        })
+    }
+
+    /// A pending file with its temporary file created, and that file.
+    pub fn create(path: &Path) -> Result<(Pending, File)> {
+        let pending = Pending::new(path, "")?;
+        let file = File::create(&pending.tmp)
+            .map_err(|e| Error::io(&pending.tmp, "cannot create file", e).advise(WRITE_ADVICE))?;
+        Ok((pending, file))
+    }
+
+    /// The temporary path being written.
+    pub fn tmp(&self) -> &Path {
+        &self.tmp
+    }
+
+    /// Syncs the written file and renames it to its final name.
+    pub fn commit(mut self) -> Result<()> {
+        if let Ok(f) = File::open(&self.tmp) {
+            let _ = f.sync_all();
+        }
+        std::fs::rename(&self.tmp, &self.path).map_err(|e| {
+            Error::io(&self.path, "cannot move file into place", e).advise(WRITE_ADVICE)
+        })?;
+        self.committed = true;
+        Ok(())
+    }
+}
+
+impl Drop for Pending {
+    fn drop(&mut self) {
+        if !self.committed {
+            let _ = std::fs::remove_file(&self.tmp);
+        }
+    }
 }
 
 pub fn write_text_atomic(path: &Path, text: &str) -> Result<()> {

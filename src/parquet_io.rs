@@ -2,7 +2,7 @@
 //! pulse, waveform and photon files share.
 
 use crate::error::{Error, Result};
-use crate::fsutil::write_atomic;
+use crate::fsutil::Pending;
 use arrow_array::builder::{Float32Builder, Float64Builder, ListBuilder};
 use arrow_array::{ArrayRef, RecordBatch};
 use arrow_schema::{DataType, Field, Schema};
@@ -73,10 +73,15 @@ pub const CANDIDATES: [Encoding; 6] = [
     },
 ];
 
+/// Rows per row group: a writer holds one row group in memory, so this bounds what writing
+/// a long plan or many photons costs (Parquet's default is 1 Mi rows).
+pub const ROW_GROUP_ROWS: usize = 1 << 16;
+
 impl Encoding {
     pub fn props(&self) -> WriterProperties {
         let mut b = WriterProperties::builder()
             .set_created_by(format!("lidarsim {}", env!("CARGO_PKG_VERSION")))
+            .set_max_row_group_row_count(Some(ROW_GROUP_ROWS))
             .set_dictionary_enabled(self.dictionary)
             .set_compression(match self.zstd {
                 Some(level) => Compression::ZSTD(ZstdLevel::try_new(level).unwrap_or_default()),
@@ -109,15 +114,47 @@ pub fn encode(batch: &RecordBatch, props: WriterProperties) -> parquet::errors::
 }
 
 pub fn write_batch(path: &Path, batch: RecordBatch) -> Result<()> {
-    write_atomic(path, |file| {
-        let err = |e: parquet::errors::ParquetError| {
-            Error::io(path, "cannot write Parquet", e).advise(crate::fsutil::WRITE_ADVICE)
-        };
-        let mut w = ArrowWriter::try_new(file, batch.schema(), Some(props())).map_err(err)?;
-        w.write(&batch).map_err(err)?;
-        w.close().map_err(err)?;
-        Ok(())
-    })
+    let mut sink = Sink::create(path, batch.schema())?;
+    sink.write(&batch)?;
+    sink.finish()
+}
+
+/// A Parquet file written a batch at a time (row groups of [`ROW_GROUP_ROWS`]), under its
+/// temporary name until [`Sink::finish`].
+pub struct Sink {
+    writer: ArrowWriter<std::fs::File>,
+    pending: Pending,
+    path: std::path::PathBuf,
+}
+
+impl Sink {
+    pub fn create(path: &Path, schema: arrow_schema::SchemaRef) -> Result<Sink> {
+        let (pending, file) = Pending::create(path)?;
+        let writer = ArrowWriter::try_new(file, schema, Some(props()))
+            .map_err(|e| parquet_error(path, e))?;
+        Ok(Sink {
+            writer,
+            pending,
+            path: path.to_path_buf(),
+        })
+    }
+
+    pub fn write(&mut self, batch: &RecordBatch) -> Result<()> {
+        self.writer
+            .write(batch)
+            .map_err(|e| parquet_error(&self.path, e))
+    }
+
+    pub fn finish(self) -> Result<()> {
+        self.writer
+            .close()
+            .map_err(|e| parquet_error(&self.path, e))?;
+        self.pending.commit()
+    }
+}
+
+fn parquet_error(path: &Path, e: parquet::errors::ParquetError) -> Error {
+    Error::io(path, "cannot write Parquet", e).advise(crate::fsutil::WRITE_ADVICE)
 }
 
 pub fn list_f32(rows: impl Iterator<Item = Vec<f32>>) -> ArrayRef {

@@ -13,7 +13,7 @@ pub(super) fn check(path: &std::path::Path) -> Result<()> {
     require_file(path)?;
     let loaded = crate::plan::read_campaign(path)?;
     let c = &loaded.campaign;
-    let pulses = plan::plan(c)?;
+    let plan = plan::Plan::new(c)?;
     let t = Instant::now();
     let scene = Scene::load(&loaded.scene_path, c.wavelength_nm)?;
     let load_s = t.elapsed().as_secs_f64();
@@ -21,7 +21,7 @@ pub(super) fn check(path: &std::path::Path) -> Result<()> {
     let (lo, hi) = scene.bounds();
     println!("campaign: {} ({})", c.name, path.display());
     println!("scene: {} ({})", scene.name, loaded.scene_path.display());
-    println!("pulses: {}", pulses.len());
+    println!("pulses: {}", plan.len());
     println!("rays per pulse: {}", c.simulation.rays_per_pulse);
     println!("instances: {}", s.instances);
     println!("distinct meshes: {}", s.distinct_meshes);
@@ -36,23 +36,11 @@ pub(super) fn check(path: &std::path::Path) -> Result<()> {
         lo.x, lo.y, lo.z, hi.x, hi.y, hi.z
     );
     println!("scene load: {load_s:.2} s");
-    let rate = pipeline::probe_rays_per_second(&loaded, &scene, &pulses);
-    let total_rays = pulses.len() as f64 * c.simulation.rays_per_pulse as f64;
-    // what a run holds beyond the scene: the pulses, one part of waveforms, per-thread tallies
-    let bins = pulses
-        .iter()
-        .take(1)
-        .map(|p| {
-            crate::sensor::Gate::for_pulse(&c.instrument, p.origin, p.direction, scene.bounds())
-                .bins
-        })
-        .next()
-        .unwrap_or(0) as f64;
-    let run_bytes = pulses.len() as f64 * 80.0
-        + pipeline::PART_PULSES as f64 * (bins * 12.0 + c.simulation.max_order as f64 * 16.0)
-        + rayon::current_num_threads() as f64 * bins * 64.0 * 8.0;
+    let rate = pipeline::probe_rays_per_second(&loaded, &scene, &plan);
+    let total_rays = plan.len() as f64 * c.simulation.rays_per_pulse as f64;
+    let run_bytes = run_memory_bound(&loaded, &scene, &plan);
     println!(
-        "estimated memory: {:.0} MB (scene {:.0} MB + run {:.0} MB)",
+        "estimated memory: {:.0} MB (scene {:.0} MB + run {:.0} MB, a bound that does not grow with the number of pulses)",
         (s.memory_bytes as f64 + run_bytes) / 1e6,
         s.memory_bytes as f64 / 1e6,
         run_bytes / 1e6
@@ -66,6 +54,36 @@ pub(super) fn check(path: &std::path::Path) -> Result<()> {
     );
     println!("ok");
     Ok(())
+}
+
+/// What a run holds beyond the scene, bytes. Every stage works a part at a time, so this
+/// does not depend on the number of pulses: the simulate stage's part in the making and the
+/// one being written, with the workers' tallies; the products stage's part of waveforms, its
+/// chunk of points, the DSM grid over the scene, the distance histogram and the top view's
+/// sample; a row group of pulses or photons being written.
+fn run_memory_bound(loaded: &crate::campaign::Loaded, scene: &Scene, plan: &plan::Plan) -> f64 {
+    let c = &loaded.campaign;
+    let bins = if plan.is_empty() {
+        0.0
+    } else {
+        let p = plan.pulse(0);
+        crate::sensor::Gate::for_pulse(&c.instrument, p.origin, p.direction, scene.bounds()).bins
+            as f64
+    };
+    // a waveform: photons, impulse energy and its error, four classes, orders (f32 each)
+    let waveform = bins * 4.0 * (3.0 + 4.0) + c.simulation.max_order as f64 * 16.0;
+    let part = pipeline::PART_PULSES as f64 * waveform;
+    let threads = rayon::current_num_threads() as f64;
+    let simulate = 2.0 * part + threads * bins * 64.0 * 8.0;
+    let (lo, hi) = scene.bounds();
+    let dsm_cells = match crate::products::stage::wanted(loaded).dsm {
+        Some(res) => ((hi.x - lo.x) / res + 2.0) * ((hi.y - lo.y) / res + 2.0),
+        None => 0.0,
+    };
+    let points = crate::products::spill::CHUNK as f64 * 2.0 * 80.0;
+    let products = part + points + dsm_cells * 48.0 + 4e6 + 400_000.0 * 32.0;
+    let writing = crate::parquet_io::ROW_GROUP_ROWS as f64 * 2.0 * 80.0;
+    simulate.max(products) + writing
 }
 
 fn human_seconds(s: f64) -> String {

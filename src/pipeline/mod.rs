@@ -22,7 +22,7 @@ pub use sweep::RunTotals;
 use crate::campaign::{Campaign, Loaded};
 use crate::error::{Error, Result};
 use crate::fsutil::write_text_atomic;
-use crate::plan::{self, Pulse};
+use crate::plan::{self, Plan};
 use crate::products;
 use crate::progress::log;
 use crate::scene::Scene;
@@ -355,11 +355,11 @@ fn run_single(
     // simulate stage's fingerprint)
     let as_written = loaded.campaign_yaml();
     let fp_plan = fingerprint(&[as_written.as_bytes(), env!("CARGO_PKG_VERSION").as_bytes()]);
-    let pulses = plan_stage(&mut run, &loaded.campaign, &fp_plan)?;
+    let plan = plan_stage(&mut run, &loaded.campaign, &fp_plan)?;
 
     let mut summary = RunSummary {
         out: out.to_path_buf(),
-        pulses: pulses.len(),
+        pulses: plan.len(),
         rays: 0,
         seconds: 0.0,
         parts_done: 0,
@@ -376,7 +376,7 @@ fn run_single(
     let scene = cache.get(&loaded.scene_path, loaded.campaign.wavelength_nm)?;
     let fp_sim = simulate_fingerprint(&fp_plan, scene)?;
     if run.done(Stage::Simulate, &fp_sim) {
-        if let Some(bad) = first_broken_part(out, pulses.len()) {
+        if let Some(bad) = first_broken_part(out, plan.len()) {
             // the manifest says done, the files disagree: the files win
             log(&format!(
                 "simulate: a part file is missing or damaged ({bad}): it is simulated again"
@@ -387,7 +387,7 @@ fn run_single(
     }
     if run.wanted(Stage::Simulate) && !run.done(Stage::Simulate, &fp_sim) {
         let (t, cpu) = (Instant::now(), crate::progress::process_cpu_seconds());
-        let (rays, parts_done) = simulate_stage(&mut run, loaded, scene, &pulses, &fp_sim)?;
+        let (rays, parts_done) = simulate_stage(&mut run, loaded, scene, &plan, &fp_sim)?;
         summary.simulate_wall_s = Some(t.elapsed().as_secs_f64());
         summary.simulate_cpu_s = cpu
             .zip(crate::progress::process_cpu_seconds())
@@ -405,14 +405,14 @@ fn run_single(
 
     let fp_products = fingerprint(&[fp_sim.as_bytes(), b"products"]);
     if run.wanted(Stage::Products) && !run.done(Stage::Products, &fp_products) {
-        products_stage(&mut run, loaded, scene, &pulses, &fp_products)?;
+        products_stage(&mut run, loaded, scene, &plan, &fp_products)?;
     }
     let fp_report = fingerprint(&[fp_products.as_bytes(), b"report"]);
     if run.wanted(Stage::Report)
         && run.done(Stage::Products, &fp_products)
         && !run.done(Stage::Report, &fp_report)
     {
-        report_stage(&mut run, loaded, scene, &pulses, &fp_report)?;
+        report_stage(&mut run, loaded, scene, &plan, &fp_report)?;
     }
     if run.manifest == before {
         log("nothing to do: every stage is up to date");
@@ -427,12 +427,12 @@ fn products_stage(
     run: &mut RunFolder,
     loaded: &Loaded,
     scene: &Scene,
-    pulses: &[Pulse],
+    plan: &Plan,
     fp: &str,
 ) -> Result<()> {
     let t = Instant::now();
-    let parts = part_count(pulses.len());
-    let (outputs, note) = products::stage::run(loaded, scene, run.out, pulses, parts)?;
+    let parts = part_count(plan.len());
+    let (outputs, note) = products::stage::run(loaded, scene, run.out, plan, parts)?;
     log(&format!(
         "products: {} in {:.2} s",
         outputs.join(", "),
@@ -447,7 +447,7 @@ fn report_stage(
     run: &mut RunFolder,
     loaded: &Loaded,
     scene: &Scene,
-    pulses: &[Pulse],
+    plan: &Plan,
     fp: &str,
 ) -> Result<()> {
     let t = Instant::now();
@@ -457,16 +457,17 @@ fn report_stage(
         .get("simulate")
         .map(|r| r.wall_time_s)
         .unwrap_or(0.0);
-    let text = products::report::report(loaded, scene, pulses, run.out, simulate_s)?;
+    let text = products::report::report(loaded, scene, plan.len(), run.out, simulate_s)?;
     write_text_atomic(&run.out.join("report.md"), &text)?;
     run.finish(Stage::Report, fp, vec!["report.md".into()], t, None, "done")
 }
 
-/// The plan stage. Planning is cheap and deterministic, so the pulses are always planned in
-/// memory; `pulses.parquet` is written only when the stage is not already done.
-fn plan_stage(run: &mut RunFolder, c: &Campaign, fp: &str) -> Result<Vec<Pulse>> {
+/// The plan stage. Planning is cheap and deterministic, so every stage makes the pulses it
+/// needs from the [`Plan`], a part at a time; `pulses.parquet` is written only when the stage
+/// is not already done.
+fn plan_stage(run: &mut RunFolder, c: &Campaign, fp: &str) -> Result<Plan> {
     let t = Instant::now();
-    let pulses = plan::plan(c)?;
+    let pulses = Plan::new(c)?;
     if pulses.is_empty() {
         return Err(Error::msg("the platform plans no pulses"));
     }
@@ -526,12 +527,12 @@ fn simulate_stage(
     run: &mut RunFolder,
     loaded: &Loaded,
     scene: &Scene,
-    pulses: &[Pulse],
+    plan: &Plan,
     fp: &str,
 ) -> Result<(u64, usize)> {
     let (out, shard) = (run.out, run.opts.shard);
     let t = Instant::now();
-    let parts = part_count(pulses.len());
+    let parts = part_count(plan.len());
     let part_files: Vec<String> = (0..parts).map(part_name).collect();
     let wf_dir = out.join("waveforms");
     let marker = wf_dir.join("fingerprint");
@@ -542,13 +543,12 @@ fn simulate_stage(
         let _ = std::fs::remove_dir_all(&wf_dir);
     }
     write_text_atomic(&marker, fp)?;
-    let whole =
-        |k: usize| part_is_whole(&out.join(part_name(k)), part_range(k, pulses.len()).len());
+    let whole = |k: usize| part_is_whole(&out.join(part_name(k)), part_range(k, plan.len()).len());
     let todo: Vec<usize> = (0..parts)
         .filter(|k| shard.is_none_or(|(i, n)| k % n == i))
         .filter(|&k| !whole(k))
         .collect();
-    let (rays, done, stopped) = simulate_parts(loaded, scene, pulses, &todo, out)?;
+    let (rays, done, stopped) = simulate_parts(loaded, scene, plan, &todo, out)?;
     let missing = (0..parts).filter(|&k| !whole(k)).count();
     if missing == 0 {
         run.finish(Stage::Simulate, fp, part_files, t, None, "done")?;

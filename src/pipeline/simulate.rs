@@ -4,7 +4,7 @@
 use super::PART_PULSES;
 use crate::campaign::Loaded;
 use crate::error::{Error, Result};
-use crate::plan::Pulse;
+use crate::plan::{Plan, Pulse};
 use crate::progress::{log, progress};
 use crate::scene::Scene;
 use crate::sensor::{pulse_sigma_s, Gate, Laser, Receiver, SunSource};
@@ -26,14 +26,11 @@ use std::time::Instant;
 pub(super) fn simulate_parts(
     loaded: &Loaded,
     scene: &Scene,
-    pulses: &[Pulse],
+    plan: &Plan,
     todo: &[usize],
     out: &Path,
 ) -> Result<(u64, usize, Option<i32>)> {
-    let total: usize = todo
-        .iter()
-        .map(|&k| part_range(k, pulses.len()).len())
-        .sum();
+    let total: usize = todo.iter().map(|&k| part_range(k, plan.len()).len()).sum();
     let bar = progress(total as u64, "simulating");
     let t = Instant::now();
     let mut rays = 0u64;
@@ -61,8 +58,8 @@ pub(super) fn simulate_parts(
                 stopped = Some(signal);
                 break;
             }
-            let range = part_range(k, pulses.len());
-            let (waveforms, secs) = simulate(loaded, scene, &pulses[range], &bar);
+            let pulses = plan.pulses(part_range(k, plan.len()));
+            let (waveforms, secs) = simulate(loaded, scene, &pulses, &bar);
             rays += waveforms.iter().map(|w| w.rays as u64).sum::<u64>();
             done_pulses += waveforms.len();
             let elapsed = t.elapsed().as_secs_f64();
@@ -184,9 +181,11 @@ pub fn simulate(
 
 /// Rays per second on this machine for this campaign, measured on up to 8 pulses spread
 /// over the plan with at most 1000 rays each: the basis of `lidarsim check`'s time estimate.
-pub fn probe_rays_per_second(loaded: &Loaded, scene: &Scene, pulses: &[Pulse]) -> f64 {
-    let n = pulses.len().min(8);
-    let sample: Vec<Pulse> = (0..n).map(|i| pulses[i * pulses.len() / n]).collect();
+pub fn probe_rays_per_second(loaded: &Loaded, scene: &Scene, plan: &Plan) -> f64 {
+    let n = plan.len().min(8);
+    let sample: Vec<Pulse> = (0..n)
+        .map(|i| plan.pulse((i * plan.len() / n) as u64))
+        .collect();
     let mut probe = loaded.clone();
     probe.campaign.simulation.rays_per_pulse = probe.campaign.simulation.rays_per_pulse.min(1000);
     let t = Instant::now();

@@ -31,12 +31,21 @@
 //!   keep increasing with emission order. `line` = index of the flight line.
 
 use super::{need, whole_steps, GroundPath, Pulse};
-use crate::campaign::{Platform, PlatformKind, ScanPattern, Segment};
+use crate::campaign::{Platform, PlatformKind, ScanPattern};
 use crate::error::{Error, Result};
 use glam::DVec3;
 
-pub(crate) struct Als<'a> {
-    lines: &'a [Segment],
+/// A flight line with what its pulses need: where its pulses start in the plan and when the
+/// platform reaches its start.
+struct Flight {
+    path: GroundPath,
+    first_id: u64,
+    scan_lines: u64,
+    t_start: f64,
+}
+
+pub(crate) struct Als {
+    flights: Vec<Flight>,
     altitude: f64,
     speed: f64,
     pattern: ScanPattern,
@@ -51,8 +60,8 @@ pub(crate) struct Als<'a> {
     gps_start: f64,
 }
 
-impl<'a> Als<'a> {
-    pub(crate) fn new(p: &'a Platform) -> Result<Als<'a>> {
+impl Als {
+    pub(crate) fn new(p: &Platform) -> Result<Als> {
         let kind = PlatformKind::Als;
         let s = p
             .scanner
@@ -77,8 +86,29 @@ impl<'a> Als<'a> {
             Some(a) => a,
             None => sweep_deg * lines_per_s / need(p.prf_hz, kind, "prf_hz")?,
         };
+        let per_line = whole_steps(sweep_deg, look_step_deg);
+        // Flights in order; between two, the platform flies straight from one end to the next
+        // start. Summed in flight order, so every pulse's time is the same however it is found.
+        let (mut flights, mut first_id, mut t_line) = (Vec::new(), 0u64, 0.0);
+        let mut previous_end: Option<DVec3> = None;
+        for seg in p.lines.as_deref().unwrap_or(&[]) {
+            let path = GroundPath::new(seg);
+            if let Some(e) = previous_end {
+                t_line += (path.start - e).length() / speed;
+            }
+            let scan_lines = whole_steps(path.length, line_step_m);
+            flights.push(Flight {
+                path,
+                first_id,
+                scan_lines,
+                t_start: t_line,
+            });
+            first_id = first_id.saturating_add(scan_lines.saturating_mul(per_line));
+            t_line += path.length / speed;
+            previous_end = Some(path.end);
+        }
         Ok(Als {
-            lines: p.lines.as_deref().unwrap_or(&[]),
+            flights,
             altitude: need(p.altitude_m, kind, "altitude_m")?,
             speed,
             pattern,
@@ -87,18 +117,20 @@ impl<'a> Als<'a> {
             cone_deg: min_deg.abs().max(max_deg.abs()),
             line_step_m,
             look_step_deg,
-            per_line: whole_steps(sweep_deg, look_step_deg),
+            per_line,
             gps_start: p.gps_start_s.unwrap_or(0.0),
         })
     }
 
-    pub(crate) fn scan_lines(&self, line: &Segment) -> u64 {
-        whole_steps(GroundPath::new(line).length, self.line_step_m)
+    /// Scan lines of each flight line, in order.
+    pub(crate) fn scan_lines(&self) -> impl Iterator<Item = u64> + '_ {
+        self.flights.iter().map(|f| f.scan_lines)
     }
 
     pub(crate) fn count(&self) -> u64 {
-        self.lines.iter().fold(0u64, |n, l| {
-            n.saturating_add(self.scan_lines(l).saturating_mul(self.per_line))
+        self.flights.last().map_or(0, |f| {
+            f.first_id
+                .saturating_add(f.scan_lines.saturating_mul(self.per_line))
         })
     }
 
@@ -125,35 +157,23 @@ impl<'a> Als<'a> {
         }
     }
 
-    pub(crate) fn fill(&self, out: &mut Vec<Pulse>) {
-        let lines_per_s = self.speed / self.line_step_m;
-        let up = DVec3::Z * self.altitude;
+    /// Pulse `id` (< [`Als::count`]).
+    pub(crate) fn pulse(&self, id: u64) -> Pulse {
+        let index = self.flights.partition_point(|f| f.first_id <= id) - 1;
+        let f = &self.flights[index];
         let n = self.per_line;
-        // Time at which the platform reaches the start of the current flight line.
-        let mut t_line = 0.0;
-        let mut previous_end: Option<DVec3> = None;
-        for (index, seg) in self.lines.iter().enumerate() {
-            let g = GroundPath::new(seg);
-            if let Some(e) = previous_end {
-                t_line += (g.start - e).length() / self.speed;
-            }
-            for j in 0..self.scan_lines(seg) {
-                for i in 0..n {
-                    // Scan lines flown since the start of this flight line, fractional.
-                    let s = j as f64 + i as f64 / n as f64;
-                    let (direction, angle) = self.beam(&g, j, i);
-                    out.push(Pulse {
-                        id: out.len() as u64,
-                        gps_time_s: self.gps_start + t_line + s / lines_per_s,
-                        origin: g.start + g.along * (s * self.line_step_m) + up,
-                        direction,
-                        scan_angle_deg: angle as f32,
-                        line: index as u32,
-                    });
-                }
-            }
-            t_line += g.length / self.speed;
-            previous_end = Some(g.end);
+        let (j, i) = ((id - f.first_id) / n, (id - f.first_id) % n);
+        let lines_per_s = self.speed / self.line_step_m;
+        // Scan lines flown since the start of this flight line, fractional.
+        let s = j as f64 + i as f64 / n as f64;
+        let (direction, angle) = self.beam(&f.path, j, i);
+        Pulse {
+            id,
+            gps_time_s: self.gps_start + f.t_start + s / lines_per_s,
+            origin: f.path.start + f.path.along * (s * self.line_step_m) + DVec3::Z * self.altitude,
+            direction,
+            scan_angle_deg: angle as f32,
+            line: index as u32,
         }
     }
 }

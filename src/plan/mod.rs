@@ -112,24 +112,82 @@ pub fn check_campaign(doc: &Doc, campaign: &Campaign) -> Result<()> {
     validate::platform(doc, &campaign.platform)
 }
 
-/// The pulses of a campaign, in emission order (`id` = index).
+/// A campaign's pulses, made on demand: any pulse, or any range of them, is computed from
+/// its id alone, so no stage holds the whole plan in memory whatever the campaign's length.
+pub struct Plan {
+    len: u64,
+    platform: Source,
+}
+
+/// The platform that makes the pulses.
+enum Source {
+    /// `static`: the campaign file lists its pulses.
+    Listed(Vec<Pulse>),
+    Als(als::Als),
+    Spaceborne(spaceborne::Spaceborne),
+    Track(track::Track),
+    Tls(tls::Tls),
+}
+
+impl Plan {
+    /// The plan of a campaign; refused when over [`MAX_PULSES`].
+    pub fn new(campaign: &Campaign) -> Result<Plan> {
+        let p = &campaign.platform;
+        let platform = match p.kind {
+            PlatformKind::Static => Source::Listed(static_pulses(p)),
+            PlatformKind::Als => Source::Als(als::Als::new(p)?),
+            PlatformKind::Spaceborne => Source::Spaceborne(spaceborne::Spaceborne::new(p)?),
+            PlatformKind::Track => Source::Track(track::Track::new(p)?),
+            PlatformKind::Tls => Source::Tls(tls::Tls::new(p)?),
+        };
+        let len = match &platform {
+            Source::Listed(v) => v.len() as u64,
+            Source::Als(a) => a.count(),
+            Source::Spaceborne(s) => s.count(),
+            Source::Track(t) => t.count(),
+            Source::Tls(t) => t.count(),
+        };
+        if len > MAX_PULSES {
+            return Err(Error::msg(too_many(len)));
+        }
+        Ok(Plan { len, platform })
+    }
+
+    /// Number of pulses.
+    pub fn len(&self) -> usize {
+        self.len as usize
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+
+    /// Pulse `id`, which must be below [`Plan::len`].
+    pub fn pulse(&self, id: u64) -> Pulse {
+        debug_assert!(id < self.len);
+        match &self.platform {
+            Source::Listed(v) => v[id as usize],
+            Source::Als(a) => a.pulse(id),
+            Source::Spaceborne(s) => s.pulse(id),
+            Source::Track(t) => t.pulse(id),
+            Source::Tls(t) => t.pulse(id),
+        }
+    }
+
+    /// The pulses whose ids lie in `range` (clipped to the plan), in emission order.
+    pub fn pulses(&self, range: std::ops::Range<usize>) -> Vec<Pulse> {
+        let end = range.end.min(self.len());
+        (range.start.min(end)..end)
+            .map(|id| self.pulse(id as u64))
+            .collect()
+    }
+}
+
+/// Every pulse of a campaign, in emission order (`id` = index): for tests and small plans;
+/// the pipeline takes them a part at a time from [`Plan`].
 pub fn plan(campaign: &Campaign) -> Result<Vec<Pulse>> {
-    let p = &campaign.platform;
-    let n = count(p)?;
-    if n > MAX_PULSES {
-        return Err(Error::msg(too_many(n)));
-    }
-    // reserve no more than a part's worth up front: the count was checked, memory is not
-    let mut out = Vec::with_capacity((n as usize).min(1 << 20));
-    match p.kind {
-        PlatformKind::Static => static_pulses(p, &mut out),
-        PlatformKind::Als => als::Als::new(p)?.fill(&mut out),
-        PlatformKind::Spaceborne => spaceborne::Spaceborne::new(p)?.fill(&mut out),
-        PlatformKind::Track => track::Track::new(p)?.fill(&mut out),
-        PlatformKind::Tls => tls::Tls::new(p)?.fill(&mut out),
-    }
-    debug_assert_eq!(out.len() as u64, n);
-    Ok(out)
+    let plan = Plan::new(campaign)?;
+    Ok(plan.pulses(0..plan.len()))
 }
 
 /// How many pulses `plan` would make, without making them (saturating on overflow).
@@ -150,25 +208,30 @@ pub(crate) fn too_many(n: u64) -> String {
     )
 }
 
-fn static_pulses(p: &Platform, out: &mut Vec<Pulse>) {
+fn static_pulses(p: &Platform) -> Vec<Pulse> {
     let specs = p.pulses.as_deref().unwrap_or(&[]);
     let t0 = p.gps_start_s.unwrap_or(0.0);
-    out.extend(specs.iter().enumerate().map(|(i, s)| {
-        let direction = match s.direction {
-            Some(d) => DVec3::from_array(d).normalize(),
-            None => {
-                direction_from_angles(s.zenith_deg.unwrap_or(180.0), s.azimuth_deg.unwrap_or(0.0))
+    specs
+        .iter()
+        .enumerate()
+        .map(|(i, s)| {
+            let direction = match s.direction {
+                Some(d) => DVec3::from_array(d).normalize(),
+                None => direction_from_angles(
+                    s.zenith_deg.unwrap_or(180.0),
+                    s.azimuth_deg.unwrap_or(0.0),
+                ),
+            };
+            Pulse {
+                id: i as u64,
+                gps_time_s: t0,
+                origin: DVec3::from_array(s.position),
+                direction,
+                scan_angle_deg: off_nadir_deg(direction) as f32,
+                line: 0,
             }
-        };
-        Pulse {
-            id: i as u64,
-            gps_time_s: t0,
-            origin: DVec3::from_array(s.position),
-            direction,
-            scan_angle_deg: off_nadir_deg(direction) as f32,
-            line: 0,
-        }
-    }));
+        })
+        .collect()
 }
 
 /// "an als", "a track", ...: the kind with its article, for messages.

@@ -1,17 +1,38 @@
 //! `pulses.parquet` (outputs.md): the planned pulses.
 
-use super::Pulse;
+use super::{Plan, Pulse};
 use crate::error::Result;
-use crate::parquet_io::{batch, write_batch};
-use arrow_array::{ArrayRef, Float32Array, Float64Array, UInt32Array, UInt64Array};
+use crate::parquet_io::{batch, Sink};
+use arrow_array::{ArrayRef, Float32Array, Float64Array, RecordBatch, UInt32Array, UInt64Array};
 use std::path::Path;
 use std::sync::Arc;
 
-pub fn write_pulses(path: &Path, pulses: &[Pulse]) -> Result<()> {
+/// Pulses made and written at a time: a row group, so memory stays bounded whatever the
+/// plan's length.
+const CHUNK: usize = crate::parquet_io::ROW_GROUP_ROWS;
+
+/// Writes every pulse of `plan`, a chunk at a time.
+pub fn write_pulses(path: &Path, plan: &Plan) -> Result<()> {
+    let mut sink = None;
+    for start in (0..plan.len().max(1)).step_by(CHUNK) {
+        let b = table(&plan.pulses(start..start + CHUNK));
+        let s = match &mut sink {
+            Some(s) => s,
+            None => sink.insert(Sink::create(path, b.schema())?),
+        };
+        s.write(&b)?;
+    }
+    match sink {
+        Some(s) => s.finish(),
+        None => Ok(()),
+    }
+}
+
+fn table(pulses: &[Pulse]) -> RecordBatch {
     let f64col = |f: fn(&Pulse) -> f64| -> ArrayRef {
         Arc::new(Float64Array::from_iter_values(pulses.iter().map(f)))
     };
-    let b = batch(vec![
+    batch(vec![
         (
             "pulse_id",
             Arc::new(UInt64Array::from_iter_values(pulses.iter().map(|p| p.id))),
@@ -33,6 +54,5 @@ pub fn write_pulses(path: &Path, pulses: &[Pulse]) -> Result<()> {
             "line",
             Arc::new(UInt32Array::from_iter_values(pulses.iter().map(|p| p.line))),
         ),
-    ]);
-    write_batch(path, b)
+    ])
 }

@@ -18,19 +18,19 @@ use crate::campaign::{Platform, PlatformKind};
 use crate::error::{Error, Result};
 use glam::DVec3;
 
-pub(crate) struct Spaceborne<'a> {
+pub(crate) struct Spaceborne {
     path: GroundPath,
     altitude: f64,
     prf: f64,
     pub(crate) shot_step_m: f64,
-    /// Cross-track offsets; `None` = one beam on the track.
-    beams: Option<&'a [crate::campaign::Beam]>,
+    /// Cross-track offsets of the beams, m; `None` = one beam on the track.
+    beams: Option<Vec<f64>>,
     off_nadir_deg: f64,
     gps_start: f64,
 }
 
-impl<'a> Spaceborne<'a> {
-    pub(crate) fn new(p: &'a Platform) -> Result<Spaceborne<'a>> {
+impl Spaceborne {
+    pub(crate) fn new(p: &Platform) -> Result<Spaceborne> {
         let kind = PlatformKind::Spaceborne;
         let track = p
             .track
@@ -42,14 +42,17 @@ impl<'a> Spaceborne<'a> {
             altitude: need(p.altitude_m, kind, "altitude_m")?,
             prf,
             shot_step_m: need(p.ground_speed_m_s, kind, "ground_speed_m_s")? / prf,
-            beams: p.beams.as_deref(),
+            beams: p
+                .beams
+                .as_ref()
+                .map(|b| b.iter().map(|b| b.cross_track_m).collect()),
             off_nadir_deg: p.off_nadir_deg.unwrap_or(0.0),
             gps_start: p.gps_start_s.unwrap_or(0.0),
         })
     }
 
     fn beam_count(&self) -> u64 {
-        self.beams.map_or(1, |b| b.len() as u64)
+        self.beams.as_ref().map_or(1, |b| b.len() as u64)
     }
 
     pub(crate) fn shots(&self) -> u64 {
@@ -60,27 +63,24 @@ impl<'a> Spaceborne<'a> {
         self.shots().saturating_mul(self.beam_count())
     }
 
-    pub(crate) fn fill(&self, out: &mut Vec<Pulse>) {
+    /// Pulse `id` (< [`Spaceborne::count`]): shot-major, beam-minor.
+    pub(crate) fn pulse(&self, id: u64) -> Pulse {
         let g = &self.path;
         let (s, c) = self.off_nadir_deg.to_radians().sin_cos();
         let direction = g.right * s - DVec3::Z * c;
         // From the footprint centre back up the beam to the platform's height.
         let lift = DVec3::Z * self.altitude - g.right * (self.altitude * s / c);
-        let nadir = [crate::campaign::Beam { cross_track_m: 0.0 }];
-        let beams = self.beams.unwrap_or(&nadir);
-        for k in 0..self.shots() {
-            let ground = g.start + g.along * (k as f64 * self.shot_step_m).min(g.length);
-            let t = self.gps_start + k as f64 / self.prf;
-            for (b, beam) in beams.iter().enumerate() {
-                out.push(Pulse {
-                    id: out.len() as u64,
-                    gps_time_s: t,
-                    origin: ground + g.right * beam.cross_track_m + lift,
-                    direction,
-                    scan_angle_deg: self.off_nadir_deg as f32,
-                    line: b as u32,
-                });
-            }
+        let beams = self.beam_count();
+        let (k, b) = (id / beams, id % beams);
+        let cross = self.beams.as_ref().map_or(0.0, |v| v[b as usize]);
+        let ground = g.start + g.along * (k as f64 * self.shot_step_m).min(g.length);
+        Pulse {
+            id,
+            gps_time_s: self.gps_start + k as f64 / self.prf,
+            origin: ground + g.right * cross + lift,
+            direction,
+            scan_angle_deg: self.off_nadir_deg as f32,
+            line: b as u32,
         }
     }
 }

@@ -58,23 +58,20 @@ impl Tls {
         self.azimuths().saturating_mul(self.zeniths())
     }
 
-    pub(crate) fn fill(&self, out: &mut Vec<Pulse>) {
-        let (na, nz) = (self.azimuths(), self.zeniths());
-        for ia in 0..na {
-            let az = (self.azimuth[0] + ia as f64 * self.azimuth_step).min(self.azimuth[1]);
-            for iz in 0..nz {
-                // Clamped because the tolerance may let the last step overshoot by 1e-9.
-                let ze = (self.zenith[0] + iz as f64 * self.zenith_step).min(self.zenith[1]);
-                let k = out.len() as u64;
-                out.push(Pulse {
-                    id: k,
-                    gps_time_s: self.gps_start + k as f64 / self.prf,
-                    origin: self.position,
-                    direction: direction_from_angles(ze, az),
-                    scan_angle_deg: ze as f32,
-                    line: 0,
-                });
-            }
+    /// Pulse `id` (< [`Tls::count`]): azimuth-major, zenith-minor.
+    pub(crate) fn pulse(&self, id: u64) -> Pulse {
+        let nz = self.zeniths();
+        let (ia, iz) = (id / nz, id % nz);
+        let az = (self.azimuth[0] + ia as f64 * self.azimuth_step).min(self.azimuth[1]);
+        // Clamped because the tolerance may let the last step overshoot by 1e-9.
+        let ze = (self.zenith[0] + iz as f64 * self.zenith_step).min(self.zenith[1]);
+        Pulse {
+            id,
+            gps_time_s: self.gps_start + id as f64 / self.prf,
+            origin: self.position,
+            direction: direction_from_angles(ze, az),
+            scan_angle_deg: ze as f32,
+            line: 0,
         }
     }
 }

@@ -43,18 +43,16 @@ impl Track {
         whole_steps(self.path.length, self.step)
     }
 
-    pub(crate) fn fill(&self, out: &mut Vec<Pulse>) {
+    /// Pulse `id` (< [`Track::count`]).
+    pub(crate) fn pulse(&self, id: u64) -> Pulse {
         let g = &self.path;
-        let up = DVec3::Z * self.altitude;
-        for k in 0..self.count() {
-            out.push(Pulse {
-                id: out.len() as u64,
-                gps_time_s: self.gps_start + k as f64 / self.prf,
-                origin: g.start + g.along * (k as f64 * self.step) + up,
-                direction: DVec3::NEG_Z,
-                scan_angle_deg: 0.0,
-                line: 0,
-            });
+        Pulse {
+            id,
+            gps_time_s: self.gps_start + id as f64 / self.prf,
+            origin: g.start + g.along * (id as f64 * self.step) + DVec3::Z * self.altitude,
+            direction: DVec3::NEG_Z,
+            scan_angle_deg: 0.0,
+            line: 0,
         }
     }
 }

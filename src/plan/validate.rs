@@ -302,8 +302,8 @@ fn als(c: &Check, p: &Platform) -> Result<()> {
             ),
         ));
     }
-    for (i, l) in lines.iter().enumerate() {
-        if a.scan_lines(l) == 0 {
+    for (i, (l, n)) in lines.iter().zip(a.scan_lines()).enumerate() {
+        if n == 0 {
             return Err(doc.error(
                 &format!("platform.lines[{i}]"),
                 format!(

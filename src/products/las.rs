@@ -1,11 +1,11 @@
 //! points.las: LAS 1.4, point format 6, millimetre precision, with two extra dimensions.
 
 use crate::error::{Error, Result};
-use crate::fsutil::write_atomic;
+use crate::fsutil::{write_atomic, WRITE_ADVICE};
 use crate::products::points::Point;
 use las::point::Classification;
 use las::{Builder, Reader, Transform, Vector, Version, Vlr, Writer};
-use std::io::{BufWriter, Write};
+use std::io::{BufWriter, Seek, SeekFrom, Write};
 use std::path::Path;
 
 pub const SCALE: f64 = 0.001;
@@ -59,68 +59,157 @@ fn extra_len() -> u16 {
 /// the floor of each coordinate's minimum, so every coordinate is a whole number of
 /// millimetres from it and fits i32 for extents up to 2000 km.
 pub fn write_las(path: &Path, points: &[Point]) -> Result<()> {
-    let err = |e: las::Error| Error::file(path, format!("cannot write LAS: {e}"));
-    let min = |f: fn(&Point) -> f64| -> f64 {
-        let m = points.iter().map(f).fold(f64::INFINITY, f64::min);
-        if m.is_finite() {
-            m.floor()
-        } else {
-            0.0
+    let mut extent = Extent::default();
+    extent.add(path, points)?;
+    let offset = extent.offset(path)?;
+    let mut chunks = Some(points);
+    write_las_chunks(path, offset, |each| match chunks.take() {
+        Some(c) => each(c),
+        None => Ok(()),
+    })
+}
+
+/// What the LAS offsets need of the points, gathered as they stream by: each coordinate's
+/// minimum, and the points farthest from it.
+#[derive(Clone, Debug, Default)]
+pub struct Extent {
+    min: Option<[f64; 3]>,
+    /// Per axis, the point with the largest coordinate.
+    max: [Option<Point>; 3],
+}
+
+impl Extent {
+    /// Takes in more points; a point with a non-finite coordinate is an error.
+    pub fn add(&mut self, path: &Path, points: &[Point]) -> Result<()> {
+        for p in points {
+            let v = [p.x, p.y, p.z];
+            if !v.iter().all(|c| c.is_finite()) {
+                return Err(Error::file(
+                    path,
+                    format!("point of pulse {} has a non-finite coordinate", p.pulse_id),
+                ));
+            }
+            let min = self.min.get_or_insert(v);
+            for axis in 0..3 {
+                min[axis] = min[axis].min(v[axis]);
+                if self.max[axis]
+                    .as_ref()
+                    .is_none_or(|m| v[axis] > [m.x, m.y, m.z][axis])
+                {
+                    self.max[axis] = Some(p.clone());
+                }
+            }
         }
-    };
-    let (x0, y0, z0) = (min(|p| p.x), min(|p| p.y), min(|p| p.z));
-    // every coordinate a whole number of millimetres from its offset within i32; checked
-    // here, because the las crate panics when a writer that failed a point is dropped
-    let fits = |v: f64, offset: f64| ((v - offset) / SCALE).abs() < i32::MAX as f64;
-    for p in points {
-        if !(p.x.is_finite() && p.y.is_finite() && p.z.is_finite()) {
-            return Err(Error::file(
-                path,
-                format!("point of pulse {} has a non-finite coordinate", p.pulse_id),
-            ));
-        }
-        if !(fits(p.x, x0) && fits(p.y, y0) && fits(p.z, z0)) {
-            return Err(Error::file(
-                path,
-                format!(
-                    "point of pulse {} at ({}, {}, {}) m lies more than 2000 km from the others: LAS cannot hold it",
-                    p.pulse_id, p.x, p.y, p.z
-                ),
-            ));
-        }
+        Ok(())
     }
+
+    /// The offsets: the floor of each minimum (0 without points), once every coordinate is
+    /// known to be a whole number of millimetres from it within i32; checked here, before
+    /// any point is written, because the las crate panics when a writer that failed a point
+    /// is dropped.
+    pub fn offset(&self, path: &Path) -> Result<[f64; 3]> {
+        let offset = self.min.map_or([0.0; 3], |m| m.map(f64::floor));
+        for (axis, p) in self.max.iter().enumerate() {
+            let Some(p) = p else { continue };
+            if ([p.x, p.y, p.z][axis] - offset[axis]) / SCALE >= i32::MAX as f64 {
+                return Err(Error::file(
+                    path,
+                    format!(
+                        "point of pulse {} at ({}, {}, {}) m lies more than 2000 km from the others: LAS cannot hold it",
+                        p.pulse_id, p.x, p.y, p.z
+                    ),
+                ));
+            }
+        }
+        Ok(offset)
+    }
+}
+
+/// Writes points.las with the given offsets ([`Extent::offset`]) from the points `chunks`
+/// hands to its callback, in order.
+pub fn write_las_chunks(
+    path: &Path,
+    offset: [f64; 3],
+    chunks: impl FnOnce(&mut dyn FnMut(&[Point]) -> Result<()>) -> Result<()>,
+) -> Result<()> {
+    let err = |e: las::Error| Error::file(path, format!("cannot write LAS: {e}"));
     let mut b = Builder::from((1, 4));
     b.version = Version::new(1, 4);
     b.point_format = las::point::Format::new(6).map_err(err)?;
     b.point_format.extra_bytes = extra_len();
+    let transform = |offset| Transform {
+        scale: SCALE,
+        offset,
+    };
     b.transforms = Vector {
-        x: Transform {
-            scale: SCALE,
-            offset: x0,
-        },
-        y: Transform {
-            scale: SCALE,
-            offset: y0,
-        },
-        z: Transform {
-            scale: SCALE,
-            offset: z0,
-        },
+        x: transform(offset[0]),
+        y: transform(offset[1]),
+        z: transform(offset[2]),
     };
     b.generating_software = format!("lidarsim {}", env!("CARGO_PKG_VERSION"));
     b.vlrs.push(extra_bytes_vlr());
     let header = b.into_header().map_err(err)?;
     write_atomic(path, |file| {
-        let mut w = Writer::new(BufWriter::new(file), header).map_err(err)?;
-        for p in points {
-            w.write_point(to_las(p)?).map_err(err)?;
+        let sink = Sticky {
+            inner: BufWriter::new(file),
+            error: None,
+        };
+        let mut w = Writer::new(sink, header).map_err(err)?;
+        let written = chunks(&mut |points| {
+            for p in points {
+                w.write_point(to_las(p)?).map_err(err)?;
+            }
+            Ok(())
+        });
+        let mut sink = w.into_inner().map_err(err)?;
+        written?;
+        let flushed = sink.inner.flush();
+        match sink.error.take().map_or(flushed, Err) {
+            Ok(()) => Ok(()),
+            Err(e) => Err(Error::io(path, "cannot write LAS", e).advise(WRITE_ADVICE)),
         }
-        let mut inner = w.into_inner().map_err(err)?;
-        inner
-            .flush()
-            .map_err(|e| Error::file(path, format!("cannot write LAS: {e}")))?;
-        Ok(())
     })
+}
+
+/// A writer that never fails: it keeps the first error and drops what follows. The las
+/// crate panics when a writer whose stream failed (a full disk) is dropped, so its stream
+/// must not fail; the error is returned once the writer is done.
+#[derive(Debug)]
+struct Sticky<W> {
+    inner: W,
+    error: Option<std::io::Error>,
+}
+
+impl<W: Write> Write for Sticky<W> {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        if self.error.is_none() {
+            if let Err(e) = self.inner.write_all(buf) {
+                self.error = Some(e);
+            }
+        }
+        Ok(buf.len())
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        if self.error.is_none() {
+            if let Err(e) = self.inner.flush() {
+                self.error = Some(e);
+            }
+        }
+        Ok(())
+    }
+}
+
+impl<W: Seek> Seek for Sticky<W> {
+    fn seek(&mut self, pos: SeekFrom) -> std::io::Result<u64> {
+        if self.error.is_none() {
+            match self.inner.seek(pos) {
+                Ok(at) => return Ok(at),
+                Err(e) => self.error = Some(e),
+            }
+        }
+        Ok(0)
+    }
 }
 
 fn to_las(p: &Point) -> Result<las::Point> {

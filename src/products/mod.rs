@@ -10,5 +10,6 @@ pub mod plot;
 pub mod points;
 pub mod report;
 pub mod returns;
+pub mod spill;
 pub mod stage;
 pub mod summary;

@@ -5,7 +5,7 @@ use crate::parquet_io::{batch, write_batch};
 use crate::plan::Pulse;
 use crate::rng::SplitMix64;
 use crate::C;
-use arrow_array::{ArrayRef, Float64Array, UInt64Array, UInt8Array};
+use arrow_array::{ArrayRef, Float64Array, RecordBatch, UInt64Array, UInt8Array};
 use std::path::Path;
 use std::sync::Arc;
 
@@ -125,6 +125,11 @@ pub fn photon_rows(
 /// Writes photons.parquet (outputs.md): pulse_id u64, time_ns f64, x, y, z f64,
 /// along_track_m f64, source u8.
 pub fn write_photons(path: &Path, rows: &[PhotonRow]) -> Result<()> {
+    write_batch(path, photon_table(rows))
+}
+
+/// The rows as `photons.parquet` holds them.
+pub fn photon_table(rows: &[PhotonRow]) -> RecordBatch {
     let f64col = |f: fn(&PhotonRow) -> f64| -> ArrayRef {
         Arc::new(Float64Array::from_iter_values(rows.iter().map(f)))
     };
@@ -145,7 +150,7 @@ pub fn write_photons(path: &Path, rows: &[PhotonRow]) -> Result<()> {
             Arc::new(UInt8Array::from_iter_values(rows.iter().map(|r| r.source))),
         ),
     ];
-    write_batch(path, batch(columns))
+    batch(columns)
 }
 
 #[cfg(test)]

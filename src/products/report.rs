@@ -2,7 +2,6 @@
 
 use crate::campaign::Loaded;
 use crate::error::Result;
-use crate::plan::Pulse;
 use crate::products::dsm::DsmReport;
 use crate::products::summary::ProductsSummary;
 use crate::scene::Scene;
@@ -14,21 +13,22 @@ use std::path::Path;
 pub fn report(
     loaded: &Loaded,
     scene: &Scene,
-    pulses: &[Pulse],
+    pulses: usize,
     out: &Path,
     simulate_s: f64,
 ) -> Result<String> {
     let c = &loaded.campaign;
-    let mut received = Vec::new();
+    let (mut total, mut received) = (0.0, 0usize);
     let mut multiple = 0.0;
     let mut rays = 0u64;
     let mut paths = 0.0;
     let (mut solar, mut brf_fov, mut brf_fp) = (0.0, 0.0, 0.0);
     // the parts by index, as the products stage reads them: another file in the folder is
     // not part of the run
-    for k in 0..part_count(pulses.len()) {
+    for k in 0..part_count(pulses) {
         for w in read_waveforms(&out.join(part_name(k)))? {
-            received.push(w.received_energy_j);
+            total += w.received_energy_j;
+            received += 1;
             multiple += w.received_energy_j - w.order_energy_j.first().copied().unwrap_or(0.0);
             rays += w.rays as u64;
             paths += w.paths_per_ray as f64 * w.rays as f64;
@@ -37,7 +37,6 @@ pub fn report(
             brf_fp += w.brf_footprint_laser as f64;
         }
     }
-    let total: f64 = received.iter().sum();
     let sim = simulate_s;
     let s = scene.stats();
     let mut text = format!("# Run report: {}\n\n", c.name);
@@ -54,15 +53,15 @@ pub fn report(
         c.simulation.method,
         c.simulation.rays_per_pulse,
         c.simulation.max_order,
-        pulses.len(),
+        pulses,
         rays,
         sim,
-        if sim > 0.0 { pulses.len() as f64 / sim } else { 0.0 },
+        if sim > 0.0 { pulses as f64 / sim } else { 0.0 },
         paths / rays.max(1) as f64,
-        total / received.len().max(1) as f64,
+        total / received.max(1) as f64,
         if total > 0.0 { 100.0 * multiple / total } else { 0.0 },
     );
-    let n = received.len().max(1) as f64;
+    let n = received.max(1) as f64;
     text += &format!(
         "| scene BRF in the footprint, from the laser (π/ΔΩ)(Q_r/Q_e) | {:.4} |\n",
         brf_fp / n

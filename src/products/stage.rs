@@ -4,18 +4,23 @@
 use crate::campaign::{InstrumentKind, Loaded};
 use crate::error::{Error, Result};
 use crate::fsutil::write_text_atomic;
-use crate::plan::Pulse;
+use crate::parquet_io::Sink;
+use crate::plan::Plan;
+use crate::products::accuracy::DistanceHistogram;
+use crate::products::dsm::Dsm;
 use crate::products::figures::{self, TopPoint, WaveformFigure};
-use crate::products::las::write_las;
-use crate::products::photons::{count_photons, photon_rows, write_photons, PhotonRow};
+use crate::products::las::{write_las_chunks, Extent};
+use crate::products::photons::{count_photons, photon_rows, photon_table, PhotonRow};
 use crate::products::points::{points_on_axis, Point, PointConfig};
 use crate::products::returns::{decompose, Component, Decomposition};
+use crate::products::spill::Spill;
 use crate::products::summary::{PhotonCounts, PointsSummary, ProductsSummary};
 use crate::progress::{log, progress};
 use crate::scene::{Scene, SurfaceClass};
 use crate::sensor::pulse_sigma_s;
 use crate::waveform::file::{part_name, read_waveforms};
 use crate::waveform::Waveform;
+use glam::DVec3;
 use rayon::prelude::*;
 use std::path::Path;
 
@@ -82,10 +87,14 @@ fn components(loaded: &Loaded, w: &Waveform) -> Vec<Component> {
 }
 
 /// Discrete returns of every pulse, in pulse order then time.
-pub fn discrete_returns(loaded: &Loaded, pulses: &[Pulse], waveforms: &[Waveform]) -> Vec<Point> {
+pub fn discrete_returns(loaded: &Loaded, plan: &Plan, waveforms: &[Waveform]) -> Vec<Point> {
     let c = &loaded.campaign;
     let inst = &c.instrument;
-    let reference_range = pulses.first().map_or(1.0, |p| p.origin.z.abs().max(1.0));
+    let reference_range = if plan.is_empty() {
+        1.0
+    } else {
+        plan.pulse(0).origin.z.abs().max(1.0)
+    };
     let config = PointConfig {
         emitted_energy_j: inst.pulse_energy_j,
         photon_energy_j: crate::photon_energy_j(c.wavelength_nm),
@@ -95,7 +104,7 @@ pub fn discrete_returns(loaded: &Loaded, pulses: &[Pulse], waveforms: &[Waveform
     let by_pulse: Vec<Vec<Point>> = waveforms
         .par_iter()
         .map(|w| {
-            let pulse = &pulses[w.pulse_id as usize];
+            let pulse = &plan.pulse(w.pulse_id);
             let comps = components(loaded, w);
             let classes: Vec<u8> = comps
                 .iter()
@@ -159,36 +168,21 @@ impl Examples {
     }
 }
 
-/// `points_top.png` and `waveforms.png` beside points.las.
+/// `points_top.png` and `waveforms.png` beside points.las; `top` holds the points the top
+/// view shows ([`TopView`]), `points` is how many there are in all.
 fn point_figures(
     loaded: &Loaded,
     out: &Path,
     examples: Examples,
-    points: &[Point],
+    top: TopView,
+    points: usize,
 ) -> Result<Vec<String>> {
-    // lowest first, so the top of the canopy is what one sees from above
-    let mut top: Vec<(f64, TopPoint)> = points
-        .iter()
-        .map(|p| {
-            (
-                p.z,
-                TopPoint {
-                    x: p.x,
-                    y: p.y,
-                    reflectance: p.apparent_reflectance as f64,
-                },
-            )
-        })
-        .collect();
-    top.sort_by(|a, b| a.0.total_cmp(&b.0));
-    let top: Vec<TopPoint> = top.into_iter().map(|t| t.1).collect();
     figures::points_top_view(
         &out.join("points_top.png"),
-        &top,
+        &top.lowest_first(),
         &format!(
             "{}: {} points from above, by apparent reflectance",
-            loaded.campaign.name,
-            points.len()
+            loaded.campaign.name, points
         ),
     )?;
     let examples = examples.figures(loaded);
@@ -200,15 +194,57 @@ fn point_figures(
     Ok(written)
 }
 
+/// The points the top view draws: every `step`-th point, `step` chosen from the number of
+/// points so that at most [`figures::TOP_VIEW_MAX_POINTS`] are kept.
+struct TopView {
+    step: usize,
+    seen: usize,
+    kept: Vec<(f64, TopPoint)>,
+}
+
+impl TopView {
+    fn new(points: usize) -> TopView {
+        TopView {
+            step: points.div_ceil(figures::TOP_VIEW_MAX_POINTS).max(1),
+            seen: 0,
+            kept: Vec::new(),
+        }
+    }
+
+    fn offer(&mut self, points: &[Point]) {
+        for p in points {
+            if self.seen.is_multiple_of(self.step) {
+                let top = TopPoint {
+                    x: p.x,
+                    y: p.y,
+                    reflectance: p.apparent_reflectance as f64,
+                };
+                self.kept.push((p.z, top));
+            }
+            self.seen += 1;
+        }
+    }
+
+    /// Lowest first, so the top of the canopy is what one sees from above.
+    fn lowest_first(mut self) -> Vec<TopPoint> {
+        self.kept.sort_by(|a, b| a.0.total_cmp(&b.0));
+        self.kept.into_iter().map(|t| t.1).collect()
+    }
+}
+
 /// Photon events of every pulse (photon counting), deterministic per (seed, pulse).
-pub fn photon_events(loaded: &Loaded, pulses: &[Pulse], waveforms: &[Waveform]) -> Vec<PhotonRow> {
+pub fn photon_events(loaded: &Loaded, plan: &Plan, waveforms: &[Waveform]) -> Vec<PhotonRow> {
     let c = &loaded.campaign;
     let inst = &c.instrument;
-    let first = pulses.first().map(|p| p.origin).unwrap_or_default();
+    let first = if plan.is_empty() {
+        DVec3::ZERO
+    } else {
+        plan.pulse(0).origin
+    };
     let by_pulse: Vec<Vec<PhotonRow>> = waveforms
         .par_iter()
         .map(|w| {
-            let pulse = &pulses[w.pulse_id as usize];
+            let pulse = &plan.pulse(w.pulse_id);
             let events = count_photons(
                 &w.laser_photons,
                 w.solar_photons_per_bin as f64,
@@ -227,19 +263,29 @@ pub fn photon_events(loaded: &Loaded, pulses: &[Pulse], waveforms: &[Waveform]) 
 }
 
 /// Runs the products stage; returns the files written (relative to `out`) and a note.
+///
+/// Memory is bounded by a part and the scene, not by the campaign's length: the first pass
+/// reads the waveforms a part at a time, writes photons as they come and spills the points to
+/// disk with what their summary needs; the second reads the points back a chunk at a time
+/// into points.las, the top view and the DSM, once their extent is known.
 pub fn run(
     loaded: &Loaded,
     scene: &Scene,
     out: &Path,
-    pulses: &[Pulse],
+    plan: &Plan,
     parts: usize,
 ) -> Result<(Vec<String>, String)> {
     let want = wanted(loaded);
-    // one part of waveforms in memory at a time: a long gate of fine bins makes a waveform
-    // tens of kilobytes, and a campaign millions of them
-    let (mut points, mut rows, mut examples, mut seen) =
-        (Vec::new(), Vec::new(), Examples::default(), 0usize);
-    let bar = progress(pulses.len() as u64, "products");
+    let las_path = out.join("points.las");
+    let mut points = if want.points {
+        Some(PointsPass::new(&out.join("points.spill"))?)
+    } else {
+        None
+    };
+    let mut photons = PhotonsPass::default();
+    let photons_path = out.join("photons.parquet");
+    let (mut examples, mut seen) = (Examples::default(), 0usize);
+    let bar = progress(plan.len() as u64, "products");
     let start = std::time::Instant::now();
     let every = parts.div_ceil(10).max(1);
     for k in 0..parts {
@@ -250,20 +296,20 @@ pub fn run(
             ));
         }
         let part = read_waveforms(&out.join(part_name(k)))?;
-        if part.iter().any(|w| w.pulse_id as usize >= pulses.len()) {
+        if part.iter().any(|w| w.pulse_id as usize >= plan.len()) {
             return Err(Error::msg(format!(
                 "{}: waveforms of pulses that were not planned: run again without --resume",
                 out.display()
             )));
         }
         seen += part.len();
-        if want.points {
-            let p = discrete_returns(loaded, pulses, &part);
+        if let Some(pass) = &mut points {
+            let p = discrete_returns(loaded, plan, &part);
             examples.offer(&part, &p);
-            points.extend(p);
+            pass.add(scene, plan, &las_path, &p)?;
         }
         if want.photons {
-            rows.extend(photon_events(loaded, pulses, &part));
+            photons.add(&photons_path, &photon_events(loaded, plan, &part))?;
         }
         bar.inc(part.len() as u64);
         if bar.is_hidden() && (k + 1) % every == 0 && k + 1 < parts {
@@ -272,47 +318,57 @@ pub fn run(
                 "products: {}/{} parts, {rate:.0} pulses/s, {:.0} s left",
                 k + 1,
                 parts,
-                (pulses.len() - seen.min(pulses.len())) as f64 / rate
+                (plan.len() - seen.min(plan.len())) as f64 / rate
             ));
         }
     }
     bar.finish_and_clear();
-    if seen != pulses.len() {
+    if seen != plan.len() {
         return Err(Error::msg(format!(
             "{}: {seen} waveforms for {} planned pulses: run again with --resume",
             out.display(),
-            pulses.len()
+            plan.len()
         )));
     }
     let mut outputs = Vec::new();
     let mut summary = ProductsSummary {
-        pulses: pulses.len(),
+        pulses: plan.len(),
         ..Default::default()
     };
-    if want.points {
-        write_las(&out.join("points.las"), &points)?;
+    if let Some(pass) = points {
+        let mut dsm = want
+            .dsm
+            .and_then(|res| Dsm::new(scene, pass.first_returns(), res));
+        let mut top = TopView::new(pass.spill.len());
+        let offset = pass.extent.offset(&las_path)?;
+        let PointsPass {
+            mut spill, tally, ..
+        } = pass;
+        write_las_chunks(&las_path, offset, |write| {
+            spill.read(|chunk| {
+                write(chunk)?;
+                top.offer(chunk);
+                if let Some(d) = &mut dsm {
+                    d.add_points(chunk);
+                }
+                Ok(())
+            })
+        })?;
+        drop(spill);
         outputs.push("points.las".to_string());
-        outputs.extend(point_figures(loaded, out, examples, &points)?);
-        let mut points_summary = points_summary(&points, pulses.len());
-        let distances = crate::products::accuracy::distances(scene, &points, pulses);
-        points_summary.surface_distance = crate::products::accuracy::summarize(&distances);
-        summary.points = Some(points_summary);
-        if let Some(res) = want.dsm {
-            let dsm_outputs = crate::products::dsm::write_dsm(scene, out, &points, pulses, res)?;
-            outputs.extend(dsm_outputs);
+        outputs.extend(point_figures(loaded, out, examples, top, tally.points)?);
+        summary.points = Some(tally.summary(plan.len()));
+        if let Some(mut d) = dsm {
+            for start in (0..plan.len()).step_by(crate::waveform::file::PART_PULSES) {
+                d.aim(&plan.pulses(start..start + crate::waveform::file::PART_PULSES));
+            }
+            outputs.extend(d.write(out)?);
         }
     }
     if want.photons {
-        write_photons(&out.join("photons.parquet"), &rows)?;
+        let counts = photons.finish(&photons_path, plan.len())?;
         outputs.push("photons.parquet".to_string());
-        let count = |s: u8| rows.iter().filter(|r| r.source == s).count();
-        summary.photons = Some(PhotonCounts {
-            total: rows.len(),
-            laser: count(0),
-            solar: count(1),
-            dark: count(2),
-            laser_per_shot: count(0) as f64 / pulses.len().max(1) as f64,
-        });
+        summary.photons = Some(counts);
     }
     write_text_atomic(&out.join("products.json"), &summary.to_json())?;
     outputs.push("products.json".to_string());
@@ -324,31 +380,144 @@ pub fn run(
     Ok((outputs, note.to_string()))
 }
 
-/// The points' part of `products.json`: counts, and the pulse density over the box the first
-/// returns cover.
-fn points_summary(points: &[Point], pulses: usize) -> PointsSummary {
-    let (mut lo, mut hi) = ([f64::MAX; 2], [f64::MIN; 2]);
-    for p in points.iter().filter(|p| p.return_number == 1) {
-        lo = [lo[0].min(p.x), lo[1].min(p.y)];
-        hi = [hi[0].max(p.x), hi[1].max(p.y)];
-    }
-    let area = ((hi[0] - lo[0]) * (hi[1] - lo[1])).max(0.0);
-    let points_by_class = SurfaceClass::ALL
-        .iter()
-        .map(|class| {
-            let n = points
-                .iter()
-                .filter(|p| p.classification == class.las_code())
-                .count();
-            (class.las_name().to_string(), n)
+/// The first pass's work on the points: spilled to disk, with what points.las, the DSM and
+/// `products.json` need of them gathered on the way.
+struct PointsPass {
+    spill: Spill,
+    extent: Extent,
+    tally: PointsTally,
+    /// The box of the first returns, for the DSM grid.
+    first: Option<(DVec3, DVec3)>,
+}
+
+impl PointsPass {
+    fn new(spill: &Path) -> Result<PointsPass> {
+        Ok(PointsPass {
+            spill: Spill::create(spill)?,
+            extent: Extent::default(),
+            tally: PointsTally::default(),
+            first: None,
         })
-        .collect();
-    PointsSummary {
-        points: points.len(),
-        points_per_pulse: points.len() as f64 / pulses.max(1) as f64,
-        area_m2: Some(area).filter(|a| a.is_finite()),
-        pulse_density_per_m2: (area > 0.0).then(|| pulses as f64 / area),
-        points_by_class,
-        surface_distance: None,
+    }
+
+    fn add(&mut self, scene: &Scene, plan: &Plan, las: &Path, points: &[Point]) -> Result<()> {
+        self.extent.add(las, points)?;
+        self.tally.add(points);
+        self.tally
+            .distances
+            .add(&crate::products::accuracy::distances(scene, points, plan));
+        for p in points.iter().filter(|p| p.return_number == 1) {
+            let v = DVec3::new(p.x, p.y, p.z);
+            let (lo, hi) = self.first.get_or_insert((v, v));
+            (*lo, *hi) = (lo.min(v), hi.max(v));
+        }
+        self.spill.push(points)
+    }
+
+    fn first_returns(&self) -> Option<(DVec3, DVec3)> {
+        self.first
+    }
+}
+
+/// The photons, written a part at a time, and their counts by source.
+#[derive(Default)]
+struct PhotonsPass {
+    sink: Option<Sink>,
+    /// Rows by source: laser, solar, dark.
+    by_source: [usize; 3],
+    total: usize,
+}
+
+impl PhotonsPass {
+    fn add(&mut self, path: &Path, rows: &[PhotonRow]) -> Result<()> {
+        let table = photon_table(rows);
+        let sink = match &mut self.sink {
+            Some(s) => s,
+            None => self.sink.insert(Sink::create(path, table.schema())?),
+        };
+        sink.write(&table)?;
+        for r in rows {
+            if let Some(n) = self.by_source.get_mut(r.source as usize) {
+                *n += 1;
+            }
+        }
+        self.total += rows.len();
+        Ok(())
+    }
+
+    fn finish(mut self, path: &Path, pulses: usize) -> Result<PhotonCounts> {
+        if self.sink.is_none() {
+            self.add(path, &[])?;
+        }
+        if let Some(s) = self.sink {
+            s.finish()?;
+        }
+        let [laser, solar, dark] = self.by_source;
+        Ok(PhotonCounts {
+            total: self.total,
+            laser,
+            solar,
+            dark,
+            laser_per_shot: laser as f64 / pulses.max(1) as f64,
+        })
+    }
+}
+
+/// The points' part of `products.json`, summed as the points stream by: counts, the pulse
+/// density over the box the first returns cover, and the distances to the surfaces.
+struct PointsTally {
+    points: usize,
+    by_class: [usize; SurfaceClass::ALL.len()],
+    /// The box of the first returns in x and y.
+    lo: [f64; 2],
+    hi: [f64; 2],
+    distances: DistanceHistogram,
+}
+
+impl Default for PointsTally {
+    fn default() -> PointsTally {
+        PointsTally {
+            points: 0,
+            by_class: [0; SurfaceClass::ALL.len()],
+            lo: [f64::MAX; 2],
+            hi: [f64::MIN; 2],
+            distances: DistanceHistogram::default(),
+        }
+    }
+}
+
+impl PointsTally {
+    fn add(&mut self, points: &[Point]) {
+        self.points += points.len();
+        for p in points {
+            if let Some(i) = SurfaceClass::ALL
+                .iter()
+                .position(|c| c.las_code() == p.classification)
+            {
+                self.by_class[i] += 1;
+            }
+            if p.return_number == 1 {
+                self.lo = [self.lo[0].min(p.x), self.lo[1].min(p.y)];
+                self.hi = [self.hi[0].max(p.x), self.hi[1].max(p.y)];
+            }
+        }
+    }
+
+    fn summary(&self, pulses: usize) -> PointsSummary {
+        let (lo, hi) = (self.lo, self.hi);
+        let area = ((hi[0] - lo[0]) * (hi[1] - lo[1])).max(0.0);
+        let points_by_class = SurfaceClass::ALL
+            .iter()
+            .zip(self.by_class)
+            .map(|(class, n)| (class.las_name().to_string(), n))
+            .collect();
+        PointsSummary {
+            points: self.points,
+            points_per_pulse: self.points as f64 / pulses.max(1) as f64,
+            area_m2: Some(area).filter(|a| a.is_finite()),
+            pulse_density_per_m2: (area > 0.0).then(|| pulses as f64 / area),
+            points_by_class,
+            surface_distance: self.distances.summary(),
+        }
     }
 }

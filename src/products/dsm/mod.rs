@@ -16,6 +16,7 @@ use crate::plan::Pulse;
 use crate::products::points::Point;
 pub use crate::scene::top_surface::Grid;
 use crate::scene::Scene;
+use glam::DVec3;
 use serde::{Deserialize, Deserializer, Serialize};
 use std::path::Path;
 
@@ -42,8 +43,14 @@ pub fn first_return_dsm(points: &[DsmPoint], grid: &Grid) -> Vec<f64> {
 /// (NaN where there is none).
 pub fn first_return_dsm_with_angle(points: &[DsmPoint], grid: &Grid) -> (Vec<f64>, Vec<f64>) {
     let n = grid.len();
-    let mut z = vec![f64::NAN; n];
-    let mut angle = vec![f64::NAN; n];
+    let (mut z, mut angle) = (vec![f64::NAN; n], vec![f64::NAN; n]);
+    add_first_returns(&mut z, &mut angle, points, grid);
+    (z, angle)
+}
+
+/// Raises the first-return DSM `z` (and its `angle`) by more points, in order: the same cells
+/// whether the points come at once or a chunk at a time.
+fn add_first_returns(z: &mut [f64], angle: &mut [f64], points: &[DsmPoint], grid: &Grid) {
     for p in points {
         if !p.first || !p.z.is_finite() {
             continue;
@@ -58,33 +65,55 @@ pub fn first_return_dsm_with_angle(points: &[DsmPoint], grid: &Grid) -> (Vec<f64
             angle[k] = a;
         }
     }
-    (z, angle)
 }
 
 /// Per cell, the mean |scan angle| (degrees) of the pulses whose axis crosses the plane
 /// z = `ground_z` in that cell (NaN where none does).
 pub fn aim_angles(pulses: &[Pulse], grid: &Grid, ground_z: f64) -> Vec<f64> {
-    let mut sum = vec![0.0; grid.len()];
-    let mut count = vec![0u32; grid.len()];
-    for p in pulses {
-        let d = p.direction;
-        if d.z.abs() < 1e-12 {
-            continue; // horizontal: never reaches the ground plane
-        }
-        let t = (ground_z - p.origin.z) / d.z;
-        if !(t > 0.0 && t.is_finite()) {
-            continue;
-        }
-        let hit = p.origin + d * t;
-        if let Some(k) = grid.index(hit.x, hit.y) {
-            sum[k] += (p.scan_angle_deg as f64).abs();
-            count[k] += 1;
+    let mut aims = Aims::new(grid.len());
+    aims.add(pulses, grid, ground_z);
+    aims.mean()
+}
+
+/// Sums behind [`aim_angles`], gathered a chunk of pulses at a time.
+struct Aims {
+    sum: Vec<f64>,
+    count: Vec<u32>,
+}
+
+impl Aims {
+    fn new(cells: usize) -> Aims {
+        Aims {
+            sum: vec![0.0; cells],
+            count: vec![0; cells],
         }
     }
-    sum.iter()
-        .zip(&count)
-        .map(|(s, &n)| if n > 0 { s / n as f64 } else { f64::NAN })
-        .collect()
+
+    fn add(&mut self, pulses: &[Pulse], grid: &Grid, ground_z: f64) {
+        for p in pulses {
+            let d = p.direction;
+            if d.z.abs() < 1e-12 {
+                continue; // horizontal: never reaches the ground plane
+            }
+            let t = (ground_z - p.origin.z) / d.z;
+            if !(t > 0.0 && t.is_finite()) {
+                continue;
+            }
+            let hit = p.origin + d * t;
+            if let Some(k) = grid.index(hit.x, hit.y) {
+                self.sum[k] += (p.scan_angle_deg as f64).abs();
+                self.count[k] += 1;
+            }
+        }
+    }
+
+    fn mean(&self) -> Vec<f64> {
+        self.sum
+            .iter()
+            .zip(&self.count)
+            .map(|(s, &n)| if n > 0 { s / n as f64 } else { f64::NAN })
+            .collect()
+    }
 }
 
 /// Error figures of the cells whose |scan angle| falls in [bin_deg_lo, bin_deg_hi).
@@ -265,65 +294,113 @@ pub fn write_report(
 
 /// The DSM error product of a run: reference DSM from the scene's own surfaces, first-return
 /// DSM from the points, on one grid over the scanned area; `dsm/report.json` and plots.
-pub fn write_dsm(
-    scene: &Scene,
-    out: &Path,
-    points: &[Point],
-    pulses: &[Pulse],
+/// Built while the points and pulses stream by, so its memory is the grid's: [`Dsm::new`]
+/// once the first returns' extent is known, [`Dsm::add_points`] and [`Dsm::aim`] a chunk at
+/// a time (in point and pulse order), then [`Dsm::write`].
+pub struct Dsm {
+    grid: Grid,
     res: f64,
-) -> Result<Vec<String>> {
-    let firsts: Vec<DsmPoint> = points
-        .iter()
-        .map(|p| DsmPoint {
+    reference: Vec<f64>,
+    /// Height the pulses are aimed at, for the scan-angle attribution.
+    ground: f64,
+    measured: Vec<f64>,
+    angles: Vec<f64>,
+    aims: Aims,
+}
+
+impl Dsm {
+    /// The grid over `first_returns` (the box of the first-return points) within the scene;
+    /// None, and a log line, without first returns.
+    pub fn new(scene: &Scene, first_returns: Option<(DVec3, DVec3)>, res: f64) -> Option<Dsm> {
+        let Some((lo, hi)) = first_returns else {
+            crate::progress::log("dsm: no first returns, no DSM");
+            return None;
+        };
+        let (slo, shi) = scene.bounds();
+        let (lo, hi) = (lo.max(slo), hi.min(shi));
+        let grid = Grid::covering(
+            DVec3::new(lo.x, lo.y, slo.z),
+            DVec3::new(hi.x, hi.y, shi.z),
+            res,
+        );
+        let reference = scene.top_surface_grid(&grid);
+        // pulses are aimed at the ground: the 5th percentile of the reference heights
+        let mut heights: Vec<f64> = reference
+            .iter()
+            .copied()
+            .filter(|z| z.is_finite())
+            .collect();
+        heights.sort_by(f64::total_cmp);
+        let ground = heights.get(heights.len() / 20).copied().unwrap_or(slo.z);
+        let n = grid.len();
+        Some(Dsm {
+            grid,
+            res,
+            reference,
+            ground,
+            measured: vec![f64::NAN; n],
+            angles: vec![f64::NAN; n],
+            aims: Aims::new(n),
+        })
+    }
+
+    pub fn add_points(&mut self, points: &[Point]) {
+        let firsts: Vec<DsmPoint> = points.iter().map(DsmPoint::from).collect();
+        add_first_returns(&mut self.measured, &mut self.angles, &firsts, &self.grid);
+    }
+
+    pub fn aim(&mut self, pulses: &[Pulse]) {
+        self.aims.add(pulses, &self.grid, self.ground);
+    }
+
+    /// Cells in the grid: what the DSM holds in memory is a few numbers per cell.
+    pub fn cells(&self) -> usize {
+        self.grid.len()
+    }
+
+    /// Writes `dsm/` under `out`; returns the files written, relative to `out`.
+    pub fn write(self, out: &Path) -> Result<Vec<String>> {
+        let aim = self.aims.mean();
+        let report = compare(
+            &self.reference,
+            &self.measured,
+            &aim,
+            &self.angles,
+            &self.grid,
+        );
+        write_report(
+            &out.join("dsm"),
+            &report,
+            &self.reference,
+            &self.measured,
+            &self.grid,
+        )?;
+        crate::progress::log(&format!(
+            "dsm: bias {:+.3} m, RMSE {:.3} m, coverage {:.1}% over {} cells of {} m",
+            report.bias_m,
+            report.rmse_m,
+            100.0 * report.coverage,
+            report.cells,
+            self.res
+        ));
+        Ok(vec![
+            "dsm/report.json".into(),
+            "dsm/error_vs_scan_angle.png".into(),
+            "dsm/error_map.png".into(),
+        ])
+    }
+}
+
+impl From<&Point> for DsmPoint {
+    fn from(p: &Point) -> DsmPoint {
+        DsmPoint {
             x: p.x,
             y: p.y,
             z: p.z,
             scan_angle_deg: p.scan_angle_deg as f64,
             first: p.return_number == 1,
-        })
-        .collect();
-    if !firsts.iter().any(|p| p.first) {
-        crate::progress::log("dsm: no first returns, no DSM");
-        return Ok(Vec::new());
+        }
     }
-    // the grid covers the scanned area (the first returns) within the scene
-    let (slo, shi) = scene.bounds();
-    let (mut lo, mut hi) = (glam::DVec3::splat(f64::MAX), glam::DVec3::splat(f64::MIN));
-    for p in firsts.iter().filter(|p| p.first) {
-        lo = lo.min(glam::DVec3::new(p.x, p.y, p.z));
-        hi = hi.max(glam::DVec3::new(p.x, p.y, p.z));
-    }
-    let (lo, hi) = (lo.max(slo), hi.min(shi));
-    let grid = Grid::covering(
-        glam::DVec3::new(lo.x, lo.y, slo.z),
-        glam::DVec3::new(hi.x, hi.y, shi.z),
-        res,
-    );
-    let reference = scene.top_surface_grid(&grid);
-    let (measured, angles) = first_return_dsm_with_angle(&firsts, &grid);
-    // pulses are aimed at the ground: the 5th percentile of the reference heights
-    let mut heights: Vec<f64> = reference
-        .iter()
-        .copied()
-        .filter(|z| z.is_finite())
-        .collect();
-    heights.sort_by(f64::total_cmp);
-    let ground = heights.get(heights.len() / 20).copied().unwrap_or(slo.z);
-    let aim = aim_angles(pulses, &grid, ground);
-    let report = compare(&reference, &measured, &aim, &angles, &grid);
-    write_report(&out.join("dsm"), &report, &reference, &measured, &grid)?;
-    crate::progress::log(&format!(
-        "dsm: bias {:+.3} m, RMSE {:.3} m, coverage {:.1}% over {} cells of {res} m",
-        report.bias_m,
-        report.rmse_m,
-        100.0 * report.coverage,
-        report.cells
-    ));
-    Ok(vec![
-        "dsm/report.json".into(),
-        "dsm/error_vs_scan_angle.png".into(),
-        "dsm/error_map.png".into(),
-    ])
 }
 
 #[cfg(test)]

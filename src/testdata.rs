@@ -1,8 +1,8 @@
 //! For the tests: data they need from outside the repository, and how a test that cannot run
 //! says so. A skip is printed on stderr (cargo shows it). `LIDARSIM_REQUIRE_DATA=1`, which
 //! `.ci/run` sets where `../shared/` is present, turns a skip for want of data into a failure;
-//! `LIDARSIM_REQUIRE_TOOLS=1`, which it sets once it has installed laspy, does the same for a
-//! skip for want of an outside reader.
+//! `LIDARSIM_REQUIRE_TOOLS=1`, which it sets once it has installed laspy and Slurm, does the
+//! same for a skip for want of an outside tool.
 
 use std::path::PathBuf;
 
@@ -32,7 +32,7 @@ pub fn skip(why: &str) {
     skip_unless("LIDARSIM_REQUIRE_DATA", why);
 }
 
-/// Says on stderr why a test cannot run for want of an outside tool (laspy); fails the test
+/// Says on stderr why a test cannot run for want of an outside tool (laspy, Slurm); fails the test
 /// instead when `LIDARSIM_REQUIRE_TOOLS=1`.
 pub fn skip_tool(why: &str) {
     skip_unless("LIDARSIM_REQUIRE_TOOLS", why);

@@ -992,3 +992,199 @@ fn a_busy_folder_is_refused_and_a_stale_lock_taken_over() {
     assert!(log.contains("complete"), "{log}");
     assert!(!lock.exists(), "the lock goes when the run ends");
 }
+
+/// A discrete-return track of 2500 pulses (three parts) over the plane, with the given seed.
+fn parts_track(dir: &Path, seed: u64) -> PathBuf {
+    plane_scene(dir, 0.3, 30.0);
+    write(
+        dir,
+        &format!("campaign_{seed}.yaml"),
+        &format!("name: parts\nscene: plane.yaml\nseed: {seed}\nwavelength_nm: 1064\ninstrument: {{ kind: discrete_return, pulse_energy_j: 0.00001, pulse_fwhm_ns: 3, footprint_half_angle_mrad: 0.3, fov_half_angle_mrad: 0.5, receiver_area_m2: 0.01, bin_ns: 1 }}\nplatform: {{ kind: track, altitude_m: 100, track: {{ start: [-10, 0], end: [15, 0] }}, along_track_step_m: 0.01 }}\nsimulation: {{ method: forward, rays_per_pulse: 20, max_order: 1 }}\n"),
+    )
+}
+
+/// The files of a run folder, every one, by name (the lock, wall times and logs aside): what
+/// "nothing lost, nothing changed" compares.
+fn folder_bytes(out: &Path) -> Vec<(PathBuf, Vec<u8>)> {
+    let mut files = Vec::new();
+    let mut todo = vec![out.to_path_buf()];
+    while let Some(d) = todo.pop() {
+        for e in std::fs::read_dir(&d).unwrap().flatten() {
+            let p = e.path();
+            if p.is_dir() {
+                todo.push(p);
+            } else {
+                files.push((p.clone(), std::fs::read(&p).unwrap()));
+            }
+        }
+    }
+    files.sort();
+    files
+}
+
+/// A manifest cut in half is not trusted: `--resume` says it cannot be read and redoes the
+/// stages from what the files themselves prove (each part by its checksum), and the run ends
+/// equal to a clean one.
+#[test]
+fn a_damaged_manifest_is_not_trusted() {
+    let dir = tmp("e2e_damaged_manifest");
+    let camp = parts_track(&dir, 4);
+    let clean = dir.join("clean");
+    run_ok(&camp, &clean, &[]);
+    let out = dir.join("run");
+    run_ok(&camp, &out, &[]);
+    truncate_half(&out.join("manifest.json"));
+    let log = resume_redoes(&camp, &out, &clean);
+    assert!(log.contains("manifest.json cannot be read"), "{log}");
+    assert!(log.contains("0 parts simulated"), "{log}");
+    // and a manifest that is valid JSON but another run's: its fingerprints do not match
+    std::fs::copy(dir.join("clean/manifest.json"), out.join("manifest.json")).unwrap();
+    let other = parts_track(&dir, 5);
+    let log = run_ok(&other, &out, &["--resume"]);
+    assert!(log.contains("3 parts simulated"), "{log}");
+}
+
+/// Parts simulated for another campaign (here another seed) in the same folder are redone,
+/// never mixed with the new campaign's: by a resume, and by shards, which keep the folder's
+/// files because other shards may be writing beside them.
+#[test]
+fn parts_of_another_campaign_are_redone_never_mixed() {
+    let dir = tmp("e2e_other_parts");
+    let (a, b) = (parts_track(&dir, 4), parts_track(&dir, 5));
+    let clean = dir.join("clean");
+    run_ok(&b, &clean, &[]);
+    for how in [&["--resume"][..], &["--shard", "0/1"][..]] {
+        let out = dir.join(format!("mixed{}", how.len()));
+        run_ok(&a, &out, &["--stages", "plan,simulate"]);
+        let log = run_ok(&b, &out, how);
+        assert!(log.contains("3 parts simulated"), "{how:?}: {log}");
+        run_ok(&b, &out, &["--resume"]);
+        assert_same_files(&out, &clean);
+    }
+}
+
+/// The command that runs `lidarsim` as a user who may not write `folder` (root-owned): as
+/// root, the binary copied where anyone can run it and started as `nobody` with setpriv;
+/// otherwise the folder is made read-only for its owner. None, saying why, where neither works.
+fn unprivileged(dir: &Path, folder: &Path) -> Option<std::process::Command> {
+    let root = std::process::Command::new("id")
+        .arg("-u")
+        .output()
+        .is_ok_and(|o| String::from_utf8_lossy(&o.stdout).trim() == "0");
+    if !root {
+        let mut perms = std::fs::metadata(folder).unwrap().permissions();
+        std::os::unix::fs::PermissionsExt::set_mode(&mut perms, 0o555);
+        std::fs::set_permissions(folder, perms).unwrap();
+        return Some(std::process::Command::new(env!("CARGO_BIN_EXE_lidarsim")));
+    }
+    let has_setpriv = std::process::Command::new("setpriv")
+        .arg("--version")
+        .output()
+        .is_ok_and(|o| o.status.success());
+    if !has_setpriv {
+        lidarsim::testdata::skip_tool("unwritable folder test: running as root without setpriv (util-linux), no user to lack the permission");
+        return None;
+    }
+    let bin = dir.join("lidarsim-copy");
+    std::fs::copy(env!("CARGO_BIN_EXE_lidarsim"), &bin).unwrap();
+    let mut c = std::process::Command::new("setpriv");
+    c.args(["--reuid=65534", "--regid=65534", "--clear-groups"])
+        .arg(bin);
+    Some(c)
+}
+
+/// An output folder the run cannot write: exit 1, one message naming a file in it and what to
+/// do, and nothing in it changed; once it can be written, `--resume` finishes the run equal to
+/// a clean one.
+#[test]
+fn an_unwritable_folder_ends_with_a_message_and_resume_finishes_it() {
+    // under the system's temporary folder, which every user may cross (the target folder may
+    // lie under a home that `nobody` cannot enter)
+    let dir = std::env::temp_dir().join(format!("lidarsim-e2e-unwritable-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let camp = parts_track(&dir, 4);
+    let clean = dir.join("clean");
+    run_ok(&camp, &clean, &[]);
+    let out = dir.join("run");
+    run_ok(&camp, &out, &["--stages", "plan,simulate"]);
+    let before = folder_bytes(&out);
+    let Some(mut cmd) = unprivileged(&dir, &out) else {
+        return;
+    };
+    let o = cmd
+        .args([
+            "run",
+            camp.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "--resume",
+        ])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    let errors: Vec<&str> = err.lines().filter(|l| l.starts_with("error:")).collect();
+    assert_eq!(errors.len(), 1, "{err}");
+    assert!(
+        errors[0].contains(out.to_str().unwrap())
+            && errors[0].contains("Permission denied")
+            && errors[0].contains("permissions of that folder")
+            && errors[0].contains("--resume"),
+        "{err}"
+    );
+    let mut perms = std::fs::metadata(&out).unwrap().permissions();
+    std::os::unix::fs::PermissionsExt::set_mode(&mut perms, 0o755);
+    std::fs::set_permissions(&out, perms).unwrap();
+    assert!(
+        folder_bytes(&out) == before,
+        "the refused run changed the folder"
+    );
+    let log = run_ok(&camp, &out, &["--resume"]);
+    assert!(log.contains("0 parts simulated"), "{log}");
+    assert_same_files(&out, &clean);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// The disk filling in the products stage (a file-size limit under the points' size): exit 1
+/// naming the file, no file half-written under its final name, and `--resume` finishes the
+/// run equal to a clean one. Before the points streamed through the las crate's writer, whose
+/// drop after a failed write panics, this was a panic.
+#[test]
+fn a_full_disk_in_the_products_stage_ends_with_a_message_and_resume_finishes_it() {
+    let dir = tmp("e2e_products_fsize");
+    let camp = parts_track(&dir, 4);
+    let clean = dir.join("clean");
+    run_ok(&camp, &clean, &[]);
+    let las = std::fs::metadata(clean.join("points.las")).unwrap().len();
+    let out = dir.join("run");
+    run_ok(&camp, &out, &["--stages", "plan,simulate"]);
+    // a limit in 512-byte blocks (as dash counts them; bash counts KiB, which only doubles it)
+    // at a third of points.las, which the parts already written do not need
+    let blocks = las / 3 / 1024;
+    assert!(blocks >= 8, "points.las is {las} bytes");
+    let o = std::process::Command::new("sh")
+        .args([
+            "-c",
+            &format!(
+                "ulimit -f {blocks} && exec '{}' run '{}' --out '{}' --resume",
+                env!("CARGO_BIN_EXE_lidarsim"),
+                camp.display(),
+                out.display()
+            ),
+        ])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    let errors: Vec<&str> = err.lines().filter(|l| l.starts_with("error:")).collect();
+    assert_eq!(errors.len(), 1, "{err}");
+    assert!(
+        errors[0].contains(out.to_str().unwrap()) && errors[0].contains("--resume"),
+        "{err}"
+    );
+    assert!(!out.join("points.las").exists(), "{err}");
+    let log = run_ok(&camp, &out, &["--resume"]);
+    assert!(log.contains("0 parts simulated"), "{log}");
+    assert_same_files(&out, &clean);
+}

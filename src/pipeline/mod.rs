@@ -376,7 +376,7 @@ fn run_single(
     let scene = cache.get(&loaded.scene_path, loaded.campaign.wavelength_nm)?;
     let fp_sim = simulate_fingerprint(&fp_plan, scene)?;
     if run.done(Stage::Simulate, &fp_sim) {
-        if let Some(bad) = first_broken_part(out, plan.len()) {
+        if let Some(bad) = first_broken_part(out, plan.len(), &fp_sim) {
             // the manifest says done, the files disagree: the files win
             log(&format!(
                 "simulate: a part file is missing or damaged ({bad}): it is simulated again"
@@ -515,9 +515,9 @@ fn simulate_fingerprint(fp_plan: &str, scene: &Scene) -> Result<String> {
 }
 
 /// The first part of a run of `pulses` pulses that is missing or not whole, by its name.
-fn first_broken_part(out: &Path, pulses: usize) -> Option<String> {
+fn first_broken_part(out: &Path, pulses: usize, fp: &str) -> Option<String> {
     (0..part_count(pulses))
-        .find(|&k| !part_is_whole(&out.join(part_name(k)), part_range(k, pulses).len()))
+        .find(|&k| !part_is_whole(&out.join(part_name(k)), part_range(k, pulses).len(), fp))
         .map(part_name)
 }
 
@@ -543,12 +543,13 @@ fn simulate_stage(
         let _ = std::fs::remove_dir_all(&wf_dir);
     }
     write_text_atomic(&marker, fp)?;
-    let whole = |k: usize| part_is_whole(&out.join(part_name(k)), part_range(k, plan.len()).len());
+    let whole =
+        |k: usize| part_is_whole(&out.join(part_name(k)), part_range(k, plan.len()).len(), fp);
     let todo: Vec<usize> = (0..parts)
         .filter(|k| shard.is_none_or(|(i, n)| k % n == i))
         .filter(|&k| !whole(k))
         .collect();
-    let (rays, done, stopped) = simulate_parts(loaded, scene, plan, &todo, out)?;
+    let (rays, done, stopped) = simulate_parts(loaded, scene, plan, &todo, out, fp)?;
     let missing = (0..parts).filter(|&k| !whole(k)).count();
     if missing == 0 {
         run.finish(Stage::Simulate, fp, part_files, t, None, "done")?;

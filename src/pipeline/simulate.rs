@@ -29,6 +29,7 @@ pub(super) fn simulate_parts(
     plan: &Plan,
     todo: &[usize],
     out: &Path,
+    fingerprint: &str,
 ) -> Result<(u64, usize, Option<i32>)> {
     let total: usize = todo.iter().map(|&k| part_range(k, plan.len()).len()).sum();
     let bar = progress(total as u64, "simulating");
@@ -44,7 +45,7 @@ pub(super) fn simulate_parts(
             std::sync::mpsc::sync_channel::<(usize, Vec<Waveform>, Vec<f64>)>(1);
         let writer = scope.spawn(move || -> Result<()> {
             for (k, waveforms, secs) in finished {
-                write_waveforms(&out.join(part_name(k)), &waveforms)?;
+                write_waveforms(&out.join(part_name(k)), &waveforms, fingerprint)?;
                 write_pulse_stats(
                     &out.join(format!("waveforms/part-{k:05}.stats.csv")),
                     &waveforms,

@@ -25,13 +25,14 @@ pub fn part_name(k: usize) -> String {
 /// Writes a waveform part. One statement per column of the output contract (README,
 /// "Outputs"), in the file's column order: the function is as long as the contract, and
 /// splitting it would scatter the contract over several places.
-pub fn write_waveforms(path: &Path, w: &[Waveform]) -> Result<()> {
+pub fn write_waveforms(path: &Path, w: &[Waveform], fingerprint: &str) -> Result<()> {
     write_batch(path, waveform_batch(w))?;
-    // the part's checksum beside it, written after it: a part without one, or whose bytes
-    // disagree with it, is no part (see `part_is_whole`)
+    // the part's checksum and the fingerprint of the simulation that made it beside it,
+    // written after it: a part without them, whose bytes disagree, or made for other inputs
+    // (another campaign, scene or version in the same folder) is no part (`part_is_whole`)
     let sum = crate::fsutil::file_checksum(path)
         .ok_or_else(|| Error::data(path, "cannot read back the part just written"))?;
-    crate::fsutil::write_text_atomic(&checksum_path(path), &sum)
+    crate::fsutil::write_text_atomic(&checksum_path(path), &format!("{sum} {fingerprint}\n"))
 }
 
 /// Where a part's checksum is kept: `part-NNNNN.parquet` → `part-NNNNN.fnv`.
@@ -283,14 +284,21 @@ pub fn read_waveforms(path: &Path) -> Result<Vec<Waveform>> {
     Ok(out)
 }
 
-/// Whether a part file is whole: its bytes match the checksum written beside it, its Parquet
-/// footer reads and it holds `rows` pulses. A part cut short or changed in the middle (a kill
-/// mid-write that escaped the atomic rename, a full disk, a bad copy, a flipped bit) fails;
-/// `--resume` redoes such a part instead of trusting it.
-pub fn part_is_whole(path: &Path, rows: usize) -> bool {
+/// Whether a part file is whole: its bytes match the checksum written beside it, it was made
+/// for the simulation whose `fingerprint` is given, its Parquet footer reads and it holds
+/// `rows` pulses. A part cut short or changed in the middle (a kill mid-write that escaped the
+/// atomic rename, a full disk, a bad copy, a flipped bit), or left by another campaign in the
+/// same folder, fails; `--resume` and shards redo such a part instead of trusting it.
+pub fn part_is_whole(path: &Path, rows: usize, fingerprint: &str) -> bool {
     use parquet::file::reader::{FileReader, SerializedFileReader};
-    let sum = std::fs::read_to_string(checksum_path(path)).ok();
-    if sum.is_none() || sum != crate::fsutil::file_checksum(path) {
+    let Ok(record) = std::fs::read_to_string(checksum_path(path)) else {
+        return false;
+    };
+    let (sum, made_for) = record
+        .trim_end()
+        .split_once(' ')
+        .unwrap_or((record.as_str(), ""));
+    if made_for != fingerprint || Some(sum) != crate::fsutil::file_checksum(path).as_deref() {
         return false;
     }
     let Ok(file) = std::fs::File::open(path) else {

@@ -1093,6 +1093,20 @@ fn unprivileged(dir: &Path, folder: &Path) -> Option<std::process::Command> {
     Some(c)
 }
 
+/// A run that failed as a fault should end it: exit 1 and one `error:` line, naming a file in
+/// the run folder `out` and saying how to go on (`--resume`); returns that line.
+fn one_error(o: &std::process::Output, out: &Path) -> String {
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    let errors: Vec<&str> = err.lines().filter(|l| l.starts_with("error:")).collect();
+    assert_eq!(errors.len(), 1, "{err}");
+    assert!(
+        errors[0].contains(out.to_str().unwrap()) && errors[0].contains("--resume"),
+        "{err}"
+    );
+    errors[0].to_string()
+}
+
 /// An output folder the run cannot write: exit 1, one message naming a file in it and what to
 /// do, and nothing in it changed; once it can be written, `--resume` finishes the run equal to
 /// a clean one.
@@ -1122,16 +1136,10 @@ fn an_unwritable_folder_ends_with_a_message_and_resume_finishes_it() {
         ])
         .output()
         .unwrap();
-    let err = String::from_utf8_lossy(&o.stderr);
-    assert_eq!(o.status.code(), Some(1), "{err}");
-    let errors: Vec<&str> = err.lines().filter(|l| l.starts_with("error:")).collect();
-    assert_eq!(errors.len(), 1, "{err}");
+    let error = one_error(&o, &out);
     assert!(
-        errors[0].contains(out.to_str().unwrap())
-            && errors[0].contains("Permission denied")
-            && errors[0].contains("permissions of that folder")
-            && errors[0].contains("--resume"),
-        "{err}"
+        error.contains("Permission denied") && error.contains("permissions of that folder"),
+        "{error}"
     );
     let mut perms = std::fs::metadata(&out).unwrap().permissions();
     std::os::unix::fs::PermissionsExt::set_mode(&mut perms, 0o755);
@@ -1175,15 +1183,8 @@ fn a_full_disk_in_the_products_stage_ends_with_a_message_and_resume_finishes_it(
         ])
         .output()
         .unwrap();
-    let err = String::from_utf8_lossy(&o.stderr);
-    assert_eq!(o.status.code(), Some(1), "{err}");
-    let errors: Vec<&str> = err.lines().filter(|l| l.starts_with("error:")).collect();
-    assert_eq!(errors.len(), 1, "{err}");
-    assert!(
-        errors[0].contains(out.to_str().unwrap()) && errors[0].contains("--resume"),
-        "{err}"
-    );
-    assert!(!out.join("points.las").exists(), "{err}");
+    let error = one_error(&o, &out);
+    assert!(!out.join("points.las").exists(), "{error}");
     let log = run_ok(&camp, &out, &["--resume"]);
     assert!(log.contains("0 parts simulated"), "{log}");
     assert_same_files(&out, &clean);

@@ -156,10 +156,14 @@ fn mutate(r: &mut SplitMix64, data: &[u8]) -> Vec<u8> {
 
 #[test]
 fn mutated_inputs_never_panic_and_fail_with_one_line() {
-    let cases: usize = std::env::var("LIDARSIM_FUZZ_CASES")
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(400);
+    let env = |name: &str| -> Option<u64> { std::env::var(name).ok()?.parse().ok() };
+    // LIDARSIM_FUZZ_SECONDS runs for that long instead of a number of cases
+    let seconds = env("LIDARSIM_FUZZ_SECONDS");
+    let cases = match seconds {
+        Some(_) => usize::MAX,
+        None => env("LIDARSIM_FUZZ_CASES").unwrap_or(400) as usize,
+    };
+    let start = std::time::Instant::now();
     let dir = tmp("fuzz_loaders");
     let base = files();
     // the unmutated files are a valid campaign: every rejection below is the mutation's
@@ -180,12 +184,19 @@ fn mutated_inputs_never_panic_and_fail_with_one_line() {
     );
     let mut r = SplitMix64::new(2026);
     let mut rejected = 0;
+    let mut tried = vec![0usize; base.len()];
     let mut findings: Vec<String> = Vec::new();
+    let mut cases_run = 0;
     for case in 0..cases {
+        if seconds.is_some_and(|s| start.elapsed().as_secs() >= s) {
+            break;
+        }
+        cases_run += 1;
         let d = dir.join(format!("case{}", case % 4));
         let _ = std::fs::remove_dir_all(&d);
         std::fs::create_dir_all(&d).unwrap();
         let target = below(&mut r, base.len());
+        tried[target] += 1;
         for (k, (name, bytes)) in base.iter().enumerate() {
             let data = if k == target {
                 mutate(&mut r, bytes)
@@ -219,14 +230,21 @@ fn mutated_inputs_never_panic_and_fail_with_one_line() {
             ));
         }
     }
+    let per_file: Vec<String> = base
+        .iter()
+        .zip(&tried)
+        .map(|((name, _), n)| format!("{name} {n}"))
+        .collect();
     eprintln!(
-        "fuzz: {cases} cases, {rejected} rejected, {} findings",
+        "fuzz: {cases_run} cases in {:.0} s ({}), {rejected} rejected, {} findings",
+        start.elapsed().as_secs_f64(),
+        per_file.join(", "),
         findings.len()
     );
     // the mutations must reach the loaders' error paths, not only pass through
     assert!(
-        rejected * 4 >= cases,
-        "only {rejected} of {cases} cases rejected"
+        rejected * 4 >= cases_run,
+        "only {rejected} of {cases_run} cases rejected"
     );
     assert!(findings.is_empty(), "{findings:#?}");
 }

@@ -131,29 +131,76 @@ where
 /// FNV-1a, 64 bits, over length-prefixed parts: a fingerprint that is stable across platforms
 /// and tool builds, for stage inputs and for checksums of the files a run wrote.
 pub fn fingerprint(parts: &[&[u8]]) -> String {
-    let mut h = 0xcbf2_9ce4_8422_2325u64;
-    let mut fnv = |bytes: &[u8]| {
-        for b in bytes {
-            h ^= *b as u64;
-            h = h.wrapping_mul(0x100_0000_01b3);
-        }
-    };
+    let mut h = Fnv::default();
     for p in parts {
-        fnv(&(p.len() as u64).to_le_bytes());
-        fnv(p);
+        h.add(&(p.len() as u64).to_le_bytes());
+        h.add(p);
     }
-    format!("{h:016x}")
+    h.hex()
+}
+
+/// FNV-1a, 64 bits.
+struct Fnv(u64);
+
+impl Default for Fnv {
+    fn default() -> Fnv {
+        Fnv(0xcbf2_9ce4_8422_2325)
+    }
+}
+
+impl Fnv {
+    fn add(&mut self, bytes: &[u8]) {
+        for b in bytes {
+            self.0 ^= *b as u64;
+            self.0 = self.0.wrapping_mul(0x100_0000_01b3);
+        }
+    }
+
+    fn hex(&self) -> String {
+        format!("{:016x}", self.0)
+    }
 }
 
 /// The checksum of a file's bytes ([`fingerprint`] of them), or None when it cannot be read.
+/// Read a block at a time: run files reach gigabytes, and memory must not grow with them.
 pub fn file_checksum(path: &Path) -> Option<String> {
-    let bytes = std::fs::read(path).ok()?;
-    Some(fingerprint(&[&bytes]))
+    use std::io::Read;
+    let mut file = File::open(path).ok()?;
+    let len = file.metadata().ok()?.len();
+    let mut h = Fnv::default();
+    h.add(&len.to_le_bytes());
+    let mut block = vec![0u8; 1 << 20];
+    let mut read = 0u64;
+    loop {
+        let n = file.read(&mut block).ok()?;
+        if n == 0 {
+            break;
+        }
+        h.add(&block[..n]);
+        read += n as u64;
+    }
+    // a file that changed while it was read has no checksum
+    (read == len).then(|| h.hex())
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A file's checksum, read a block at a time, is the fingerprint of its bytes.
+    #[test]
+    fn file_checksum_is_the_fingerprint_of_the_bytes() {
+        let dir = std::env::temp_dir().join(format!("lidarsim_sum_{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("f.bin");
+        for len in [0usize, 1, (1 << 20) - 1, 1 << 20, (1 << 20) + 7, 3 << 20] {
+            let bytes: Vec<u8> = (0..len).map(|i| (i * 7 + i / 3) as u8).collect();
+            std::fs::write(&path, &bytes).unwrap();
+            assert_eq!(file_checksum(&path), Some(fingerprint(&[&bytes])), "{len}");
+        }
+        assert_eq!(file_checksum(&dir.join("missing")), None);
+        let _ = std::fs::remove_dir_all(&dir);
+    }
 
     #[test]
     fn csv_fields_are_quoted_only_when_needed() {

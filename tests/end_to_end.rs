@@ -1189,3 +1189,42 @@ fn a_full_disk_in_the_products_stage_ends_with_a_message_and_resume_finishes_it(
     assert!(log.contains("0 parts simulated"), "{log}");
     assert_same_files(&out, &clean);
 }
+
+/// The number before `unit` after `label` in `text`.
+fn figure_after(text: &str, label: &str) -> f64 {
+    let rest = &text[text
+        .find(label)
+        .unwrap_or_else(|| panic!("no {label:?} in {text}"))
+        + label.len()..];
+    rest.split_whitespace()
+        .next()
+        .and_then(|w| w.trim_end_matches(',').parse().ok())
+        .unwrap_or_else(|| panic!("no number after {label:?} in {text}"))
+}
+
+/// `lidarsim check` bounds a run's peak memory: a discrete-return survey (points, DSM) of
+/// 25,000 pulses peaks below the estimate, and the estimate is not so loose as to be useless.
+#[test]
+fn check_bounds_the_peak_memory_of_a_run() {
+    let dir = tmp("e2e_memory_bound");
+    plane_scene(&dir, 0.3, 60.0);
+    let camp = write(
+        &dir,
+        "campaign.yaml",
+        "name: bound\nscene: plane.yaml\nseed: 2\nwavelength_nm: 1064\ninstrument: { kind: discrete_return, pulse_energy_j: 0.001, pulse_fwhm_ns: 3, footprint_half_angle_mrad: 0.25, fov_half_angle_mrad: 0.375, receiver_area_m2: 0.1, bin_ns: 0.067 }\nplatform: { kind: als, altitude_m: 250, speed_m_s: 5, prf_hz: 100000, lines: [ { start: [-40, 0], end: [40, 0] } ], scanner: { pattern: line, scan_angle_deg: [-10, 10], look_angle_step_deg: 0.04, along_track_step_m: 1.6 } }\nsimulation: { method: bdpt, rays_per_pulse: 1 }\n",
+    );
+    let (code, check, err) = lidarsim(&["check", camp.to_str().unwrap()]);
+    assert_eq!(code, 0, "{err}");
+    let bound = figure_after(&check, "estimated peak memory:");
+    let log = run_ok(&camp, &dir.join("run"), &[]);
+    assert_eq!(summary_pulses(&log), 25_000, "{log}");
+    let peak = figure_after(&log, "peak memory");
+    assert!(
+        peak <= bound,
+        "peak {peak} MB over the bound {bound} MB\n{check}"
+    );
+    assert!(
+        bound <= 4.0 * peak,
+        "bound {bound} MB for a peak of {peak} MB\n{check}"
+    );
+}

@@ -182,8 +182,11 @@ fn run(args: RunArgs) -> Result<()> {
     } else {
         "incomplete: run again with --resume"
     };
+    let peak = crate::progress::peak_rss_bytes()
+        .map(|b| format!(", peak memory {:.0} MB", b as f64 / 1e6))
+        .unwrap_or_default();
     println!(
-        "wrote {} ({} pulses, {} rays, {} parts simulated, {:.2} s, {state})",
+        "wrote {} ({} pulses, {} rays, {} parts simulated, {:.2} s{peak}, {state})",
         s.out.display(),
         s.pulses,
         s.rays,

@@ -204,10 +204,11 @@ struct TopView {
 
 impl TopView {
     fn new(points: usize) -> TopView {
+        let step = points.div_ceil(figures::TOP_VIEW_MAX_POINTS).max(1);
         TopView {
-            step: points.div_ceil(figures::TOP_VIEW_MAX_POINTS).max(1),
+            step,
             seen: 0,
-            kept: Vec::new(),
+            kept: Vec::with_capacity(points.div_ceil(step)),
         }
     }
 

@@ -370,3 +370,43 @@ fn far_coordinates_and_huge_scales() {
     let (code, err, _) = check("far_height", CAMPAIGN, &dem);
     assert_one_message(code, &err, &["dem.csv:2:", "column 2", "1000 km"]);
 }
+
+/// A frame whose CRS cannot place the scene's metres, or whose origin is no number, or a
+/// points format that is neither las nor laz: one message at the line of the key.
+#[test]
+fn bad_frames_and_points_formats() {
+    for (text, line, words) in [
+        (
+            "frame: { crs: EPSG:4326, origin: [0, 0, 0] }\n",
+            16,
+            &["frame.crs", "not a projected CRS"][..],
+        ),
+        (
+            "frame: { crs: EPSG:2227, origin: [0, 0, 0] }\n",
+            16,
+            &["frame.crs", "not in metres"][..],
+        ),
+        (
+            "frame: { crs: UTM31N, origin: [0, 0, 0] }\n",
+            16,
+            &["frame.crs", "EPSG:NNNN"][..],
+        ),
+        (
+            "frame:\n  crs: EPSG:32631\n  origin: [500000, .nan, 0]\n",
+            18,
+            &["frame.origin[1]", "finite"][..],
+        ),
+        ("frame: { crs: EPSG:32631 }\n", 16, &["frame", "origin"][..]),
+        (
+            "products: { points: true, points_format: copc }\n",
+            16,
+            &["products.points_format", "copc"][..],
+        ),
+    ] {
+        let (code, err, _) = check("frame", &format!("{CAMPAIGN}{text}"), SCENE);
+        let at = format!("campaign.yaml:{line}");
+        let mut expect = vec![at.as_str()];
+        expect.extend_from_slice(words);
+        assert_one_message(code, &err, &expect);
+    }
+}

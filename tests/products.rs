@@ -308,3 +308,158 @@ fn a_plane_gives_one_return_at_any_incidence_at_few_rays() {
         }
     }
 }
+
+/// A GeoTIFF raster's float32 cells (north row first) and its tiepoint, pixel scale and
+/// GeoKey directory.
+fn read_geotiff(path: &Path) -> (Vec<f32>, Vec<f64>, Vec<f64>, Vec<u16>) {
+    use tiff::decoder::{Decoder, DecodingResult};
+    use tiff::tags::Tag;
+    let mut d = Decoder::new(std::fs::File::open(path).unwrap()).unwrap();
+    let DecodingResult::F32(v) = d.read_image().unwrap() else {
+        panic!("{}: not float32", path.display());
+    };
+    (
+        v,
+        d.get_tag_f64_vec(Tag::ModelTiepointTag).unwrap(),
+        d.get_tag_f64_vec(Tag::ModelPixelScaleTag).unwrap(),
+        d.get_tag_u16_vec(Tag::GeoKeyDirectoryTag).unwrap(),
+    )
+}
+
+/// A survey placed in UTM zone 31N (`frame`) with LAZ points is the local survey shifted by
+/// the frame's origin: the same points at local + origin (to the millimetre both files keep),
+/// the CRS as an OGC WKT VLR, the DSM rasters' cells and corner shifted alike with the EPSG
+/// code in their GeoKeys (the difference raster unshifted); laspy and rasterio, readers we did
+/// not write, read the files the same way when they are installed.
+#[test]
+fn a_georeferenced_survey_is_the_local_one_shifted_into_its_crs() {
+    let dir = tmp("products_frame");
+    plane_scene(&dir, 0.3, 40.0);
+    let base = "scene: plane.yaml\nseed: 3\nwavelength_nm: 1064\ninstrument: { kind: discrete_return, pulse_energy_j: 0.001, pulse_fwhm_ns: 3, footprint_half_angle_mrad: 0.25, fov_half_angle_mrad: 0.375, receiver_area_m2: 0.1, bin_ns: 0.5 }\nplatform: { kind: als, altitude_m: 250, speed_m_s: 5, prf_hz: 100000, lines: [ { start: [-30, 0], end: [30, 0] } ], scanner: { pattern: line, scan_angle_deg: [-6, 6], look_angle_step_deg: 0.3, along_track_step_m: 1.5 } }\nsimulation: { method: bdpt, rays_per_pulse: 4 }\n";
+    let origin = [500_000.25, 4_800_000.5, 120.0];
+    let local = write(
+        &dir,
+        "local.yaml",
+        &format!("name: local\n{base}products: {{ points: true, dsm: {{ resolution_m: 4 }} }}\n"),
+    );
+    let geo = write(
+        &dir,
+        "geo.yaml",
+        &format!(
+            "name: geo\n{base}products: {{ points: true, dsm: {{ resolution_m: 4 }}, points_format: laz }}\nframe: {{ crs: EPSG:32631, origin: [{}, {}, {}] }}\n",
+            origin[0], origin[1], origin[2]
+        ),
+    );
+    let (a, b) = (dir.join("local"), dir.join("geo"));
+    for (camp, out) in [(&local, &a), (&geo, &b)] {
+        let (code, _, err) = lidarsim(&[
+            "run",
+            camp.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        assert_eq!(code, 0, "{err}");
+    }
+    assert!(!b.join("points.las").exists() && !a.join("points.laz").exists());
+    let (pa, pb) = (
+        read_las(&a.join("points.las")).unwrap(),
+        read_las(&b.join("points.laz")).unwrap(),
+    );
+    assert!(pa.len() > 1000, "{} points", pa.len());
+    assert_eq!(pa.len(), pb.len());
+    for (p, q) in pa.iter().zip(&pb) {
+        assert_eq!(p.pulse_id, q.pulse_id);
+        for (u, v, o) in [
+            (p.x, q.x, origin[0]),
+            (p.y, q.y, origin[1]),
+            (p.z, q.z, origin[2]),
+        ] {
+            assert!((u + o - v).abs() <= 0.0011, "{u} + {o} against {v}");
+        }
+    }
+    let header = las::Reader::from_path(b.join("points.laz"))
+        .unwrap()
+        .header()
+        .clone();
+    assert!(header.point_format().is_compressed && header.has_wkt_crs());
+    let wkt = String::from_utf8_lossy(header.get_wkt_crs_bytes().unwrap()).into_owned();
+    assert!(wkt.starts_with("PROJCS[\"WGS 84 / UTM zone 31N\""), "{wkt}");
+    let local_header = las::Reader::from_path(a.join("points.las"))
+        .unwrap()
+        .header()
+        .clone();
+    assert!(local_header.get_wkt_crs_bytes().is_none());
+
+    for (name, dz) in [
+        ("dsm", origin[2]),
+        ("reference", origin[2]),
+        ("difference", 0.0),
+    ] {
+        let (va, ta, sa, ka) = read_geotiff(&a.join(format!("dsm/{name}.tif")));
+        let (vb, tb, sb, kb) = read_geotiff(&b.join(format!("dsm/{name}.tif")));
+        assert_eq!(va.len(), vb.len(), "{name}");
+        assert!(va.iter().any(|&v| v != -9999.0), "{name}: no data at all");
+        for (u, v) in va.iter().zip(&vb) {
+            if *u == -9999.0 {
+                assert_eq!(*v, -9999.0, "{name}");
+            } else {
+                assert!(
+                    (*u as f64 + dz - *v as f64).abs() < 1e-4,
+                    "{name}: {u} + {dz} against {v}"
+                );
+            }
+        }
+        assert_eq!(sa, sb);
+        assert_eq!(sa, vec![4.0, 4.0, 0.0]);
+        assert_eq!(
+            (tb[3] - ta[3], tb[4] - ta[4]),
+            (origin[0], origin[1]),
+            "{name}"
+        );
+        assert!(ka.chunks(4).any(|k| k == [3072, 0, 1, 32767]), "{ka:?}");
+        assert!(kb.chunks(4).any(|k| k == [3072, 0, 1, 32631]), "{kb:?}");
+    }
+
+    let tools = std::process::Command::new("python3")
+        .args(["-c", "import laspy, lazrs, rasterio"])
+        .output()
+        .is_ok_and(|o| o.status.success());
+    if !tools {
+        lidarsim::testdata::skip_tool(
+            "python3 with laspy, lazrs and rasterio is not available (pip install 'laspy[lazrs]' rasterio)",
+        );
+        return;
+    }
+    let script = format!(
+        r#"
+import sys, laspy, rasterio, numpy as np
+f = laspy.read(sys.argv[1] + "/points.laz")
+assert len(f.points) == {n}, len(f.points)
+wkt = [v for v in f.header.vlrs if v.record_id == 2112][0].string
+assert "UTM zone 31N" in wkt, wkt
+assert abs(float(f.x.min()) - {xmin}) < 0.0011, f.x.min()
+with rasterio.open(sys.argv[1] + "/dsm/dsm.tif") as r:
+    assert r.crs.to_epsg() == 32631, r.crs
+    assert r.nodata == -9999.0, r.nodata
+    t = r.transform
+    assert (t.a, t.e) == (4.0, -4.0), t
+    a = r.read(1)
+    h = a[a != r.nodata]
+    assert abs(float(np.median(h)) - {z0}) < 0.05, np.median(h)
+print("laspy and rasterio ok")
+"#,
+        n = pb.len(),
+        xmin = pb.iter().map(|p| p.x).fold(f64::MAX, f64::min),
+        z0 = origin[2],
+    );
+    let o = std::process::Command::new("python3")
+        .args(["-c", &script, b.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert!(
+        o.status.success(),
+        "{}{}",
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    );
+}

@@ -4,9 +4,11 @@
 //! every number is checked after parsing, with errors that point at the file, line and key.
 //! Units are those the key names say; conversion to SI happens once, in `sensor`.
 
+pub mod frame;
 pub mod yaml;
 
 use crate::error::{Error, Result};
+pub use frame::Frame;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -31,6 +33,9 @@ pub struct Campaign {
     pub products: Option<Products>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub sweep: Option<BTreeMap<String, Vec<serde_yaml::Value>>>,
+    /// Georeference of the products; absent = local metres, no CRS.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub frame: Option<Frame>,
 }
 
 fn default_seed() -> u64 {
@@ -308,6 +313,35 @@ pub struct Products {
     pub photons: bool,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub dsm: Option<Dsm>,
+    #[serde(default)]
+    pub points_format: PointsFormat,
+}
+
+/// The discrete returns' file: `points.las`, or `points.laz` (LAZ, the same points).
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum PointsFormat {
+    #[default]
+    Las,
+    Laz,
+}
+
+impl Campaign {
+    /// The discrete returns' file format (`products.points_format`, LAS by default).
+    pub fn points_format(&self) -> PointsFormat {
+        self.products
+            .as_ref()
+            .map_or(PointsFormat::Las, |p| p.points_format)
+    }
+}
+
+impl PointsFormat {
+    pub fn file_name(self) -> &'static str {
+        match self {
+            PointsFormat::Las => "points.las",
+            PointsFormat::Laz => "points.laz",
+        }
+    }
 }
 
 fn yes() -> bool {
@@ -546,6 +580,18 @@ impl Campaign {
         if let Some(p) = &self.products {
             if let Some(d) = &p.dsm {
                 c.positive("products.dsm.resolution_m", d.resolution_m)?;
+            }
+        }
+        if let Some(f) = &self.frame {
+            f.resolve().map_err(|e| doc.error("frame.crs", e))?;
+            for (k, v) in f.origin.iter().enumerate() {
+                c.within(
+                    &format!("frame.origin[{k}]"),
+                    *v,
+                    -1e8,
+                    1e8,
+                    "a coordinate in metres within 100,000 km",
+                )?;
             }
         }
         Ok(())

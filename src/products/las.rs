@@ -61,12 +61,34 @@ fn extra_len() -> u16 {
 pub fn write_las(path: &Path, points: &[Point]) -> Result<()> {
     let mut extent = Extent::default();
     extent.add(path, points)?;
-    let offset = extent.offset(path)?;
+    let layout = Layout::local(extent.offset(path, [0.0; 3])?);
     let mut chunks = Some(points);
-    write_las_chunks(path, offset, |each| match chunks.take() {
+    write_las_chunks(path, &layout, |each| match chunks.take() {
         Some(c) => each(c),
         None => Ok(()),
     })
+}
+
+/// How the points are written: the LAS offsets, the shift from the scene's local metres to
+/// the file's coordinates (the frame's origin, else 0), the CRS as OGC WKT, and LAZ or not.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Layout {
+    pub offset: [f64; 3],
+    pub shift: [f64; 3],
+    pub wkt: Option<&'static str>,
+    pub laz: bool,
+}
+
+impl Layout {
+    /// Local metres, no CRS, LAS.
+    pub fn local(offset: [f64; 3]) -> Layout {
+        Layout {
+            offset,
+            shift: [0.0; 3],
+            wkt: None,
+            laz: false,
+        }
+    }
 }
 
 /// What the LAS offsets need of the points, gathered as they stream by: each coordinate's
@@ -107,11 +129,15 @@ impl Extent {
     /// known to be a whole number of millimetres from it within i32; checked here, before
     /// any point is written, because the las crate panics when a writer that failed a point
     /// is dropped.
-    pub fn offset(&self, path: &Path) -> Result<[f64; 3]> {
-        let offset = self.min.map_or([0.0; 3], |m| m.map(f64::floor));
+    /// `shift` is added to every coordinate as it is written (a frame's origin): rounding is
+    /// monotonic, so the shifted minimum is the minimum of the shifted coordinates.
+    pub fn offset(&self, path: &Path, shift: [f64; 3]) -> Result<[f64; 3]> {
+        let offset = self
+            .min
+            .map_or([0.0; 3], |m| [0, 1, 2].map(|a| (m[a] + shift[a]).floor()));
         for (axis, p) in self.max.iter().enumerate() {
             let Some(p) = p else { continue };
-            if ([p.x, p.y, p.z][axis] - offset[axis]) / SCALE >= i32::MAX as f64 {
+            if ([p.x, p.y, p.z][axis] + shift[axis] - offset[axis]) / SCALE >= i32::MAX as f64 {
                 return Err(Error::file(
                     path,
                     format!(
@@ -125,18 +151,20 @@ impl Extent {
     }
 }
 
-/// Writes points.las with the given offsets ([`Extent::offset`]) from the points `chunks`
-/// hands to its callback, in order.
+/// Writes points.las (or .laz) as `layout` says from the points `chunks` hands to its
+/// callback, in order.
 pub fn write_las_chunks(
     path: &Path,
-    offset: [f64; 3],
+    layout: &Layout,
     chunks: impl FnOnce(&mut dyn FnMut(&[Point]) -> Result<()>) -> Result<()>,
 ) -> Result<()> {
     let err = |e: las::Error| Error::file(path, format!("cannot write LAS: {e}"));
+    let offset = layout.offset;
     let mut b = Builder::from((1, 4));
     b.version = Version::new(1, 4);
     b.point_format = las::point::Format::new(6).map_err(err)?;
     b.point_format.extra_bytes = extra_len();
+    b.point_format.is_compressed = layout.laz;
     let transform = |offset| Transform {
         scale: SCALE,
         offset,
@@ -148,7 +176,10 @@ pub fn write_las_chunks(
     };
     b.generating_software = format!("lidarsim {}", env!("CARGO_PKG_VERSION"));
     b.vlrs.push(extra_bytes_vlr());
-    let header = b.into_header().map_err(err)?;
+    let mut header = b.into_header().map_err(err)?;
+    if let Some(wkt) = layout.wkt {
+        header.set_wkt_crs(wkt.as_bytes().to_vec()).map_err(err)?;
+    }
     write_atomic(path, |file| {
         let sink = Sticky {
             inner: BufWriter::new(file),
@@ -157,7 +188,7 @@ pub fn write_las_chunks(
         let mut w = Writer::new(sink, header).map_err(err)?;
         let written = chunks(&mut |points| {
             for p in points {
-                w.write_point(to_las(p)?).map_err(err)?;
+                w.write_point(to_las(p, layout.shift)).map_err(err)?;
             }
             Ok(())
         });
@@ -212,17 +243,17 @@ impl<W: Seek> Seek for Sticky<W> {
     }
 }
 
-fn to_las(p: &Point) -> Result<las::Point> {
+fn to_las(p: &Point, shift: [f64; 3]) -> las::Point {
     let mut extra = Vec::with_capacity(extra_len() as usize);
     extra.extend_from_slice(&p.apparent_reflectance.to_le_bytes());
     extra.extend_from_slice(&p.pulse_id.to_le_bytes());
     // Code 12 (overlap) is a flag in LAS 1.4, not a class: such a point is unclassified.
     let classification =
         Classification::new(p.classification).unwrap_or(Classification::Unclassified);
-    Ok(las::Point {
-        x: p.x,
-        y: p.y,
-        z: p.z,
+    las::Point {
+        x: p.x + shift[0],
+        y: p.y + shift[1],
+        z: p.z + shift[2],
         intensity: p.intensity,
         return_number: p.return_number.min(15),
         number_of_returns: p.number_of_returns.min(15),
@@ -232,7 +263,7 @@ fn to_las(p: &Point) -> Result<las::Point> {
         gps_time: Some(p.gps_time),
         extra_bytes: extra,
         ..Default::default()
-    })
+    }
 }
 
 /// Format 6 stores the scan angle in 0.006° steps and the crate truncates towards zero:

@@ -72,13 +72,13 @@ pub fn report(
             sun.zenith_deg, sun.azimuth_deg, solar / n, brf_fov / n
         );
     }
-    text += &products_section(out);
+    text += &products_section(out, c.points_format().file_name());
     Ok(text)
 }
 
 /// The products part of report.md: figures from products.json and dsm/report.json, and the
 /// plots beside them.
-fn products_section(out: &Path) -> String {
+fn products_section(out: &Path, points_file: &str) -> String {
     let mut text = String::new();
     let Some(p) = ProductsSummary::read(&out.join("products.json")) else {
         return text;
@@ -97,7 +97,8 @@ fn products_section(out: &Path) -> String {
                 .unwrap_or(0)
         };
         text += &format!(
-            "\n## Discrete returns (points.las)\n\n| | |\n| --- | --- |\n| points | {} |\n| points per pulse | {} |\n| pulse density | {} per m² |\n| ground / vegetation / building / unclassified | {} / {} / {} / {} |\n",
+            "\n## Discrete returns ({})\n\n| | |\n| --- | --- |\n| points | {} |\n| points per pulse | {} |\n| pulse density | {} per m² |\n| ground / vegetation / building / unclassified | {} / {} / {} / {} |\n",
+            points_file,
             pts.points, num(Some(pts.points_per_pulse)), num(pts.pulse_density_per_m2),
             by(SurfaceClass::Ground), by(SurfaceClass::Vegetation), by(SurfaceClass::Building), by(SurfaceClass::Other)
         );

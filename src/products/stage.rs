@@ -1,7 +1,7 @@
 //! The products stage: discrete returns (points.las), photon counts (photons.parquet) and the
 //! summary `products.json`, from the simulated waveforms.
 
-use crate::campaign::{InstrumentKind, Loaded};
+use crate::campaign::{InstrumentKind, Loaded, PointsFormat};
 use crate::error::{Error, Result};
 use crate::fsutil::write_text_atomic;
 use crate::parquet_io::Sink;
@@ -9,7 +9,7 @@ use crate::plan::Plan;
 use crate::products::accuracy::DistanceHistogram;
 use crate::products::dsm::Dsm;
 use crate::products::figures::{self, TopPoint, WaveformFigure};
-use crate::products::las::{write_las_chunks, Extent};
+use crate::products::las::{write_las_chunks, Extent, Layout};
 use crate::products::photons::{count_photons, photon_rows, photon_table, PhotonRow};
 use crate::products::points::{points_on_axis, Point, PointConfig};
 use crate::products::returns::{decompose, Component, Decomposition};
@@ -277,7 +277,9 @@ pub fn run(
     parts: usize,
 ) -> Result<(Vec<String>, String)> {
     let want = wanted(loaded);
-    let las_path = out.join("points.las");
+    let c = &loaded.campaign;
+    let format = c.points_format();
+    let las_path = out.join(format.file_name());
     let mut points = if want.points {
         Some(PointsPass::new(&out.join("points.spill"))?)
     } else {
@@ -341,11 +343,20 @@ pub fn run(
             .dsm
             .and_then(|res| Dsm::new(scene, pass.first_returns(), res));
         let mut top = TopView::new(pass.spill.len());
-        let offset = pass.extent.offset(&las_path)?;
+        let (shift, wkt) = match &c.frame {
+            Some(f) => (f.origin, Some(f.resolve().map_err(Error::msg)?.1)),
+            None => ([0.0; 3], None),
+        };
+        let layout = Layout {
+            offset: pass.extent.offset(&las_path, shift)?,
+            shift,
+            wkt,
+            laz: format == PointsFormat::Laz,
+        };
         let PointsPass {
             mut spill, tally, ..
         } = pass;
-        write_las_chunks(&las_path, offset, |write| {
+        write_las_chunks(&las_path, &layout, |write| {
             spill.read(|chunk| {
                 write(chunk)?;
                 top.offer(chunk);
@@ -356,14 +367,14 @@ pub fn run(
             })
         })?;
         drop(spill);
-        outputs.push("points.las".to_string());
+        outputs.push(format.file_name().to_string());
         outputs.extend(point_figures(loaded, out, examples, top, tally.points)?);
         summary.points = Some(tally.summary(plan.len()));
         if let Some(mut d) = dsm {
             for start in (0..plan.len()).step_by(crate::waveform::file::PART_PULSES) {
                 d.aim(&plan.pulses(start..start + crate::waveform::file::PART_PULSES));
             }
-            outputs.extend(d.write(out)?);
+            outputs.extend(d.write(out, c.frame.as_ref())?);
         }
     }
     if want.photons {

@@ -9,6 +9,7 @@
 //! that set its DSM value (its highest first return; among equal heights the smallest angle).
 
 mod figures;
+pub mod geotiff;
 
 use crate::error::{Error, Result};
 use crate::fsutil::write_text_atomic;
@@ -358,8 +359,9 @@ impl Dsm {
         self.grid.len()
     }
 
-    /// Writes `dsm/` under `out`; returns the files written, relative to `out`.
-    pub fn write(self, out: &Path) -> Result<Vec<String>> {
+    /// Writes `dsm/` under `out`: the report, its figures and the three rasters, in the
+    /// frame's CRS when there is one; returns the files written, relative to `out`.
+    pub fn write(self, out: &Path, frame: Option<&crate::campaign::Frame>) -> Result<Vec<String>> {
         let aim = self.aims.mean();
         let report = compare(
             &self.reference,
@@ -368,12 +370,35 @@ impl Dsm {
             &self.angles,
             &self.grid,
         );
-        write_report(
-            &out.join("dsm"),
-            &report,
-            &self.reference,
-            &self.measured,
+        let dir = out.join("dsm");
+        write_report(&dir, &report, &self.reference, &self.measured, &self.grid)?;
+        let georef = geotiff::Georef { frame };
+        let difference: Vec<f64> = self
+            .measured
+            .iter()
+            .zip(&self.reference)
+            .map(|(m, r)| m - r)
+            .collect();
+        geotiff::write(
+            &dir.join("dsm.tif"),
             &self.grid,
+            &self.measured,
+            georef,
+            true,
+        )?;
+        geotiff::write(
+            &dir.join("reference.tif"),
+            &self.grid,
+            &self.reference,
+            georef,
+            true,
+        )?;
+        geotiff::write(
+            &dir.join("difference.tif"),
+            &self.grid,
+            &difference,
+            georef,
+            false,
         )?;
         crate::progress::log(&format!(
             "dsm: bias {:+.3} m, RMSE {:.3} m, coverage {:.1}% over {} cells of {} m",
@@ -387,6 +412,9 @@ impl Dsm {
             "dsm/report.json".into(),
             "dsm/error_vs_scan_angle.png".into(),
             "dsm/error_map.png".into(),
+            "dsm/dsm.tif".into(),
+            "dsm/reference.tif".into(),
+            "dsm/difference.tif".into(),
         ])
     }
 }

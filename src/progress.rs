@@ -23,6 +23,24 @@ pub fn log(line: &str) {
     eprintln!("lidarsim: {line}");
 }
 
+/// Gives the memory the allocator holds free back to the system. glibc keeps the blocks a
+/// stage frees in its per-thread heaps, where the next stage's different sizes cannot always
+/// reuse them: without this a whole run's peak grew with its length (59 MiB at 10^5 pulses,
+/// 75 MiB at 10^7) although each stage alone stays flat. Called between stages and every few
+/// parts; other C libraries have nothing to do here.
+pub fn release_free_memory() {
+    #[cfg(all(target_os = "linux", target_env = "gnu"))]
+    {
+        extern "C" {
+            fn malloc_trim(pad: usize) -> i32;
+        }
+        // SAFETY: malloc_trim only returns free memory to the system; it is thread-safe.
+        unsafe {
+            malloc_trim(0);
+        }
+    }
+}
+
 /// Peak resident memory of this process since it started or since the last
 /// [`reset_peak_rss`], bytes (Linux: VmHWM of /proc/self/status; None elsewhere).
 pub fn peak_rss_bytes() -> Option<u64> {

@@ -330,6 +330,8 @@ impl<'a> RunFolder<'a> {
         note: Option<String>,
         status: &str,
     ) -> Result<()> {
+        // what the stage freed goes back to the system before the next stage allocates
+        crate::progress::release_free_memory();
         record(&mut self.manifest, self.out, stage, fp, outputs, t, note);
         if let Some(r) = self.manifest.stages.get_mut(stage.name()) {
             r.status = status.into();

@@ -17,6 +17,9 @@ use std::io::IsTerminal;
 use std::path::Path;
 use std::time::Instant;
 
+/// Parts written between two returns of freed memory to the system.
+const RELEASE_EVERY_PARTS: usize = 16;
+
 /// Simulates the given parts, each written when complete. Pulses within a part and each
 /// pulse's ray chunks run in parallel, and a finished part is encoded and written on a thread
 /// of its own while the workers go on with the next one: the queue holds one finished part
@@ -44,13 +47,18 @@ pub(super) fn simulate_parts(
         let (queue, finished) =
             std::sync::mpsc::sync_channel::<(usize, Vec<Waveform>, Vec<f64>)>(1);
         let writer = scope.spawn(move || -> Result<()> {
-            for (k, waveforms, secs) in finished {
+            for (n, (k, waveforms, secs)) in finished.into_iter().enumerate() {
                 write_waveforms(&out.join(part_name(k)), &waveforms, fingerprint)?;
                 write_pulse_stats(
                     &out.join(format!("waveforms/part-{k:05}.stats.csv")),
                     &waveforms,
                     &secs,
                 )?;
+                drop(waveforms);
+                // fragments of freed parts would otherwise pile up over a long campaign
+                if n % RELEASE_EVERY_PARTS == RELEASE_EVERY_PARTS - 1 {
+                    crate::progress::release_free_memory();
+                }
             }
             Ok(())
         });

@@ -157,6 +157,13 @@ fn parquet_error(path: &Path, e: parquet::errors::ParquetError) -> Error {
     Error::io(path, "cannot write Parquet", e).advise(crate::fsutil::WRITE_ADVICE)
 }
 
+/// A float column where NaN, "no meaning for this pulse or run", is stored as null.
+pub fn f32_or_null(values: impl Iterator<Item = f32>) -> ArrayRef {
+    Arc::new(arrow_array::Float32Array::from_iter(
+        values.map(|v| (!v.is_nan()).then_some(v)),
+    ))
+}
+
 pub fn list_f32(rows: impl Iterator<Item = Vec<f32>>) -> ArrayRef {
     let mut b = ListBuilder::new(Float32Builder::new()).with_field(Field::new(
         "item",
@@ -184,9 +191,21 @@ pub fn list_f64(rows: impl Iterator<Item = Vec<f64>>) -> ArrayRef {
 }
 
 pub fn batch(columns: Vec<(&str, ArrayRef)>) -> RecordBatch {
+    batch_nullable(columns, &[])
+}
+
+/// A batch whose `nullable` columns are declared nullable whether or not this batch holds a
+/// null, so every part of a run has the same schema.
+pub fn batch_nullable(columns: Vec<(&str, ArrayRef)>, nullable: &[&str]) -> RecordBatch {
     let fields: Vec<Field> = columns
         .iter()
-        .map(|(n, a)| Field::new(*n, a.data_type().clone(), a.null_count() > 0))
+        .map(|(n, a)| {
+            Field::new(
+                *n,
+                a.data_type().clone(),
+                a.null_count() > 0 || nullable.contains(n),
+            )
+        })
         .collect();
     RecordBatch::try_new(
         Arc::new(Schema::new(fields)),

@@ -23,6 +23,8 @@ pub fn report(
     let mut rays = 0u64;
     let mut paths = 0.0;
     let (mut solar, mut brf_fov, mut brf_fp) = (0.0, 0.0, 0.0);
+    // pulses whose laser energy fell in the gate: the others have no footprint BRF
+    let mut lit = 0usize;
     // the parts by index, as the products stage reads them: another file in the folder is
     // not part of the run
     for k in 0..part_count(pulses) {
@@ -34,7 +36,10 @@ pub fn report(
             paths += w.paths_per_ray as f64 * w.rays as f64;
             solar += w.solar_photons_per_bin as f64;
             brf_fov += w.brf_fov_solar as f64;
-            brf_fp += w.brf_footprint_laser as f64;
+            if w.brf_footprint_laser.is_finite() {
+                brf_fp += w.brf_footprint_laser as f64;
+                lit += 1;
+            }
         }
     }
     let sim = simulate_s;
@@ -62,23 +67,27 @@ pub fn report(
         if total > 0.0 { 100.0 * multiple / total } else { 0.0 },
     );
     let n = received.max(1) as f64;
-    text += &format!(
-        "| scene BRF in the footprint, from the laser (π/ΔΩ)(Q_r/Q_e) | {:.4} |\n",
-        brf_fp / n
-    );
+    text += &match lit {
+        0 => "| scene BRF in the footprint, from the laser (π/ΔΩ)(Q_r/Q_e) | – (no laser energy in any gate) |\n".to_string(),
+        _ => format!(
+            "| scene BRF in the footprint, from the laser (π/ΔΩ)(Q_r/Q_e) | {:.4} (mean over the {lit} pulses with laser energy in their gate) |\n",
+            brf_fp / lit as f64
+        ),
+    };
     if let Some(sun) = &c.sun {
         text += &format!(
             "| sun | zenith {}°, azimuth {}° |\n| solar photons per bin | {:.4} |\n| scene BRF in the field of view, from the sun (Eq. 20) | {:.4} |\n",
             sun.zenith_deg, sun.azimuth_deg, solar / n, brf_fov / n
         );
     }
-    text += &products_section(out, c.points_format().file_name());
+    let crs = c.frame.as_ref().map(|f| f.crs.as_str());
+    text += &products_section(out, c.points_format().file_name(), crs);
     Ok(text)
 }
 
 /// The products part of report.md: figures from products.json and dsm/report.json, and the
 /// plots beside them.
-fn products_section(out: &Path, points_file: &str) -> String {
+fn products_section(out: &Path, points_file: &str, crs: Option<&str>) -> String {
     let mut text = String::new();
     let Some(p) = ProductsSummary::read(&out.join("products.json")) else {
         return text;
@@ -97,8 +106,9 @@ fn products_section(out: &Path, points_file: &str) -> String {
                 .unwrap_or(0)
         };
         text += &format!(
-            "\n## Discrete returns ({})\n\n| | |\n| --- | --- |\n| points | {} |\n| points per pulse | {} |\n| pulse density | {} per m² |\n| ground / vegetation / building / unclassified | {} / {} / {} / {} |\n",
+            "\n## Discrete returns ({}{})\n\n| | |\n| --- | --- |\n| points | {} |\n| points per pulse | {} |\n| pulse density | {} per m² |\n| ground / vegetation / building / unclassified | {} / {} / {} / {} |\n",
             points_file,
+            crs.map_or(String::new(), |c| format!(", in {c}")),
             pts.points, num(Some(pts.points_per_pulse)), num(pts.pulse_density_per_m2),
             by(SurfaceClass::Ground), by(SurfaceClass::Vegetation), by(SurfaceClass::Building), by(SurfaceClass::Other)
         );
@@ -132,6 +142,12 @@ fn products_section(out: &Path, points_file: &str) -> String {
             );
         }
         text += "\n![DSM error map](dsm/error_map.png)\n\n![DSM error and coverage against scan angle](dsm/error_vs_scan_angle.png)\n";
+        if out.join("dsm/dsm.tif").is_file() {
+            text += &format!(
+                "\nRasters for GIS tools (GeoTIFF, float32, nodata −9999, {}): `dsm/dsm.tif`, `dsm/reference.tif`, `dsm/difference.tif`.\n",
+                crs.map_or("local metres, no CRS".to_string(), |c| format!("{c}, heights in it"))
+            );
+        }
     }
     if let Some(ph) = &p.photons {
         text += &format!(

@@ -3,8 +3,8 @@
 
 use super::Waveform;
 use crate::error::{Error, Result};
-use crate::parquet_io::{batch, list_f32, list_f64, write_batch};
-use arrow_array::{Float32Array, Float64Array, UInt32Array, UInt64Array};
+use crate::parquet_io::{batch_nullable, f32_or_null, list_f32, list_f64, write_batch};
+use arrow_array::{Array, Float32Array, Float64Array, UInt32Array, UInt64Array};
 use arrow_schema::DataType;
 use std::path::Path;
 use std::sync::Arc;
@@ -42,114 +42,114 @@ pub fn checksum_path(part: &Path) -> std::path::PathBuf {
 
 /// The waveforms as the table a part file holds.
 pub fn waveform_batch(w: &[Waveform]) -> arrow_array::RecordBatch {
-    batch(vec![
-        (
-            "pulse_id",
-            Arc::new(UInt64Array::from_iter_values(w.iter().map(|r| r.pulse_id))),
-        ),
-        (
-            "t0_ns",
-            Arc::new(Float64Array::from_iter_values(w.iter().map(|r| r.t0_ns))),
-        ),
-        (
-            "bin_ns",
-            Arc::new(Float32Array::from_iter_values(w.iter().map(|r| r.bin_ns))),
-        ),
-        (
-            "laser_photons",
-            list_f32(w.iter().map(|r| r.laser_photons.clone())),
-        ),
-        (
-            "impulse_energy_j",
-            list_f32(w.iter().map(|r| r.impulse_energy_j.clone())),
-        ),
-        (
-            "impulse_energy_se_j",
-            list_f32(w.iter().map(|r| r.impulse_energy_se_j.clone())),
-        ),
-        (
-            "ground_energy_j",
-            list_f32(w.iter().map(|r| r.class_energy_j[0].clone())),
-        ),
-        (
-            "vegetation_energy_j",
-            list_f32(w.iter().map(|r| r.class_energy_j[1].clone())),
-        ),
-        (
-            "building_energy_j",
-            list_f32(w.iter().map(|r| r.class_energy_j[2].clone())),
-        ),
-        (
-            "other_energy_j",
-            list_f32(w.iter().map(|r| r.class_energy_j[3].clone())),
-        ),
-        (
-            "received_energy_j",
-            Arc::new(Float64Array::from_iter_values(
-                w.iter().map(|r| r.received_energy_j),
-            )),
-        ),
-        (
-            "outside_gate_energy_j",
-            Arc::new(Float64Array::from_iter_values(
-                w.iter().map(|r| r.outside_gate_energy_j),
-            )),
-        ),
-        (
-            "order_energy_j",
-            list_f64(w.iter().map(|r| r.order_energy_j.clone())),
-        ),
-        (
-            "order_energy_se_j",
-            list_f64(w.iter().map(|r| r.order_energy_se_j.clone())),
-        ),
-        (
-            "received_energy_se_j",
-            Arc::new(Float64Array::from_iter_values(
-                w.iter().map(|r| r.received_energy_se_j),
-            )),
-        ),
-        (
-            "solar_photons_per_bin",
-            Arc::new(Float32Array::from_iter_values(
-                w.iter().map(|r| r.solar_photons_per_bin),
-            )),
-        ),
-        (
-            "solar_power_w",
-            Arc::new(Float64Array::from_iter_values(
-                w.iter().map(|r| r.solar_power_w),
-            )),
-        ),
-        (
-            "solar_power_se_w",
-            Arc::new(Float64Array::from_iter_values(
-                w.iter().map(|r| r.solar_power_se_w),
-            )),
-        ),
-        (
-            "brf_fov_solar",
-            Arc::new(Float32Array::from_iter_values(
-                w.iter().map(|r| r.brf_fov_solar),
-            )),
-        ),
-        (
-            "brf_footprint_laser",
-            Arc::new(Float32Array::from_iter_values(
-                w.iter().map(|r| r.brf_footprint_laser),
-            )),
-        ),
-        (
-            "rays",
-            Arc::new(UInt32Array::from_iter_values(w.iter().map(|r| r.rays))),
-        ),
-        (
-            "paths_per_ray",
-            Arc::new(Float32Array::from_iter_values(
-                w.iter().map(|r| r.paths_per_ray),
-            )),
-        ),
-    ])
+    batch_nullable(
+        vec![
+            (
+                "pulse_id",
+                Arc::new(UInt64Array::from_iter_values(w.iter().map(|r| r.pulse_id))),
+            ),
+            (
+                "t0_ns",
+                Arc::new(Float64Array::from_iter_values(w.iter().map(|r| r.t0_ns))),
+            ),
+            (
+                "bin_ns",
+                Arc::new(Float32Array::from_iter_values(w.iter().map(|r| r.bin_ns))),
+            ),
+            (
+                "laser_photons",
+                list_f32(w.iter().map(|r| r.laser_photons.clone())),
+            ),
+            (
+                "impulse_energy_j",
+                list_f32(w.iter().map(|r| r.impulse_energy_j.clone())),
+            ),
+            (
+                "impulse_energy_se_j",
+                list_f32(w.iter().map(|r| r.impulse_energy_se_j.clone())),
+            ),
+            (
+                "ground_energy_j",
+                list_f32(w.iter().map(|r| r.class_energy_j[0].clone())),
+            ),
+            (
+                "vegetation_energy_j",
+                list_f32(w.iter().map(|r| r.class_energy_j[1].clone())),
+            ),
+            (
+                "building_energy_j",
+                list_f32(w.iter().map(|r| r.class_energy_j[2].clone())),
+            ),
+            (
+                "other_energy_j",
+                list_f32(w.iter().map(|r| r.class_energy_j[3].clone())),
+            ),
+            (
+                "received_energy_j",
+                Arc::new(Float64Array::from_iter_values(
+                    w.iter().map(|r| r.received_energy_j),
+                )),
+            ),
+            (
+                "outside_gate_energy_j",
+                Arc::new(Float64Array::from_iter_values(
+                    w.iter().map(|r| r.outside_gate_energy_j),
+                )),
+            ),
+            (
+                "order_energy_j",
+                list_f64(w.iter().map(|r| r.order_energy_j.clone())),
+            ),
+            (
+                "order_energy_se_j",
+                list_f64(w.iter().map(|r| r.order_energy_se_j.clone())),
+            ),
+            (
+                "received_energy_se_j",
+                Arc::new(Float64Array::from_iter_values(
+                    w.iter().map(|r| r.received_energy_se_j),
+                )),
+            ),
+            (
+                "solar_photons_per_bin",
+                Arc::new(Float32Array::from_iter_values(
+                    w.iter().map(|r| r.solar_photons_per_bin),
+                )),
+            ),
+            (
+                "solar_power_w",
+                Arc::new(Float64Array::from_iter_values(
+                    w.iter().map(|r| r.solar_power_w),
+                )),
+            ),
+            (
+                "solar_power_se_w",
+                Arc::new(Float64Array::from_iter_values(
+                    w.iter().map(|r| r.solar_power_se_w),
+                )),
+            ),
+            // null without a sun, and without laser energy in the gate: no meaning, not NaN
+            (
+                "brf_fov_solar",
+                f32_or_null(w.iter().map(|r| r.brf_fov_solar)),
+            ),
+            (
+                "brf_footprint_laser",
+                f32_or_null(w.iter().map(|r| r.brf_footprint_laser)),
+            ),
+            (
+                "rays",
+                Arc::new(UInt32Array::from_iter_values(w.iter().map(|r| r.rays))),
+            ),
+            (
+                "paths_per_ray",
+                Arc::new(Float32Array::from_iter_values(
+                    w.iter().map(|r| r.paths_per_ray),
+                )),
+            ),
+        ],
+        &["brf_fov_solar", "brf_footprint_laser"],
+    )
 }
 
 /// Reads a waveform part back (used by tests and later stages).
@@ -268,8 +268,16 @@ pub fn read_waveforms(path: &Path) -> Result<Vec<Waveform>> {
                 solar_photons_per_bin: sol.value(i),
                 solar_power_w: spw.value(i),
                 solar_power_se_w: sps.value(i),
-                brf_fov_solar: bfs.value(i),
-                brf_footprint_laser: bfl.value(i),
+                brf_fov_solar: if bfs.is_null(i) {
+                    f32::NAN
+                } else {
+                    bfs.value(i)
+                },
+                brf_footprint_laser: if bfl.is_null(i) {
+                    f32::NAN
+                } else {
+                    bfl.value(i)
+                },
                 class_energy_j: [
                     f32s(&cls[0], i),
                     f32s(&cls[1], i),
@@ -322,4 +330,63 @@ fn name_is_list(name: &str) -> bool {
             | "building_energy_j"
             | "other_energy_j"
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn waveform(id: u64, brf_fov: f32, brf_footprint: f32) -> Waveform {
+        Waveform {
+            pulse_id: id,
+            t0_ns: 10.0,
+            bin_ns: 1.0,
+            laser_photons: vec![0.0, 2.0],
+            impulse_energy_j: vec![0.0, 1e-15],
+            impulse_energy_se_j: vec![0.0, 1e-16],
+            received_energy_j: 1e-15,
+            outside_gate_energy_j: 0.0,
+            order_energy_j: vec![1e-15],
+            order_energy_se_j: vec![1e-16],
+            received_energy_se_j: 1e-16,
+            solar_photons_per_bin: 0.0,
+            solar_power_w: 0.0,
+            solar_power_se_w: 0.0,
+            brf_fov_solar: brf_fov,
+            brf_footprint_laser: brf_footprint,
+            class_energy_j: std::array::from_fn(|_| vec![0.0, 2.5e-16]),
+            rays: 4,
+            paths_per_ray: 1.0,
+        }
+    }
+
+    /// A BRF with no meaning (no sun; no laser energy in the gate) is null in the file, never
+    /// NaN, and comes back as NaN in memory; the columns are nullable in every part, with or
+    /// without a null in it, so the parts of a run share one schema.
+    #[test]
+    fn meaningless_brfs_are_null_in_the_file() {
+        use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
+        let dir = std::env::temp_dir().join(format!("lidarsim-wfnull-{}", std::process::id()));
+        let (a, b) = (dir.join("a.parquet"), dir.join("b.parquet"));
+        let with_nulls = vec![waveform(0, f32::NAN, 0.3), waveform(1, f32::NAN, f32::NAN)];
+        write_waveforms(&a, &with_nulls, "fp").unwrap();
+        write_waveforms(&b, &[waveform(2, 0.2, 0.3)], "fp").unwrap();
+        let table = |p: &Path| {
+            let r = ParquetRecordBatchReaderBuilder::try_new(std::fs::File::open(p).unwrap())
+                .unwrap()
+                .build()
+                .unwrap();
+            r.map(|b| b.unwrap()).collect::<Vec<_>>()
+        };
+        let ta = table(&a);
+        for (name, nulls) in [("brf_fov_solar", 2), ("brf_footprint_laser", 1)] {
+            let col = ta[0].column_by_name(name).unwrap();
+            assert_eq!(col.null_count(), nulls, "{name}");
+        }
+        assert_eq!(ta[0].schema(), table(&b)[0].schema());
+        let back = read_waveforms(&a).unwrap();
+        assert!(back[0].brf_fov_solar.is_nan() && back[1].brf_footprint_laser.is_nan());
+        assert_eq!(back[0].brf_footprint_laser, 0.3);
+        let _ = std::fs::remove_dir_all(&dir);
+    }
 }

@@ -41,6 +41,17 @@ pub fn release_free_memory() {
     }
 }
 
+/// Parts handled between two calls of [`release_free_memory`] in a stage's loop.
+const RELEASE_EVERY_PARTS: usize = 16;
+
+/// [`release_free_memory`] after every [`RELEASE_EVERY_PARTS`]-th part a loop has handled
+/// (`n` counts from 0): fragments of freed parts would otherwise pile up over a long campaign.
+pub fn release_after_part(n: usize) {
+    if n % RELEASE_EVERY_PARTS == RELEASE_EVERY_PARTS - 1 {
+        release_free_memory();
+    }
+}
+
 /// Peak resident memory of this process since it started or since the last
 /// [`reset_peak_rss`], bytes (Linux: VmHWM of /proc/self/status; None elsewhere).
 pub fn peak_rss_bytes() -> Option<u64> {

@@ -17,9 +17,6 @@ use std::io::IsTerminal;
 use std::path::Path;
 use std::time::Instant;
 
-/// Parts written between two returns of freed memory to the system.
-const RELEASE_EVERY_PARTS: usize = 16;
-
 /// Simulates the given parts, each written when complete. Pulses within a part and each
 /// pulse's ray chunks run in parallel, and a finished part is encoded and written on a thread
 /// of its own while the workers go on with the next one: the queue holds one finished part
@@ -55,10 +52,7 @@ pub(super) fn simulate_parts(
                     &secs,
                 )?;
                 drop(waveforms);
-                // fragments of freed parts would otherwise pile up over a long campaign
-                if n % RELEASE_EVERY_PARTS == RELEASE_EVERY_PARTS - 1 {
-                    crate::progress::release_free_memory();
-                }
+                crate::progress::release_after_part(n);
             }
             Ok(())
         });

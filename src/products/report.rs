@@ -28,6 +28,7 @@ pub fn report(
     // the parts by index, as the products stage reads them: another file in the folder is
     // not part of the run
     for k in 0..part_count(pulses) {
+        crate::progress::release_after_part(k);
         for w in read_waveforms(&out.join(part_name(k)))? {
             total += w.received_energy_j;
             received += 1;

@@ -298,6 +298,7 @@ pub fn run(
                 "the products stage stopped before writing anything; the waveforms are kept",
             ));
         }
+        crate::progress::release_after_part(k);
         let part = read_waveforms(&out.join(part_name(k)))?;
         if part.iter().any(|w| w.pulse_id as usize >= plan.len()) {
             return Err(Error::msg(format!(

@@ -105,6 +105,12 @@ fn campaign_rows_are_measured_and_missing_data_is_skipped() {
     assert!(tr.inside_per_s > 0.0 && tr.bare_per_s > 0.0, "{tr:?}");
     let t = lidarsim::bench::traversal::table(&[tr]);
     assert!(t.contains("| mabel_plane | 8 |"), "{t}");
+    // the same campaign on one thread, for the serial share: its own folder, a table row
+    let sc = bc::scaling(&dir, &row, &text).unwrap();
+    assert!(dir.join("mabel_plane_1thread/run/report.md").is_file());
+    assert!(sc.one.0 > 0.0 && sc.one.1 > 0.0 && sc.all == (row.run_s, row.simulate_s));
+    let t = bc::scaling_table(&[sc]);
+    assert!(t.contains("| mabel_plane |") && t.contains("serial fraction"), "{t}");
     let planned = bc::plan(&dir, &campaigns, &dir.join("no_such_rami.yaml"), false);
     // the forest and town rows generate their scenes: only check the orchard rows here
     let skipped: Vec<String> = planned

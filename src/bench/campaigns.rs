@@ -250,7 +250,21 @@ pub fn town_scene(dir: &Path) -> Result<PathBuf> {
 
 /// Runs one planned campaign in `dir/name` and measures it.
 pub fn run_row(dir: &Path, name: &str, what: &str, text: &str) -> Result<CampaignRow> {
-    let folder = dir.join(name);
+    run_row_on(dir, name, what, text, None)
+}
+
+/// [`run_row`] on `threads` threads (all when None), in a folder of its own.
+fn run_row_on(
+    dir: &Path,
+    name: &str,
+    what: &str,
+    text: &str,
+    threads: Option<usize>,
+) -> Result<CampaignRow> {
+    let folder = match threads {
+        Some(n) => dir.join(format!("{name}_{n}thread")),
+        None => dir.join(name),
+    };
     let _ = std::fs::remove_dir_all(&folder);
     std::fs::create_dir_all(&folder)
         .map_err(|e| crate::error::Error::io(&folder, "cannot create folder", e))?;
@@ -262,6 +276,7 @@ pub fn run_row(dir: &Path, name: &str, what: &str, text: &str) -> Result<Campaig
         &path,
         &RunOptions {
             out: Some(folder.join("run")),
+            threads,
             ..Default::default()
         },
     )?;
@@ -327,10 +342,74 @@ pub fn run_row(dir: &Path, name: &str, what: &str, text: &str) -> Result<Campaig
         cpu_utilisation: summary
             .simulate_cpu_s
             .zip(summary.simulate_wall_s)
-            .map(|(cpu, wall)| cpu / wall / rayon::current_num_threads() as f64),
+            .map(|(cpu, wall)| cpu / wall / threads.unwrap_or(rayon::current_num_threads()) as f64),
         peak_mb,
         result,
     })
+}
+
+/// A campaign run on one thread and on all, for Amdahl's law: with a serial fraction f, n
+/// threads take T1 (f + (1 - f) / n), so f = (n Tn / T1 - 1) / (n - 1), and N threads would
+/// run N / (1 + f (N - 1)) times faster than one.
+#[derive(Clone, Debug)]
+pub struct Scaling {
+    pub name: String,
+    pub threads: usize,
+    /// (whole run, simulate stage) wall times on one thread and on `threads`, s.
+    pub one: (f64, f64),
+    pub all: (f64, f64),
+}
+
+/// Runs the campaign of `row` again on one thread (the row ran on all).
+pub fn scaling(dir: &Path, row: &CampaignRow, text: &str) -> Result<Scaling> {
+    let one = run_row_on(dir, &row.name, &row.what, text, Some(1))?;
+    Ok(Scaling {
+        name: row.name.clone(),
+        threads: rayon::current_num_threads(),
+        one: (one.run_s, one.simulate_s),
+        all: (row.run_s, row.simulate_s),
+    })
+}
+
+/// Amdahl's serial fraction from the wall times on one and on `n` threads (None below 2).
+pub fn serial_fraction(t1: f64, tn: f64, n: usize) -> Option<f64> {
+    (n >= 2 && t1 > 0.0).then(|| ((n as f64 * tn / t1 - 1.0) / (n as f64 - 1.0)).clamp(0.0, 1.0))
+}
+
+/// Speed-up on `threads` threads of a run with serial fraction `f`.
+pub fn amdahl_speedup(f: f64, threads: f64) -> f64 {
+    threads / (1.0 + f * (threads - 1.0))
+}
+
+/// The markdown table of [`Scaling`]s.
+pub fn scaling_table(rows: &[Scaling]) -> String {
+    if rows.is_empty() {
+        return String::new();
+    }
+    let mut s = String::from(
+        "\n### Serial share of a campaign run (Amdahl), from one thread against all\n\nSerial fraction f = (n T_n / T_1 - 1) / (n - 1) of the whole run (plan to products) and of the simulate stage; projected speed-up on N threads N / (1 + f (N - 1)).\n\n| campaign | threads n | run s, 1 thread | run s, n threads | serial fraction, run | speed-up at 20 / 64 threads, run | serial fraction, simulate | speed-up at 20 / 64 threads, simulate |\n| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n",
+    );
+    for r in rows {
+        let cell = |t1: f64, tn: f64| match serial_fraction(t1, tn, r.threads) {
+            Some(f) => (
+                format!("{f:.3}"),
+                format!(
+                    "{:.1} / {:.1}",
+                    amdahl_speedup(f, 20.0),
+                    amdahl_speedup(f, 64.0)
+                ),
+            ),
+            None => ("– (needs 2 threads)".to_string(), "–".to_string()),
+        };
+        let (run_f, run_x) = cell(r.one.0, r.all.0);
+        let (sim_f, sim_x) = cell(r.one.1, r.all.1);
+        let _ = writeln!(
+            s,
+            "| {} | {} | {:.1} | {:.1} | {run_f} | {run_x} | {sim_f} | {sim_x} |",
+            r.name, r.threads, r.one.0, r.all.0
+        );
+    }
+    s
 }
 
 /// The markdown table of the campaign rows and the skipped ones.
@@ -360,4 +439,28 @@ pub fn table(rows: &[CampaignRow], skipped: &[(String, String)]) -> String {
         let _ = writeln!(s, "| {name} | skipped: {why} | | | | | | | | | |");
     }
     s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Amdahl's law both ways: times made from a known serial fraction give it back, and the
+    /// projection is 1 on one thread and 1/f on many.
+    #[test]
+    fn the_serial_fraction_comes_back_from_the_times_it_makes() {
+        for f in [0.0, 0.05, 0.3, 1.0] {
+            let (t1, n) = (100.0, 2);
+            let tn = t1 * (f + (1.0 - f) / n as f64);
+            assert!(
+                (serial_fraction(t1, tn, n).unwrap() - f).abs() < 1e-12,
+                "{f}"
+            );
+            assert!((amdahl_speedup(f, 1.0) - 1.0).abs() < 1e-12);
+        }
+        assert!((amdahl_speedup(0.05, 1e9) - 20.0).abs() < 1e-6);
+        assert_eq!(serial_fraction(10.0, 10.0, 1), None);
+        // faster than linear (noise) is clamped to no serial part
+        assert_eq!(serial_fraction(10.0, 4.0, 2), Some(0.0));
+    }
 }

@@ -461,16 +461,20 @@ fn sun_section(opts: &BenchOptions, b: &Bench, reference: &Waveform) -> String {
 fn campaigns_section(opts: &BenchOptions) -> Result<String> {
     let planned = campaigns::plan(&opts.dir, &opts.campaigns_dir, &opts.rami_scene, opts.full)?;
     let (mut rows, mut skipped, mut traversals) = (Vec::new(), Vec::new(), Vec::new());
+    let mut scaling = Vec::new();
     for p in planned {
         match p {
             campaigns::Planned::Run { name, what, text } => {
                 eprintln!("lidarsim bench: campaign {name}");
-                rows.push(campaigns::run_row(&opts.dir, &name, &what, &text)?);
+                let row = campaigns::run_row(&opts.dir, &name, &what, &text)?;
                 if name.starts_with("als_") {
                     // 2000 pulses spread over the campaign, with its rays per pulse
                     let path = opts.dir.join(&name).join("campaign.yaml");
                     traversals.push(traversal::measure(&name, &path, 2000)?);
+                    eprintln!("lidarsim bench: campaign {name} on one thread");
+                    scaling.push(campaigns::scaling(&opts.dir, &row, &text)?);
                 }
+                rows.push(row);
             }
             campaigns::Planned::Skipped { name, why } => {
                 eprintln!("lidarsim bench: campaign {name} skipped: {why}");
@@ -478,7 +482,9 @@ fn campaigns_section(opts: &BenchOptions) -> Result<String> {
             }
         }
     }
-    Ok(campaigns::table(&rows, &skipped) + &traversal::table(&traversals))
+    Ok(campaigns::table(&rows, &skipped)
+        + &campaigns::scaling_table(&scaling)
+        + &traversal::table(&traversals))
 }
 
 /// Table 2 of the paper: rays (and wall seconds) each method needs for rRMSE ≤ 5% by

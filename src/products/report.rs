@@ -3,7 +3,7 @@
 use crate::campaign::Loaded;
 use crate::error::Result;
 use crate::products::dsm::DsmReport;
-use crate::products::summary::ProductsSummary;
+use crate::products::summary::{ProductsSummary, WaveformTotals};
 use crate::scene::Scene;
 use crate::scene::SurfaceClass;
 use crate::waveform::file::{part_count, part_name, read_waveforms};
@@ -18,31 +18,30 @@ pub fn report(
     simulate_s: f64,
 ) -> Result<String> {
     let c = &loaded.campaign;
-    let (mut total, mut received) = (0.0, 0usize);
-    let mut multiple = 0.0;
-    let mut rays = 0u64;
-    let mut paths = 0.0;
-    let (mut solar, mut brf_fov, mut brf_fp) = (0.0, 0.0, 0.0);
-    // pulses whose laser energy fell in the gate: the others have no footprint BRF
-    let mut lit = 0usize;
-    // the parts by index, as the products stage reads them: another file in the folder is
-    // not part of the run
-    for k in 0..part_count(pulses) {
-        crate::progress::release_after_part(k);
-        for w in read_waveforms(&out.join(part_name(k)))? {
-            total += w.received_energy_j;
-            received += 1;
-            multiple += w.received_energy_j - w.order_energy_j.first().copied().unwrap_or(0.0);
-            rays += w.rays as u64;
-            paths += w.paths_per_ray as f64 * w.rays as f64;
-            solar += w.solar_photons_per_bin as f64;
-            brf_fov += w.brf_fov_solar as f64;
-            if w.brf_footprint_laser.is_finite() {
-                brf_fp += w.brf_footprint_laser as f64;
-                lit += 1;
+    let totals =
+        match ProductsSummary::read(&out.join("products.json")).and_then(|p| p.waveform_totals) {
+            Some(t) => t,
+            None => {
+                // a products.json from before the totals: the parts by index, as the products
+                // stage reads them (another file in the folder is not part of the run)
+                let mut t = WaveformTotals::default();
+                for k in 0..part_count(pulses) {
+                    crate::progress::release_after_part(k);
+                    for w in read_waveforms(&out.join(part_name(k)))? {
+                        t.add(&w);
+                    }
+                }
+                t
             }
-        }
-    }
+        };
+    let (total, received, multiple) = (
+        totals.received_energy_j,
+        totals.pulses,
+        totals.multiple_energy_j,
+    );
+    let (rays, paths, solar) = (totals.rays, totals.paths, totals.solar_photons_per_bin);
+    let brf_fov = totals.brf_fov_solar.unwrap_or(f64::NAN);
+    let (brf_fp, lit) = (totals.brf_footprint_laser, totals.lit);
     let sim = simulate_s;
     let s = scene.stats();
     let mut text = format!("# Run report: {}\n\n", c.name);

@@ -14,7 +14,7 @@ use crate::products::photons::{count_photons, photon_rows, photon_table, PhotonR
 use crate::products::points::{points_on_axis, Point, PointConfig};
 use crate::products::returns::{decompose, Component, Decomposition};
 use crate::products::spill::Spill;
-use crate::products::summary::{PhotonCounts, PointsSummary, ProductsSummary};
+use crate::products::summary::{PhotonCounts, PointsSummary, ProductsSummary, WaveformTotals};
 use crate::progress::{log, progress};
 use crate::scene::{Scene, SurfaceClass};
 use crate::sensor::pulse_sigma_s;
@@ -288,6 +288,7 @@ pub fn run(
     let mut photons = PhotonsPass::default();
     let photons_path = out.join("photons.parquet");
     let (mut examples, mut seen) = (Examples::default(), 0usize);
+    let mut totals = WaveformTotals::default();
     let bar = progress(plan.len() as u64, "products");
     let start = std::time::Instant::now();
     let every = parts.div_ceil(10).max(1);
@@ -307,6 +308,9 @@ pub fn run(
             )));
         }
         seen += part.len();
+        for w in &part {
+            totals.add(w);
+        }
         if let Some(pass) = &mut points {
             let p = discrete_returns(loaded, plan, &part);
             examples.offer(&part, &p);
@@ -337,6 +341,7 @@ pub fn run(
     let mut outputs = Vec::new();
     let mut summary = ProductsSummary {
         pulses: plan.len(),
+        waveform_totals: Some(totals),
         ..Default::default()
     };
     if let Some(pass) = points {

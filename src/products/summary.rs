@@ -14,6 +14,52 @@ pub struct ProductsSummary {
     /// Photon-counting instruments.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub photons: Option<PhotonCounts>,
+    /// Sums over the waveforms, for report.md (so it need not read every part again).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub waveform_totals: Option<WaveformTotals>,
+}
+
+/// Sums over a run's waveforms, in part and pulse order (so a report made from them or from
+/// the parts themselves is the same to the last bit).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct WaveformTotals {
+    pub pulses: usize,
+    pub rays: u64,
+    /// Effective paths: paths per ray times rays, summed.
+    pub paths: f64,
+    pub received_energy_j: f64,
+    /// Received energy beyond first order, J.
+    pub multiple_energy_j: f64,
+    pub solar_photons_per_bin: f64,
+    /// Sum of `brf_fov_solar`; null without a sun.
+    #[serde(default)]
+    pub brf_fov_solar: Option<f64>,
+    /// Sum of `brf_footprint_laser` over the `lit` pulses that have one.
+    pub brf_footprint_laser: f64,
+    pub lit: usize,
+}
+
+impl WaveformTotals {
+    pub fn add(&mut self, w: &crate::waveform::Waveform) {
+        self.received_energy_j += w.received_energy_j;
+        self.pulses += 1;
+        self.multiple_energy_j +=
+            w.received_energy_j - w.order_energy_j.first().copied().unwrap_or(0.0);
+        self.rays += w.rays as u64;
+        self.paths += w.paths_per_ray as f64 * w.rays as f64;
+        self.solar_photons_per_bin += w.solar_photons_per_bin as f64;
+        // null as soon as one pulse has none (no sun): a sum with a gap has no meaning
+        let fov = Some(w.brf_fov_solar as f64).filter(|v| v.is_finite());
+        self.brf_fov_solar = if self.pulses == 1 {
+            fov
+        } else {
+            self.brf_fov_solar.zip(fov).map(|(a, b)| a + b)
+        };
+        if w.brf_footprint_laser.is_finite() {
+            self.brf_footprint_laser += w.brf_footprint_laser as f64;
+            self.lit += 1;
+        }
+    }
 }
 
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
@@ -72,13 +118,55 @@ mod tests {
                 surface_distance: None,
             }),
             photons: None,
+            waveform_totals: Some(WaveformTotals {
+                pulses: 4,
+                brf_fov_solar: None,
+                ..Default::default()
+            }),
         };
         let text = s.to_json();
+        assert!(text.contains("\"brf_fov_solar\": null"), "{text}");
         assert!(text.contains("\"pulse_density_per_m2\": null"), "{text}");
-        assert!(!text.contains("photons"), "{text}");
+        assert!(!text.contains("\"photons\""), "{text}");
         assert_eq!(serde_json::from_str::<ProductsSummary>(&text).unwrap(), s);
         let waveforms_only: ProductsSummary = serde_json::from_str("{\"pulses\": 1}").unwrap();
         assert_eq!(waveforms_only.points, None);
         assert_eq!(waveforms_only.photons, None);
+        assert_eq!(waveforms_only.waveform_totals, None);
+    }
+
+    /// The fov BRF sum is null as soon as one pulse has none, and stays so.
+    #[test]
+    fn a_sum_with_a_gap_is_null() {
+        let w = |fov: f32| crate::waveform::Waveform {
+            pulse_id: 0,
+            t0_ns: 0.0,
+            bin_ns: 1.0,
+            laser_photons: vec![],
+            impulse_energy_j: vec![],
+            impulse_energy_se_j: vec![],
+            received_energy_j: 1.0,
+            outside_gate_energy_j: 0.0,
+            order_energy_j: vec![0.75],
+            order_energy_se_j: vec![],
+            received_energy_se_j: 0.0,
+            solar_photons_per_bin: 0.5,
+            solar_power_w: 0.0,
+            solar_power_se_w: 0.0,
+            brf_fov_solar: fov,
+            brf_footprint_laser: f32::NAN,
+            class_energy_j: Default::default(),
+            rays: 2,
+            paths_per_ray: 1.5,
+        };
+        let mut t = WaveformTotals::default();
+        t.add(&w(0.25));
+        t.add(&w(0.5));
+        assert_eq!(t.brf_fov_solar, Some(0.75));
+        assert_eq!((t.pulses, t.rays, t.paths, t.lit), (2, 4, 6.0, 0));
+        assert_eq!(t.multiple_energy_j, 0.5);
+        t.add(&w(f32::NAN));
+        t.add(&w(0.5));
+        assert_eq!(t.brf_fov_solar, None);
     }
 }

@@ -410,3 +410,35 @@ fn bad_frames_and_points_formats() {
         assert_one_message(code, &err, &expect);
     }
 }
+
+/// Valid but likely unmeant: the sun with forward tracing is accepted with a warning that
+/// says why and what to use instead; with bdpt there is none.
+#[test]
+fn a_sun_with_forward_tracing_is_warned_about() {
+    let sun = "sun: { zenith_deg: 40, azimuth_deg: 0, irradiance_w_m2_um: 640 }\n";
+    for (method, warned) in [("forward", true), ("bdpt", false)] {
+        let dir = tmp(&format!("warn_{method}"));
+        write(&dir, "scene.yaml", SCENE);
+        let text = CAMPAIGN
+            .replace(
+                "simulation: { rays_per_pulse: 100 }",
+                &format!("simulation: {{ method: {method}, rays_per_pulse: 100 }}"),
+            )
+            .replace(
+                "  receiver_area_m2: 0.1\n",
+                "  receiver_area_m2: 0.1\n  bandwidth_nm: 1\n",
+            )
+            + sun;
+        let path = write(&dir, "campaign.yaml", &text);
+        let (code, out, err) = lidarsim(&["check", path.to_str().unwrap()]);
+        assert_eq!(code, 0, "{err}");
+        assert_eq!(
+            out.contains("warning: with simulation.method forward the sun"),
+            warned,
+            "{out}"
+        );
+        if warned {
+            assert!(out.contains("bdpt or backward"), "{out}");
+        }
+    }
+}

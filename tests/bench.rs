@@ -110,7 +110,10 @@ fn campaign_rows_are_measured_and_missing_data_is_skipped() {
     assert!(dir.join("mabel_plane_1thread/run/report.md").is_file());
     assert!(sc.one.0 > 0.0 && sc.one.1 > 0.0 && sc.all == (row.run_s, row.simulate_s));
     let t = bc::scaling_table(&[sc]);
-    assert!(t.contains("| mabel_plane |") && t.contains("serial fraction"), "{t}");
+    assert!(
+        t.contains("| mabel_plane |") && t.contains("serial fraction"),
+        "{t}"
+    );
     let planned = bc::plan(&dir, &campaigns, &dir.join("no_such_rami.yaml"), false);
     // the forest and town rows generate their scenes: only check the orchard rows here
     let skipped: Vec<String> = planned

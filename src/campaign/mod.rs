@@ -327,6 +327,22 @@ pub enum PointsFormat {
 }
 
 impl Campaign {
+    /// What is valid but likely not what the user wants, one sentence each, for `check` and
+    /// the run log.
+    pub fn warnings(&self) -> Vec<String> {
+        let mut out = Vec::new();
+        if self.sun.is_some() && self.simulation.method == Method::Forward {
+            out.push(
+                "with simulation.method forward the sun is found only where sun-lit points \
+                 fall in the narrow field of view, so its background converges very slowly \
+                 (often 0 at tens of rays per pulse); bdpt or backward estimate it through \
+                 the receiver's paths"
+                    .to_string(),
+            );
+        }
+        out
+    }
+
     /// The discrete returns' file format (`products.points_format`, LAS by default).
     pub fn points_format(&self) -> PointsFormat {
         self.products

@@ -54,6 +54,9 @@ pub(super) fn check(path: &std::path::Path) -> Result<()> {
         rate,
         rayon::current_num_threads()
     );
+    for w in c.warnings() {
+        println!("warning: {w}");
+    }
     println!("ok");
     Ok(())
 }

@@ -350,6 +350,9 @@ fn run_single(
     let start = Instant::now();
     let mut run = RunFolder::open(loaded, out, opts)?;
     let before = run.manifest.clone();
+    for w in loaded.campaign.warnings() {
+        log(&format!("warning: {w}"));
+    }
     let resolved = loaded.resolved_yaml();
     write_text_atomic(&out.join("campaign.resolved.yaml"), &resolved)?;
     // the campaign with its scene as the file names it, not as found from the working folder:

@@ -89,10 +89,10 @@ fn run_memory_bound(loaded: &crate::campaign::Loaded, scene: &Scene, plan: &plan
         None => 0.0,
     };
     let points = crate::products::spill::CHUNK as f64 * 2.0 * 80.0;
-    // a part read (its table and its waveforms), a chunk of points, the DSM, the distance
-    // histogram and the top view's sample
+    // a part read (its table and its waveforms) and the next one read ahead, a chunk of
+    // points, the DSM, the distance histogram and the top view's sample
     let top_view = crate::products::figures::TOP_VIEW_MAX_POINTS as f64 * 32.0 * 3.0;
-    let products = 2.0 * part + points + dsm_cells * 48.0 + 4e6 + top_view;
+    let products = 3.0 * part + points + dsm_cells * 48.0 + 4e6 + top_view;
     let writing = crate::parquet_io::ROW_GROUP_ROWS as f64 * 2.0 * 80.0;
     simulate.max(products) + writing
 }

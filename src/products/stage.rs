@@ -292,44 +292,61 @@ pub fn run(
     let bar = progress(plan.len() as u64, "products");
     let start = std::time::Instant::now();
     let every = parts.div_ceil(10).max(1);
-    for k in 0..parts {
-        if let Some(signal) = crate::interrupt::requested() {
-            return Err(Error::interrupted(
-                signal,
-                "the products stage stopped before writing anything; the waveforms are kept",
-            ));
+    // the next part is read and decoded on a thread of its own while this one is decomposed:
+    // reading is serial work the workers would otherwise wait for (a rendezvous: one part
+    // read ahead, no more)
+    std::thread::scope(|scope| -> Result<()> {
+        let (send, parts_read) = std::sync::mpsc::sync_channel::<Result<Vec<Waveform>>>(0);
+        scope.spawn(move || {
+            for k in 0..parts {
+                let part = read_waveforms(&out.join(part_name(k)));
+                let failed = part.is_err();
+                // a closed queue: the stage stopped on an error or a signal
+                if send.send(part).is_err() || failed {
+                    break;
+                }
+            }
+        });
+        for (k, part) in parts_read.into_iter().enumerate() {
+            if let Some(signal) = crate::interrupt::requested() {
+                return Err(Error::interrupted(
+                    signal,
+                    "the products stage stopped before writing anything; the waveforms are kept",
+                ));
+            }
+            crate::progress::release_after_part(k);
+            let part = part?;
+            if part.iter().any(|w| w.pulse_id as usize >= plan.len()) {
+                return Err(Error::msg(format!(
+                    "{}: waveforms of pulses that were not planned: run again without --resume",
+                    out.display()
+                )));
+            }
+            seen += part.len();
+            for w in &part {
+                totals.add(w);
+            }
+            if let Some(pass) = &mut points {
+                let p = discrete_returns(loaded, plan, &part);
+                examples.offer(&part, &p);
+                pass.add(scene, plan, &las_path, &p)?;
+            }
+            if want.photons {
+                photons.add(&photons_path, &photon_events(loaded, plan, &part))?;
+            }
+            bar.inc(part.len() as u64);
+            if bar.is_hidden() && (k + 1) % every == 0 && k + 1 < parts {
+                let rate = seen as f64 / start.elapsed().as_secs_f64().max(1e-9);
+                log(&format!(
+                    "products: {}/{} parts, {rate:.0} pulses/s, {:.0} s left",
+                    k + 1,
+                    parts,
+                    (plan.len() - seen.min(plan.len())) as f64 / rate
+                ));
+            }
         }
-        crate::progress::release_after_part(k);
-        let part = read_waveforms(&out.join(part_name(k)))?;
-        if part.iter().any(|w| w.pulse_id as usize >= plan.len()) {
-            return Err(Error::msg(format!(
-                "{}: waveforms of pulses that were not planned: run again without --resume",
-                out.display()
-            )));
-        }
-        seen += part.len();
-        for w in &part {
-            totals.add(w);
-        }
-        if let Some(pass) = &mut points {
-            let p = discrete_returns(loaded, plan, &part);
-            examples.offer(&part, &p);
-            pass.add(scene, plan, &las_path, &p)?;
-        }
-        if want.photons {
-            photons.add(&photons_path, &photon_events(loaded, plan, &part))?;
-        }
-        bar.inc(part.len() as u64);
-        if bar.is_hidden() && (k + 1) % every == 0 && k + 1 < parts {
-            let rate = seen as f64 / start.elapsed().as_secs_f64().max(1e-9);
-            log(&format!(
-                "products: {}/{} parts, {rate:.0} pulses/s, {:.0} s left",
-                k + 1,
-                parts,
-                (plan.len() - seen.min(plan.len())) as f64 / rate
-            ));
-        }
-    }
+        Ok(())
+    })?;
     bar.finish_and_clear();
     if seen != plan.len() {
         return Err(Error::msg(format!(

@@ -51,15 +51,6 @@ impl Frame {
         }
         Ok((code, wkt))
     }
-
-    /// A local position in the CRS.
-    pub fn to_crs(&self, local: [f64; 3]) -> [f64; 3] {
-        [
-            local[0] + self.origin[0],
-            local[1] + self.origin[1],
-            local[2] + self.origin[2],
-        ]
-    }
 }
 
 /// Whether a PROJCS's own linear unit (its last top-level UNIT) is the metre.
@@ -117,13 +108,5 @@ mod tests {
             );
         }
         assert!(frame("EPSG:1").resolve().unwrap_err().contains("not a CRS"));
-    }
-
-    #[test]
-    fn a_local_position_is_shifted_by_the_origin() {
-        assert_eq!(
-            frame("EPSG:32631").to_crs([1.5, -2.0, 3.0]),
-            [500_001.5, 4_799_998.0, 123.0]
-        );
     }
 }

@@ -362,9 +362,7 @@ pub fn run(
         ..Default::default()
     };
     if let Some(pass) = points {
-        let mut dsm = want
-            .dsm
-            .and_then(|res| Dsm::new(scene, pass.first_returns(), res));
+        let mut dsm = want.dsm.and_then(|res| Dsm::new(scene, pass.first, res));
         let mut top = TopView::new(pass.spill.len());
         let (shift, wkt) = match &c.frame {
             Some(f) => (f.origin, Some(f.resolve().map_err(Error::msg)?.1)),
@@ -447,10 +445,6 @@ impl PointsPass {
             (*lo, *hi) = (lo.min(v), hi.max(v));
         }
         self.spill.push(points)
-    }
-
-    fn first_returns(&self) -> Option<(DVec3, DVec3)> {
-        self.first
     }
 }
 

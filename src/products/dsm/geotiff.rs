@@ -17,18 +17,6 @@ use tiff::tags::Tag;
 /// The value of a cell without data.
 pub const NODATA: f32 = -9999.0;
 
-/// Where the rasters lie: the frame's CRS and origin, or local metres.
-#[derive(Clone, Copy, Debug)]
-pub struct Georef<'a> {
-    pub frame: Option<&'a Frame>,
-}
-
-impl Georef<'_> {
-    fn shift(&self) -> [f64; 3] {
-        self.frame.map_or([0.0; 3], |f| f.origin)
-    }
-}
-
 /// Writes `values` (row-major from the grid's south-west cell, as [`Grid::index`] counts
 /// them; NaN for no data) as a GeoTIFF. `heights` adds the frame's origin height to every
 /// value (a DSM; not a difference of two).
@@ -36,13 +24,13 @@ pub fn write(
     path: &Path,
     grid: &Grid,
     values: &[f64],
-    georef: Georef,
+    frame: Option<&Frame>,
     heights: bool,
 ) -> Result<()> {
     let err = |e: tiff::TiffError| {
         Error::io(path, "cannot write GeoTIFF", std::io::Error::other(e)).advise(WRITE_ADVICE)
     };
-    let shift = georef.shift();
+    let shift = frame.map_or([0.0; 3], |f| f.origin);
     let dz = if heights { shift[2] } else { 0.0 };
     // TIFF rows run north to south; the grid's rows run south to north
     let mut data = Vec::with_capacity(grid.len());
@@ -58,7 +46,7 @@ pub fn write(
     }
     let west = grid.x0 + shift[0];
     let north = grid.y0 + grid.ny as f64 * grid.cell + shift[1];
-    let keys = geokeys(georef.frame);
+    let keys = geokeys(frame);
     write_atomic(path, |file| {
         let mut enc = TiffEncoder::new(BufWriter::new(file)).map_err(err)?;
         let mut image = enc
@@ -124,16 +112,7 @@ mod tests {
             crs: "EPSG:32631".into(),
             origin: [500_000.0, 4_800_000.0, 100.0],
         };
-        write(
-            &path,
-            &grid,
-            &values,
-            Georef {
-                frame: Some(&frame),
-            },
-            true,
-        )
-        .unwrap();
+        write(&path, &grid, &values, Some(&frame), true).unwrap();
         let mut d = Decoder::new(std::fs::File::open(&path).unwrap()).unwrap();
         assert_eq!(d.dimensions().unwrap(), (3, 2));
         let DecodingResult::F32(v) = d.read_image().unwrap() else {
@@ -149,7 +128,7 @@ mod tests {
         assert!(keys.chunks(4).any(|k| k == [3072, 0, 1, 32631]), "{keys:?}");
         assert_eq!(d.get_tag_ascii_string(Tag::GdalNodata).unwrap(), "-9999");
         // without a frame: local metres, no height shift, a user-defined CRS
-        write(&path, &grid, &values, Georef { frame: None }, true).unwrap();
+        write(&path, &grid, &values, None, true).unwrap();
         let mut d = Decoder::new(std::fs::File::open(&path).unwrap()).unwrap();
         let tie = d.get_tag_f64_vec(Tag::ModelTiepointTag).unwrap();
         assert_eq!(tie, vec![0.0, 0.0, 0.0, 10.0, 24.0, 0.0]);

@@ -354,11 +354,6 @@ impl Dsm {
         self.aims.add(pulses, &self.grid, self.ground);
     }
 
-    /// Cells in the grid: what the DSM holds in memory is a few numbers per cell.
-    pub fn cells(&self) -> usize {
-        self.grid.len()
-    }
-
     /// Writes `dsm/` under `out`: the report, its figures and the three rasters, in the
     /// frame's CRS when there is one; returns the files written, relative to `out`.
     pub fn write(self, out: &Path, frame: Option<&crate::campaign::Frame>) -> Result<Vec<String>> {
@@ -372,7 +367,6 @@ impl Dsm {
         );
         let dir = out.join("dsm");
         write_report(&dir, &report, &self.reference, &self.measured, &self.grid)?;
-        let georef = geotiff::Georef { frame };
         let difference: Vec<f64> = self
             .measured
             .iter()
@@ -383,21 +377,21 @@ impl Dsm {
             &dir.join("dsm.tif"),
             &self.grid,
             &self.measured,
-            georef,
+            frame,
             true,
         )?;
         geotiff::write(
             &dir.join("reference.tif"),
             &self.grid,
             &self.reference,
-            georef,
+            frame,
             true,
         )?;
         geotiff::write(
             &dir.join("difference.tif"),
             &self.grid,
             &difference,
-            georef,
+            frame,
             false,
         )?;
         crate::progress::log(&format!(

@@ -44,3 +44,18 @@ fn skip_unless(required: &str, why: &str) {
     }
     eprintln!("SKIPPED: {why}");
 }
+
+/// The most of `n` independent bins that may fall outside 3 standard errors by chance: each
+/// does with p = 0.0027, and more than this many with a probability below 1e-6 (the Poisson
+/// tail of mean n p).
+pub fn most_outside_3se(n: usize) -> usize {
+    let lambda = 0.0027 * n as f64;
+    let (mut k, mut term) = (0usize, (-lambda).exp());
+    let mut below = term;
+    while 1.0 - below > 1e-6 {
+        k += 1;
+        term *= lambda / k as f64;
+        below += term;
+    }
+    k
+}

@@ -411,6 +411,66 @@ fn bad_frames_and_points_formats() {
     }
 }
 
+/// Bad detector and digitiser settings: one message at the line of the key, saying what is
+/// allowed. The instrument block's added line is line 10.
+#[test]
+fn bad_noise_and_digitisers() {
+    for (name, text, key, words) in [
+        (
+            "bits0",
+            "  digitiser: { gain: 2, bits: 0 }\n",
+            "instrument.digitiser.bits",
+            &["between 1 and 24"][..],
+        ),
+        (
+            "bits30",
+            "  digitiser: { gain: 2, bits: 30 }\n",
+            "instrument.digitiser.bits",
+            &["between 1 and 24"][..],
+        ),
+        (
+            "gain",
+            "  digitiser: { gain: -2, bits: 8 }\n",
+            "instrument.digitiser.gain",
+            &["positive"][..],
+        ),
+        (
+            "sat",
+            "  digitiser: { gain: 2, bits: 8, saturation: 256 }\n",
+            "instrument.digitiser.saturation",
+            &["255"][..],
+        ),
+        ("nogain", "  digitiser: { bits: 8 }\n", "gain", &[][..]),
+        (
+            "extra",
+            "  digitiser: { gain: 2, bits: 8, dither: 1 }\n",
+            "dither",
+            &[][..],
+        ),
+        (
+            "sd",
+            "  noise: { electronic_sd_photons: -1 }\n",
+            "instrument.noise.electronic_sd_photons",
+            &[][..],
+        ),
+        (
+            "resp",
+            "  detector_response_fwhm_ns: .nan\n",
+            "instrument.detector_response_fwhm_ns",
+            &["finite"][..],
+        ),
+    ] {
+        let text = CAMPAIGN.replace(
+            "  receiver_area_m2: 0.1\n",
+            &format!("  receiver_area_m2: 0.1\n{text}"),
+        );
+        let (code, err, _) = check(&format!("detector_{name}"), &text, SCENE);
+        let mut expect = vec!["campaign.yaml:10", key];
+        expect.extend_from_slice(words);
+        assert_one_message(code, &err, &expect);
+    }
+}
+
 /// Valid but likely unmeant: the sun with forward tracing is accepted with a warning that
 /// says why and what to use instead; with bdpt there is none.
 #[test]

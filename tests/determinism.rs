@@ -23,8 +23,14 @@ fn output_files_do_not_depend_on_thread_count() {
         50_000,
         30,
     );
+    // a noisy, digitised record in waveforms_l1b.h5: its draws too are per (seed, pulse)
+    let text = text.replace(
+        "  bin_ns: 1\n",
+        "  bin_ns: 1\n  noise: { electronic_sd_photons: 1 }\n  digitiser: { gain: 3, offset: 10, bits: 12 }\n",
+    );
+    assert!(text.contains("noise:"), "{text}");
     let camp = write(&dir, "campaign.yaml", &text);
-    let mut parts = Vec::new();
+    let (mut parts, mut l1b) = (Vec::new(), Vec::new());
     for threads in ["1", "2"] {
         let out = dir.join(format!("run{threads}"));
         let (code, _, err) = lidarsim(&[
@@ -37,6 +43,7 @@ fn output_files_do_not_depend_on_thread_count() {
         ]);
         assert_eq!(code, 0, "{err}");
         parts.push(std::fs::read(out.join("waveforms/part-00000.parquet")).unwrap());
+        l1b.push(std::fs::read(out.join("waveforms_l1b.h5")).unwrap());
         assert!(
             out.join("pulses.parquet").is_file() && out.join("campaign.resolved.yaml").is_file()
         );
@@ -44,6 +51,10 @@ fn output_files_do_not_depend_on_thread_count() {
     assert_eq!(
         parts[0], parts[1],
         "waveform files differ between 1 and 2 threads"
+    );
+    assert!(
+        l1b[0] == l1b[1],
+        "waveforms_l1b.h5 differs between 1 and 2 threads"
     );
     // a different seed gives a different estimate
     let other = text.replace("seed: 3", "seed: 4");

@@ -420,14 +420,7 @@ fn a_georeferenced_survey_is_the_local_one_shifted_into_its_crs() {
         assert!(kb.chunks(4).any(|k| k == [3072, 0, 1, 32631]), "{kb:?}");
     }
 
-    let tools = std::process::Command::new("python3")
-        .args(["-c", "import laspy, lazrs, rasterio"])
-        .output()
-        .is_ok_and(|o| o.status.success());
-    if !tools {
-        lidarsim::testdata::skip_tool(
-            "python3 with laspy, lazrs and rasterio is not available (pip install 'laspy[lazrs]' rasterio)",
-        );
+    if !python_with("laspy, lazrs, rasterio", "'laspy[lazrs]' rasterio") {
         return;
     }
     let script = format!(
@@ -452,14 +445,5 @@ print("laspy and rasterio ok")
         xmin = pb.iter().map(|p| p.x).fold(f64::MAX, f64::min),
         z0 = origin[2],
     );
-    let o = std::process::Command::new("python3")
-        .args(["-c", &script, b.to_str().unwrap()])
-        .output()
-        .unwrap();
-    assert!(
-        o.status.success(),
-        "{}{}",
-        String::from_utf8_lossy(&o.stdout),
-        String::from_utf8_lossy(&o.stderr)
-    );
+    run_python(&script, &b);
 }

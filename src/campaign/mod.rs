@@ -81,6 +81,48 @@ pub struct Instrument {
     /// Optional fixed range gate; by default each pulse's gate covers the scene's bounding box.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub range_gate: Option<RangeGate>,
+    /// Detector noise; absent: the mean waveform is recorded.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub noise: Option<Noise>,
+    /// FWHM of the detector's Gaussian impulse response, convolved with the received
+    /// waveform; absent: none beyond the pulse's own shape.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub detector_response_fwhm_ns: Option<f64>,
+    /// Analogue-to-digital conversion of the recorded waveform; absent: not quantised.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub digitiser: Option<Digitiser>,
+}
+
+/// Noise of an analogue detector: the photoelectrons of signal, solar background and dark
+/// counts are Poisson (always, when this section is present), plus Gaussian electronic noise.
+#[derive(Clone, Debug, Default, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Noise {
+    /// Standard deviation of the electronic (thermal, read) noise per bin, photoelectrons.
+    #[serde(default)]
+    pub electronic_sd_photons: f64,
+}
+
+/// counts = round(offset + gain x photoelectrons), clipped to [0, saturation].
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Digitiser {
+    /// Counts per photoelectron.
+    pub gain: f64,
+    /// Counts of zero signal.
+    #[serde(default)]
+    pub offset: f64,
+    pub bits: u32,
+    /// Highest count recorded; default 2^bits - 1.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub saturation: Option<f64>,
+}
+
+impl Digitiser {
+    pub fn saturation(&self) -> f64 {
+        self.saturation
+            .unwrap_or(((1u64 << self.bits.min(32)) - 1) as f64)
+    }
 }
 
 fn default_eta() -> f64 {
@@ -340,6 +382,17 @@ impl Campaign {
                     .to_string(),
             );
         }
+        let i = &self.instrument;
+        if i.kind == InstrumentKind::PhotonCounting
+            && (i.noise.is_some() || i.digitiser.is_some() || i.detector_response_fwhm_ns.is_some())
+        {
+            out.push(
+                "instrument.noise, detector_response_fwhm_ns and digitiser model an analogue \
+                 detector and change nothing for a photon_counting instrument, whose events \
+                 are already Poisson counts with dead time"
+                    .to_string(),
+            );
+        }
         out
     }
 
@@ -546,6 +599,36 @@ impl Campaign {
         }
         c.opt_non_negative("instrument.dead_time_ns", i.dead_time_ns)?;
         c.opt_non_negative("instrument.dark_count_hz", i.dark_count_hz)?;
+        if let Some(n) = &i.noise {
+            c.non_negative(
+                "instrument.noise.electronic_sd_photons",
+                n.electronic_sd_photons,
+            )?;
+        }
+        c.opt_non_negative(
+            "instrument.detector_response_fwhm_ns",
+            i.detector_response_fwhm_ns,
+        )?;
+        if let Some(d) = &i.digitiser {
+            c.positive("instrument.digitiser.gain", d.gain)?;
+            c.finite("instrument.digitiser.offset", d.offset)?;
+            if !(1..=24).contains(&d.bits) {
+                return Err(doc.error(
+                    "instrument.digitiser.bits",
+                    format!("must be between 1 and 24, found {}", d.bits),
+                ));
+            }
+            let full = ((1u64 << d.bits) - 1) as f64;
+            if let Some(s) = d.saturation {
+                c.within(
+                    "instrument.digitiser.saturation",
+                    s,
+                    0.0,
+                    full,
+                    &format!("counts between 0 and 2^bits - 1 = {full}"),
+                )?;
+            }
+        }
         if let Some(g) = &i.range_gate {
             c.finite("instrument.range_gate.start_ns", g.start_ns)?;
             if g.bins == 0 || g.bins > 10_000_000 {

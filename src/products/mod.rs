@@ -4,7 +4,9 @@
 pub mod accuracy;
 pub mod dsm;
 pub mod figures;
+pub mod h5;
 pub mod las;
+pub mod mission;
 pub mod photons;
 pub mod plot;
 pub mod points;

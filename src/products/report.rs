@@ -82,7 +82,48 @@ pub fn report(
     }
     let crs = c.frame.as_ref().map(|f| f.crs.as_str());
     text += &products_section(out, c.points_format().file_name(), crs);
+    text += &mission_section(out, &c.instrument, crs);
     Ok(text)
+}
+
+/// The mission-shaped files in a run folder, and what the waveform record holds.
+fn mission_section(out: &Path, inst: &crate::campaign::Instrument, crs: Option<&str>) -> String {
+    let place = crs.map_or("local metres, no CRS".to_string(), |c| {
+        format!("latitude = northing and longitude = easting in {c}")
+    });
+    let mut text = String::new();
+    if out.join(crate::products::stage::L1B_FILE).is_file() {
+        let mut record = vec![];
+        match &inst.noise {
+            Some(n) => record.push(format!(
+                "Poisson shot noise and {} photoelectrons of electronic noise",
+                n.electronic_sd_photons
+            )),
+            None => record.push("no noise (mean photoelectrons)".to_string()),
+        }
+        if let Some(f) = inst.detector_response_fwhm_ns {
+            record.push(format!("a detector response of {f} ns FWHM"));
+        }
+        if let Some(d) = &inst.digitiser {
+            record.push(format!(
+                "digitised: {} counts per photoelectron, offset {}, {} bits, saturating at {}",
+                d.gain,
+                d.offset,
+                d.bits,
+                d.saturation()
+            ));
+        }
+        text += &format!(
+            "\nGEDI L1B-like waveforms for GEDI tools: `waveforms_l1b.h5` ({place}); the record has {}.\n",
+            record.join(", ")
+        );
+    }
+    if out.join(crate::products::stage::ATL03_FILE).is_file() {
+        text += &format!(
+            "\nICESat-2 ATL03-like photons for ATL03 tools: `photons_atl03.h5` ({place}); `signal_conf_ph` is 4 for laser photons and 0 for solar and dark ones, and `truth_source` says which.\n"
+        );
+    }
+    text
 }
 
 /// The products part of report.md: figures from products.json and dsm/report.json, and the

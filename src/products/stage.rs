@@ -10,6 +10,7 @@ use crate::products::accuracy::DistanceHistogram;
 use crate::products::dsm::Dsm;
 use crate::products::figures::{self, TopPoint, WaveformFigure};
 use crate::products::las::{write_las_chunks, Extent, Layout};
+use crate::products::mission::{Atl03, L1b};
 use crate::products::photons::{count_photons, photon_rows, photon_table, PhotonRow};
 use crate::products::points::{points_on_axis, Point, PointConfig};
 use crate::products::returns::{decompose, Component, Decomposition};
@@ -19,10 +20,15 @@ use crate::progress::{log, progress};
 use crate::scene::{Scene, SurfaceClass};
 use crate::sensor::pulse_sigma_s;
 use crate::waveform::file::{part_name, read_waveforms};
+use crate::waveform::record::Recorder;
 use crate::waveform::Waveform;
 use glam::DVec3;
 use rayon::prelude::*;
 use std::path::Path;
+
+/// The mission-shaped files (campaign.md, "Files of the next wave").
+pub const L1B_FILE: &str = "waveforms_l1b.h5";
+pub const ATL03_FILE: &str = "photons_atl03.h5";
 
 /// Which products a campaign asks for: its `products:` section, or by instrument kind.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -30,6 +36,8 @@ pub struct Wanted {
     pub points: bool,
     pub photons: bool,
     pub dsm: Option<f64>,
+    /// `waveforms_l1b.h5`: waveform instruments.
+    pub l1b: bool,
 }
 
 pub fn wanted(loaded: &Loaded) -> Wanted {
@@ -40,11 +48,13 @@ pub fn wanted(loaded: &Loaded) -> Wanted {
             points: p.points,
             photons: p.photons,
             dsm: p.dsm.as_ref().map(|d| d.resolution_m),
+            l1b: kind == InstrumentKind::Waveform,
         },
         None => Wanted {
             points: kind == InstrumentKind::DiscreteReturn,
             photons: kind == InstrumentKind::PhotonCounting,
             dsm: (kind == InstrumentKind::DiscreteReturn).then_some(2.0),
+            l1b: kind == InstrumentKind::Waveform,
         },
     }
 }
@@ -67,7 +77,8 @@ fn class_of(w: &Waveform, centre: f64, sigma: f64) -> u8 {
     best.1
 }
 
-/// The decomposition of one waveform as the campaign asks for it.
+/// The decomposition of one waveform as the campaign asks for it: of the instrument's
+/// record (noise, detector response, digitiser) when it has one, else of the mean photons.
 fn components(loaded: &Loaded, w: &Waveform) -> Vec<Component> {
     let inst = &loaded.campaign.instrument;
     let hv = crate::photon_energy_j(loaded.campaign.wavelength_nm);
@@ -76,13 +87,20 @@ fn components(loaded: &Loaded, w: &Waveform) -> Vec<Component> {
         .iter()
         .map(|&s| (s as f64 / hv) as f32)
         .collect();
+    let recorder = Recorder::new(inst, loaded.campaign.seed);
+    let (photons, sigma_s) = if recorder.changes_returns() {
+        let recorded = recorder.laser_photons(&recorder.record(w));
+        (recorded, recorder.return_sigma_s(pulse_sigma_s(inst)))
+    } else {
+        (w.laser_photons.clone(), pulse_sigma_s(inst))
+    };
     decompose(
-        &w.laser_photons,
+        &photons,
         &mc_se,
         inst.detection_threshold_photons,
         inst.max_returns as usize,
         Decomposition::Gaussian,
-        pulse_sigma_s(inst) / (inst.bin_ns * 1e-9),
+        sigma_s / (inst.bin_ns * 1e-9),
     )
 }
 
@@ -287,6 +305,28 @@ pub fn run(
     };
     let mut photons = PhotonsPass::default();
     let photons_path = out.join("photons.parquet");
+    let recorder = Recorder::new(&c.instrument, c.seed);
+    let mut l1b = if want.l1b {
+        Some(L1b::create(
+            &out.join(L1B_FILE),
+            &c.name,
+            c.frame.as_ref(),
+            pulse_sigma_s(&c.instrument),
+            c.instrument.digitiser.is_some(),
+            c.instrument.detection_threshold_photons,
+        )?)
+    } else {
+        None
+    };
+    let mut atl03 = if want.photons {
+        Some(Atl03::create(
+            &out.join(ATL03_FILE),
+            &c.name,
+            c.frame.as_ref(),
+        )?)
+    } else {
+        None
+    };
     let (mut examples, mut seen) = (Examples::default(), 0usize);
     let mut totals = WaveformTotals::default();
     let bar = progress(plan.len() as u64, "products");
@@ -332,7 +372,19 @@ pub fn run(
                 pass.add(scene, plan, &las_path, &p)?;
             }
             if want.photons {
-                photons.add(&photons_path, &photon_events(loaded, plan, &part))?;
+                let events = photon_events(loaded, plan, &part);
+                if let Some(a) = &mut atl03 {
+                    for rows in events.chunk_by(|a, b| a.pulse_id == b.pulse_id) {
+                        a.add(&plan.pulse(rows[0].pulse_id), rows)?;
+                    }
+                }
+                photons.add(&photons_path, &events)?;
+            }
+            if let Some(l) = &mut l1b {
+                let records: Vec<_> = part.par_iter().map(|w| recorder.record(w)).collect();
+                for (w, r) in part.iter().zip(&records) {
+                    l.add(&plan.pulse(w.pulse_id), w, r)?;
+                }
             }
             bar.inc(part.len() as u64);
             if bar.is_hidden() && (k + 1) % every == 0 && k + 1 < parts {
@@ -402,6 +454,14 @@ pub fn run(
         let counts = photons.finish(&photons_path, plan.len())?;
         outputs.push("photons.parquet".to_string());
         summary.photons = Some(counts);
+    }
+    if let Some(a) = atl03 {
+        a.finish()?;
+        outputs.push(ATL03_FILE.to_string());
+    }
+    if let Some(l) = l1b {
+        l.finish()?;
+        outputs.push(L1B_FILE.to_string());
     }
     write_text_atomic(&out.join("products.json"), &summary.to_json())?;
     outputs.push("products.json".to_string());

@@ -6,13 +6,14 @@
 //! depend on where a path's time falls inside its bin.
 
 pub mod file;
+pub mod record;
 
 use crate::sensor::Gate;
 use crate::transport::Tally;
 use std::f64::consts::PI;
 
 /// One pulse's waveform record (outputs.md, `waveforms/part-*.parquet`).
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, Default, PartialEq)]
 pub struct Waveform {
     pub pulse_id: u64,
     pub t0_ns: f64,

@@ -117,6 +117,35 @@ pub fn lidarsim(args: &[&str]) -> (i32, String, String) {
     )
 }
 
+/// Whether python3 imports `modules` (as an import statement lists them); if not, the test
+/// says so on stderr, or fails under `LIDARSIM_REQUIRE_TOOLS=1`.
+pub fn python_with(modules: &str, pip: &str) -> bool {
+    let ok = Command::new("python3")
+        .args(["-c", &format!("import {modules}")])
+        .output()
+        .is_ok_and(|o| o.status.success());
+    if !ok {
+        lidarsim::testdata::skip_tool(&format!(
+            "python3 with {modules} is not available (pip install {pip})"
+        ));
+    }
+    ok
+}
+
+/// Runs a Python script with `arg` as sys.argv[1]; a failure fails the test with its output.
+pub fn run_python(script: &str, arg: &Path) {
+    let o = Command::new("python3")
+        .args(["-c", script, arg.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert!(
+        o.status.success(),
+        "{}{}",
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    );
+}
+
 pub fn plane_scene(dir: &Path, rho: f64, half: f64) -> PathBuf {
     write(
         dir,

@@ -1,0 +1,339 @@
+//! Files shaped like the missions' own, so code written for them runs on a simulation:
+//! `waveforms_l1b.h5` (GEDI L1B-like: one group per beam) and `photons_atl03.h5` (ICESat-2
+//! ATL03-like: one group per ground track). Names, shapes and indexing follow the real
+//! products (`rx_sample_start_index` counts from 1, `signal_conf_ph` is N x 5); the
+//! simulation defines the values as README's output contract says.
+//!
+//! Coordinates: with a `frame`, `latitude*`/`lat_ph` hold the northing and
+//! `longitude*`/`lon_ph` the easting in the frame's CRS, heights are local z + the origin's
+//! height (campaign.md: every coordinate a product writes is local + origin); without one,
+//! local y, x and z. Each file names the CRS in its root attributes.
+
+use crate::campaign::Frame;
+use crate::error::{Error, Result};
+use crate::plan::Pulse;
+use crate::products::h5::{Field, H5Writer, Kind};
+use crate::products::photons::PhotonRow;
+use crate::waveform::record::{transmitted_pulse, Record};
+use crate::waveform::Waveform;
+use glam::DVec3;
+use std::collections::BTreeMap;
+use std::path::Path;
+
+/// The root attributes both files carry: what made them and in which coordinates.
+fn root_attrs(
+    campaign: &str,
+    frame: Option<&Frame>,
+    product: &str,
+) -> Result<Vec<(&'static str, String)>> {
+    let mut attrs = vec![
+        ("short_name", product.to_string()),
+        ("campaign", campaign.to_string()),
+        (
+            "producer",
+            format!("lidarsim {}", env!("CARGO_PKG_VERSION")),
+        ),
+    ];
+    match frame {
+        Some(f) => {
+            let (_, wkt) = f.resolve().map_err(Error::msg)?;
+            attrs.push(("crs", f.crs.clone()));
+            attrs.push(("crs_wkt", wkt.to_string()));
+            attrs.push((
+                "coordinates",
+                format!(
+                    "latitude = northing, longitude = easting, in metres of {}; heights in metres",
+                    f.crs
+                ),
+            ));
+        }
+        None => attrs.push((
+            "coordinates",
+            "local scene metres: latitude = y, longitude = x, heights = z (no frame set)".into(),
+        )),
+    }
+    Ok(attrs)
+}
+
+fn shift_of(frame: Option<&Frame>) -> DVec3 {
+    frame.map_or(DVec3::ZERO, |f| DVec3::from_array(f.origin))
+}
+
+/// GEDI's beam names for the first beams (BEAM0000, BEAM0001, BEAM0010, ...): the beam index
+/// in binary.
+pub fn beam_name(line: u32) -> String {
+    format!("BEAM{line:04b}")
+}
+
+/// ICESat-2's ground tracks gt1l, gt1r, gt2l, ... for beams 0, 1, 2, ...
+pub fn track_name(line: u32) -> String {
+    format!(
+        "gt{}{}",
+        line / 2 + 1,
+        if line.is_multiple_of(2) { 'l' } else { 'r' }
+    )
+}
+
+/// `waveforms_l1b.h5`, written a pulse at a time.
+pub struct L1b {
+    h5: H5Writer,
+    /// Samples written so far per beam: rx, tx.
+    beams: BTreeMap<u32, (u64, u64)>,
+    shift: DVec3,
+    pulse_sigma_s: f64,
+    units: &'static str,
+    threshold: f64,
+}
+
+impl L1b {
+    /// `counts`: the record is digitised (else in photoelectrons).
+    pub fn create(
+        path: &Path,
+        campaign: &str,
+        frame: Option<&Frame>,
+        pulse_sigma_s: f64,
+        counts: bool,
+        threshold_photons: f64,
+    ) -> Result<L1b> {
+        let attrs = root_attrs(campaign, frame, "GEDI01_B-like (simulated)")?;
+        Ok(L1b {
+            h5: H5Writer::create(path, &attrs)?,
+            beams: BTreeMap::new(),
+            shift: shift_of(frame),
+            pulse_sigma_s,
+            units: if counts { "counts" } else { "photoelectrons" },
+            threshold: threshold_photons,
+        })
+    }
+
+    fn beam(&mut self, line: u32) -> Result<String> {
+        let name = beam_name(line);
+        if self.beams.contains_key(&line) {
+            return Ok(name);
+        }
+        self.h5.group(
+            &name,
+            &[("description", format!("beam {line} of the campaign"))],
+        )?;
+        self.h5.group(&format!("{name}/geolocation"), &[])?;
+        let u = self.units;
+        let f = |path: &str, kind, units, description| {
+            Field::new(&name, path, kind, units, description)
+        };
+        self.h5.datasets(&[
+            f("rxwaveform", Kind::F32, u, "received waveforms of all shots, concatenated: the instrument's record (noise and digitiser as configured)"),
+            f("rx_sample_count", Kind::U32, "1", "samples of each shot's received waveform"),
+            f("rx_sample_start_index", Kind::U64, "1", "index of each shot's first sample in rxwaveform, counted from 1"),
+            f("txwaveform", Kind::F32, "1", "transmitted pulse of each shot, concatenated: the fraction of the pulse energy per sample"),
+            f("tx_sample_count", Kind::U32, "1", "samples of each shot's transmitted waveform"),
+            f("tx_sample_start_index", Kind::U64, "1", "index of each shot's first sample in txwaveform, counted from 1"),
+            f("shot_number", Kind::U64, "1", "the campaign's pulse_id"),
+            f("delta_time", Kind::F64, "seconds", "the pulse's gps_time_s"),
+            f("noise_mean_corrected", Kind::F64, u, "mean of a sample without laser signal: solar background and dark counts"),
+            f("stale_return_flag", Kind::U8, "1", "1: no sample of the mean waveform reaches the detection threshold"),
+            f("geolocation/elevation_bin0", Kind::F64, "m", "height of the centre of the first sample, on the beam axis"),
+            f("geolocation/elevation_lastbin", Kind::F64, "m", "height of the centre of the last sample, on the beam axis"),
+            f("geolocation/latitude_bin0", Kind::F64, "see /@coordinates", "northing (local y without a frame) of the first sample"),
+            f("geolocation/longitude_bin0", Kind::F64, "see /@coordinates", "easting (local x without a frame) of the first sample"),
+            f("geolocation/latitude_lastbin", Kind::F64, "see /@coordinates", "northing (local y without a frame) of the last sample"),
+            f("geolocation/longitude_lastbin", Kind::F64, "see /@coordinates", "easting (local x without a frame) of the last sample"),
+        ])?;
+        self.beams.insert(line, (0, 0));
+        Ok(name)
+    }
+
+    pub fn add(&mut self, pulse: &Pulse, w: &Waveform, record: &Record) -> Result<()> {
+        let b = self.beam(pulse.line)?;
+        let tx = transmitted_pulse(self.pulse_sigma_s, w.bin_ns as f64 * 1e-9);
+        let (rx_next, tx_next) = self.beams.get(&pulse.line).copied().unwrap_or_default();
+        let n = record.samples.len();
+        // centre of sample k: t0 + (k + ½) Δt after emission, at range c t / 2
+        let at = |k: usize| {
+            let t = (w.t0_ns + (k as f64 + 0.5) * w.bin_ns as f64) * 1e-9;
+            pulse.origin + pulse.direction * (crate::C * t / 2.0) + self.shift
+        };
+        let (first, last) = (at(0), at(n.saturating_sub(1)));
+        let stale = !w
+            .laser_photons
+            .iter()
+            .any(|&v| v as f64 >= self.threshold && self.threshold > 0.0);
+        let h = &mut self.h5;
+        h.push_f32(&format!("{b}/rxwaveform"), &record.samples)?;
+        h.push_u32(&format!("{b}/rx_sample_count"), &[n as u32])?;
+        h.push_u64(&format!("{b}/rx_sample_start_index"), &[rx_next + 1])?;
+        h.push_f32(&format!("{b}/txwaveform"), &tx)?;
+        h.push_u32(&format!("{b}/tx_sample_count"), &[tx.len() as u32])?;
+        h.push_u64(&format!("{b}/tx_sample_start_index"), &[tx_next + 1])?;
+        h.push_u64(&format!("{b}/shot_number"), &[pulse.id])?;
+        h.push_f64(&format!("{b}/delta_time"), &[pulse.gps_time_s])?;
+        h.push_f64(&format!("{b}/noise_mean_corrected"), &[record.background])?;
+        h.push_u8(&format!("{b}/stale_return_flag"), &[u8::from(stale)])?;
+        let g = format!("{b}/geolocation");
+        h.push_f64(&format!("{g}/elevation_bin0"), &[first.z])?;
+        h.push_f64(&format!("{g}/elevation_lastbin"), &[last.z])?;
+        h.push_f64(&format!("{g}/latitude_bin0"), &[first.y])?;
+        h.push_f64(&format!("{g}/longitude_bin0"), &[first.x])?;
+        h.push_f64(&format!("{g}/latitude_lastbin"), &[last.y])?;
+        h.push_f64(&format!("{g}/longitude_lastbin"), &[last.x])?;
+        self.beams
+            .insert(pulse.line, (rx_next + n as u64, tx_next + tx.len() as u64));
+        Ok(())
+    }
+
+    pub fn finish(self) -> Result<()> {
+        self.h5.finish()
+    }
+}
+
+/// Per ground track: photons so far, the first pulse's origin (where along-track distance
+/// starts) and the sources of the photons, for `signal_conf_ph` at the end.
+struct Track {
+    name: String,
+    first: DVec3,
+    sources: Vec<u8>,
+}
+
+/// `photons_atl03.h5`, written a pulse at a time.
+pub struct Atl03 {
+    h5: H5Writer,
+    tracks: BTreeMap<u32, Track>,
+    shift: DVec3,
+}
+
+/// `signal_conf_ph`: high confidence (4) for laser photons, noise (0) for solar and dark
+/// ones, in all five surface-type columns (land, ocean, sea ice, land ice, inland water).
+pub fn signal_confidence(source: u8) -> i8 {
+    if source == 0 {
+        4
+    } else {
+        0
+    }
+}
+
+impl Atl03 {
+    pub fn create(path: &Path, campaign: &str, frame: Option<&Frame>) -> Result<Atl03> {
+        let attrs = root_attrs(campaign, frame, "ATL03-like (simulated)")?;
+        Ok(Atl03 {
+            h5: H5Writer::create(path, &attrs)?,
+            tracks: BTreeMap::new(),
+            shift: shift_of(frame),
+        })
+    }
+
+    fn track(&mut self, pulse: &Pulse) -> Result<()> {
+        if self.tracks.contains_key(&pulse.line) {
+            return Ok(());
+        }
+        let name = track_name(pulse.line);
+        self.h5.group(
+            &name,
+            &[(
+                "description",
+                format!("beam {} of the campaign", pulse.line),
+            )],
+        )?;
+        self.h5.group(&format!("{name}/heights"), &[])?;
+        let group = format!("{name}/heights");
+        let f = |path: &str, kind, units, description| {
+            Field::new(&group, path, kind, units, description)
+        };
+        self.h5.datasets(&[
+            f("h_ph", Kind::F64, "m", "height of the photon event"),
+            f("lat_ph", Kind::F64, "see /@coordinates", "northing (local y without a frame) of the photon event"),
+            f("lon_ph", Kind::F64, "see /@coordinates", "easting (local x without a frame) of the photon event"),
+            f("delta_time", Kind::F64, "seconds", "time of the photon event: the pulse's gps_time_s plus its time of flight"),
+            f("dist_ph_along", Kind::F64, "m", "along-track distance from the track's first pulse"),
+            f("dist_ph_across", Kind::F64, "m", "across-track distance from the pulse's nadir point, positive to the left of the track"),
+            f("ph_id_pulse", Kind::U64, "1", "the campaign's pulse_id"),
+            f("ph_id_count", Kind::U8, "1", "photon event number within the pulse, counted from 1"),
+            f("quality_ph", Kind::I8, "1", "0: nominal (always)"),
+            f("truth_source", Kind::U8, "1", "not in the real product: the simulation's truth, 0 laser, 1 solar, 2 dark"),
+        ])?;
+        self.tracks.insert(
+            pulse.line,
+            Track {
+                name,
+                first: pulse.origin,
+                sources: Vec::new(),
+            },
+        );
+        Ok(())
+    }
+
+    /// One pulse's photon events (its rows of photons.parquet).
+    pub fn add(&mut self, pulse: &Pulse, rows: &[PhotonRow]) -> Result<()> {
+        self.track(pulse)?;
+        let Some(track) = self.tracks.get_mut(&pulse.line) else {
+            return Ok(());
+        };
+        let b = format!("{}/heights", track.name);
+        let along = (pulse.origin - track.first).truncate();
+        let unit = along.try_normalize();
+        let n = rows.len();
+        let (mut h, mut lat, mut lon, mut time) = (
+            Vec::with_capacity(n),
+            Vec::with_capacity(n),
+            Vec::with_capacity(n),
+            Vec::with_capacity(n),
+        );
+        let (mut d_along, mut d_across, mut count) = (
+            Vec::with_capacity(n),
+            Vec::with_capacity(n),
+            Vec::with_capacity(n),
+        );
+        for (k, r) in rows.iter().enumerate() {
+            let p = DVec3::new(r.x, r.y, r.z);
+            h.push(p.z + self.shift.z);
+            lat.push(p.y + self.shift.y);
+            lon.push(p.x + self.shift.x);
+            time.push(pulse.gps_time_s + r.time_ns * 1e-9);
+            let from_first = (p - track.first).truncate();
+            let off = (p - pulse.origin).truncate();
+            match unit {
+                Some(u) => {
+                    d_along.push(from_first.dot(u));
+                    d_across.push(u.perp_dot(off));
+                }
+                None => {
+                    d_along.push(0.0);
+                    d_across.push(off.length());
+                }
+            }
+            count.push((k + 1).min(255) as u8);
+            track.sources.push(r.source);
+        }
+        let sources: Vec<u8> = rows.iter().map(|r| r.source).collect();
+        let hw = &mut self.h5;
+        hw.push_f64(&format!("{b}/h_ph"), &h)?;
+        hw.push_f64(&format!("{b}/lat_ph"), &lat)?;
+        hw.push_f64(&format!("{b}/lon_ph"), &lon)?;
+        hw.push_f64(&format!("{b}/delta_time"), &time)?;
+        hw.push_f64(&format!("{b}/dist_ph_along"), &d_along)?;
+        hw.push_f64(&format!("{b}/dist_ph_across"), &d_across)?;
+        hw.push_u64(&format!("{b}/ph_id_pulse"), &vec![pulse.id; n])?;
+        hw.push_u8(&format!("{b}/ph_id_count"), &count)?;
+        hw.push_i8(&format!("{b}/quality_ph"), &vec![0; n])?;
+        hw.push_u8(&format!("{b}/truth_source"), &sources)
+    }
+
+    /// Writes `signal_conf_ph` of every track (N x 5: the crate appends to rank-1 datasets
+    /// only, so this one is written whole, 5 bytes a photon) and closes the file.
+    pub fn finish(mut self) -> Result<()> {
+        for track in std::mem::take(&mut self.tracks).into_values() {
+            let conf: Vec<i8> = track
+                .sources
+                .iter()
+                .flat_map(|&s| [signal_confidence(s); 5])
+                .collect();
+            let field = Field::new(
+                &format!("{}/heights", track.name),
+                "signal_conf_ph",
+                Kind::I8,
+                "1",
+                "confidence that the photon is signal, per surface type (land, ocean, sea ice, land ice, inland water): 4 high (laser photons), 0 noise (solar and dark)",
+            );
+            self.h5.matrix_i8(&field, track.sources.len(), 5, &conf)?;
+        }
+        self.h5.finish()
+    }
+}

@@ -1,0 +1,339 @@
+//! What the instrument records of a pulse's mean waveform: the detector's impulse response,
+//! shot and electronic noise, the digitiser, and the transmitted-pulse record.
+//!
+//! The waveform files keep the mean, noise-free photons (the output contract); a record is
+//! drawn from them in the products stage, from (seed, pulse id) alone, so it is the same for
+//! any thread count or shard split.
+//!
+//! In bin k of width Δt, with quantum efficiency q, laser photons L_k (convolved with the
+//! detector's Gaussian response h when one is set), solar photons S per bin and dark rate D:
+//!
+//!   mean photoelectrons   μ_k = q (L ⊛ h)_k + q S + D Δt
+//!   recorded (noise on)   e_k ~ Poisson(μ_k) + N(0, σ_e²)      (σ_e: electronic noise)
+//!   digitised             c_k = min(max(round(offset + gain e_k), 0), saturation)
+//!
+//! Without noise e_k = μ_k; without a digitiser the record is e_k in photoelectrons.
+
+use super::Waveform;
+use crate::campaign::{Digitiser, Instrument};
+use crate::rng::SplitMix64;
+
+/// Mixed into the seed so the noise is independent of the photon-counting draws, which use
+/// the same (seed, pulse) streams.
+const NOISE_STREAM: u64 = 0x6e6f_6973_655f_7278;
+
+#[derive(Clone, Debug)]
+pub struct Recorder {
+    pub quantum_efficiency: f64,
+    pub dark_count_hz: f64,
+    /// σ of the detector's impulse response, s; 0 = none.
+    pub response_sigma_s: f64,
+    /// σ_e, photoelectrons; `None` = the mean waveform is recorded.
+    pub electronic_sd: Option<f64>,
+    pub digitiser: Option<Digitiser>,
+    pub seed: u64,
+}
+
+/// One pulse's record.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Record {
+    /// Counts with a digitiser, photoelectrons without.
+    pub samples: Vec<f32>,
+    /// The mean of a sample without laser signal, in the same units: background and dark
+    /// photoelectrons, digitised.
+    pub background: f64,
+}
+
+/// FWHM → σ of a Gaussian.
+fn sigma_of_fwhm(fwhm: f64) -> f64 {
+    fwhm / (8.0 * std::f64::consts::LN_2).sqrt()
+}
+
+impl Recorder {
+    pub fn new(inst: &Instrument, seed: u64) -> Recorder {
+        Recorder {
+            quantum_efficiency: inst.quantum_efficiency.unwrap_or(1.0),
+            dark_count_hz: inst.dark_count_hz.unwrap_or(0.0),
+            response_sigma_s: sigma_of_fwhm(inst.detector_response_fwhm_ns.unwrap_or(0.0)) * 1e-9,
+            electronic_sd: inst.noise.as_ref().map(|n| n.electronic_sd_photons),
+            digitiser: inst.digitiser.clone(),
+            seed,
+        }
+    }
+
+    /// True when the record is more than the mean waveform: then the discrete returns are
+    /// found in the record, not in the mean photons.
+    pub fn changes_returns(&self) -> bool {
+        self.electronic_sd.is_some() || self.digitiser.is_some() || self.response_sigma_s > 0.0
+    }
+
+    /// σ of the returns' shape in the record, s: the pulse's and the detector's in quadrature.
+    pub fn return_sigma_s(&self, pulse_sigma_s: f64) -> f64 {
+        pulse_sigma_s.hypot(self.response_sigma_s)
+    }
+
+    /// Counts of `pe` photoelectrons (identity without a digitiser).
+    pub fn digitise(&self, pe: f64) -> f64 {
+        match &self.digitiser {
+            Some(d) => (d.offset + d.gain * pe).round().clamp(0.0, d.saturation()),
+            None => pe,
+        }
+    }
+
+    /// Mean photoelectrons per bin from the laser alone (after the detector response), and
+    /// from the background (solar and dark).
+    pub fn mean_photoelectrons(&self, w: &Waveform) -> (Vec<f64>, f64) {
+        let q = self.quantum_efficiency;
+        let laser: Vec<f64> = w
+            .laser_photons
+            .iter()
+            .map(|&v| q * v.max(0.0) as f64)
+            .collect();
+        let laser = convolve_gaussian(&laser, self.response_sigma_s / (w.bin_ns as f64 * 1e-9));
+        let background = q * w.solar_photons_per_bin.max(0.0) as f64
+            + self.dark_count_hz * w.bin_ns as f64 * 1e-9;
+        (laser, background)
+    }
+
+    pub fn record(&self, w: &Waveform) -> Record {
+        let (laser, background) = self.mean_photoelectrons(w);
+        let mut rng = SplitMix64::for_pulse(self.seed ^ NOISE_STREAM, w.pulse_id);
+        let samples = laser
+            .iter()
+            .map(|&l| {
+                let mu = l + background;
+                let pe = match self.electronic_sd {
+                    Some(sd) => rng.poisson(mu) as f64 + sd * normal(&mut rng),
+                    None => mu,
+                };
+                self.digitise(pe) as f32
+            })
+            .collect();
+        Record {
+            samples,
+            background: self.digitise_mean(background),
+        }
+    }
+
+    /// The background in record units: a mean, so not rounded.
+    fn digitise_mean(&self, pe: f64) -> f64 {
+        match &self.digitiser {
+            Some(d) => (d.offset + d.gain * pe).clamp(0.0, d.saturation()),
+            None => pe,
+        }
+    }
+
+    /// The laser photons the decomposition sees in a record: back to photons at the
+    /// detector, background removed.
+    pub fn laser_photons(&self, r: &Record) -> Vec<f32> {
+        let (gain, offset) = self
+            .digitiser
+            .as_ref()
+            .map_or((1.0, 0.0), |d| (d.gain, d.offset));
+        let bg_pe = (r.background - offset) / gain;
+        r.samples
+            .iter()
+            .map(|&c| (((c as f64 - offset) / gain - bg_pe) / self.quantum_efficiency) as f32)
+            .collect()
+    }
+}
+
+/// The transmitted pulse as the instrument records it: the fraction of the pulse's energy in
+/// each bin of width `bin_s`, over ±4σ about the peak (normalised to 1) (one bin for a pulse shorter than a
+/// bin's fraction).
+pub fn transmitted_pulse(pulse_sigma_s: f64, bin_s: f64) -> Vec<f32> {
+    let s = pulse_sigma_s / bin_s;
+    if s.is_nan() || s <= 0.05 {
+        return vec![1.0];
+    }
+    let half = (4.0 * s).ceil() as i64;
+    let cdf = |x: f64| super::normal_cdf(x / s);
+    let w: Vec<f64> = (-half..=half)
+        .map(|k| cdf(k as f64 + 0.5) - cdf(k as f64 - 0.5))
+        .collect();
+    let total: f64 = w.iter().sum();
+    w.iter().map(|&x| (x / total) as f32).collect()
+}
+
+/// Standard normal variate (Box–Muller).
+fn normal(rng: &mut SplitMix64) -> f64 {
+    let (u, v) = (rng.uniform_pos(), rng.uniform());
+    (-2.0 * u.ln()).sqrt() * (std::f64::consts::TAU * v).cos()
+}
+
+/// `v` convolved with a unit-sum Gaussian of σ `sigma_bins` (bin-integrated, ±4σ);
+/// unchanged for σ ≤ 0.
+fn convolve_gaussian(v: &[f64], sigma_bins: f64) -> Vec<f64> {
+    if sigma_bins.is_nan() || sigma_bins <= 0.0 || v.is_empty() {
+        return v.to_vec();
+    }
+    let half = (4.0 * sigma_bins).ceil() as usize;
+    let cdf = |x: f64| super::normal_cdf(x / sigma_bins);
+    let mut kernel: Vec<f64> = (0..=2 * half)
+        .map(|j| {
+            let d = j as f64 - half as f64;
+            cdf(d + 0.5) - cdf(d - 0.5)
+        })
+        .collect();
+    // the tails beyond ±4σ folded back in: the response keeps the energy
+    let total: f64 = kernel.iter().sum();
+    kernel.iter_mut().for_each(|k| *k /= total);
+    let mut out = vec![0.0; v.len()];
+    for (i, &x) in v.iter().enumerate().filter(|(_, &x)| x != 0.0) {
+        for (j, &k) in kernel.iter().enumerate() {
+            if let Some(o) = (i + j).checked_sub(half).and_then(|t| out.get_mut(t)) {
+                *o += x * k;
+            }
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::testdata::most_outside_3se;
+
+    fn recorder() -> Recorder {
+        Recorder {
+            quantum_efficiency: 1.0,
+            dark_count_hz: 0.0,
+            response_sigma_s: 0.0,
+            electronic_sd: None,
+            digitiser: None,
+            seed: 7,
+        }
+    }
+
+    #[test]
+    fn digitiser_rounds_offsets_and_saturates_exactly() {
+        let mut r = recorder();
+        r.digitiser = Some(Digitiser {
+            gain: 2.5,
+            offset: 10.0,
+            bits: 4,
+            saturation: None,
+        });
+        // 10 + 2.5 pe, rounded half away from zero, clipped to 15 (2^4 - 1)
+        let expected = [
+            (0.0, 10.0),
+            (0.19, 10.0),
+            (0.21, 11.0),
+            (1.0, 13.0),
+            (1.9, 15.0),
+        ];
+        for (pe, c) in expected {
+            assert_eq!(r.digitise(pe), c, "{pe} photoelectrons");
+        }
+        assert_eq!(r.digitise(1e9), 15.0);
+        assert_eq!(r.digitise(-100.0), 0.0);
+        r.digitiser.as_mut().unwrap().saturation = Some(12.0);
+        assert_eq!(r.digitise(1.0), 12.0);
+    }
+
+    #[test]
+    fn response_keeps_the_energy_and_widens_the_pulse() {
+        let mut v = vec![0.0; 101];
+        v[50] = 1.0;
+        let out = convolve_gaussian(&v, 3.0);
+        assert!((out.iter().sum::<f64>() - 1.0).abs() < 1e-9);
+        let var: f64 = out
+            .iter()
+            .enumerate()
+            .map(|(i, &x)| x * (i as f64 - 50.0).powi(2))
+            .sum();
+        // bin-integrated Gaussian: σ² + 1/12, less the tails beyond ±4σ (0.1 % of σ²)
+        assert!((var - (9.0 + 1.0 / 12.0)).abs() < 0.02, "{var}");
+    }
+
+    /// The mean of 10,000 noisy records of one pulse equals the mean waveform within 3 SE per
+    /// bin: no more bins outside 3 SE than chance allows ([`most_outside_3se`]), none
+    /// outside 5 SE (a chance of 6e-7 per bin).
+    #[test]
+    fn mean_of_noisy_records_is_the_mean_waveform() {
+        let bins = 200;
+        let laser: Vec<f32> = (0..bins)
+            .map(|k| 40.0 * (-0.5 * ((k as f32 - 80.0) / 3.0).powi(2)).exp())
+            .collect();
+        let w = Waveform {
+            pulse_id: 0,
+            t0_ns: 0.0,
+            bin_ns: 1.0,
+            laser_photons: laser,
+            solar_photons_per_bin: 0.8,
+            ..Waveform::default()
+        };
+        let mut r = recorder();
+        r.quantum_efficiency = 0.5;
+        r.dark_count_hz = 2e8;
+        r.electronic_sd = Some(1.5);
+        r.response_sigma_s = 2e-9;
+        let (laser, bg) = r.mean_photoelectrons(&w);
+        let n = 10_000usize;
+        let (mut sum, mut sum2) = (vec![0.0f64; bins], vec![0.0f64; bins]);
+        for id in 0..n as u64 {
+            let rec = r.record(&Waveform {
+                pulse_id: id,
+                ..w.clone()
+            });
+            for (k, &x) in rec.samples.iter().enumerate() {
+                sum[k] += x as f64;
+                sum2[k] += (x as f64).powi(2);
+            }
+        }
+        let mut outside = 0;
+        for k in 0..bins {
+            let mean = sum[k] / n as f64;
+            let var = (sum2[k] / n as f64 - mean * mean) * n as f64 / (n - 1) as f64;
+            let se = (var / n as f64).sqrt();
+            let z = (mean - (laser[k] + bg)).abs() / se;
+            assert!(
+                z < 5.0,
+                "bin {k}: mean {mean}, expected {}, se {se}",
+                laser[k] + bg
+            );
+            outside += usize::from(z > 3.0);
+        }
+        assert!(
+            outside <= most_outside_3se(bins),
+            "{outside} bins outside 3 SE"
+        );
+    }
+
+    #[test]
+    fn records_go_back_to_laser_photons() {
+        let w = Waveform {
+            pulse_id: 3,
+            bin_ns: 1.0,
+            laser_photons: vec![0.0, 4.0, 100.0, 4.0, 0.0],
+            solar_photons_per_bin: 2.0,
+            ..Waveform::default()
+        };
+        let mut r = recorder();
+        r.quantum_efficiency = 0.25;
+        r.dark_count_hz = 1e9;
+        r.digitiser = Some(Digitiser {
+            gain: 4.0,
+            offset: 3.0,
+            bits: 12,
+            saturation: None,
+        });
+        let rec = r.record(&w);
+        // noise off: only the rounding of the counts is lost, at most half a count
+        for (got, want) in r.laser_photons(&rec).iter().zip(&w.laser_photons) {
+            assert!(
+                (got - want).abs() <= 0.5 / (4.0 * 0.25) + 1e-4,
+                "{got} vs {want}"
+            );
+        }
+        assert!((rec.background - (3.0 + 4.0 * (0.25 * 2.0 + 1.0))).abs() < 1e-12);
+    }
+
+    #[test]
+    fn transmitted_pulse_sums_to_one() {
+        let tx = transmitted_pulse(1.5e-9, 1e-9);
+        assert!((tx.iter().map(|&x| x as f64).sum::<f64>() - 1.0).abs() < 1e-5);
+        assert_eq!(tx.len() % 2, 1);
+        assert_eq!(transmitted_pulse(0.0, 1e-9), vec![1.0]);
+    }
+}

@@ -1,0 +1,445 @@
+//! Mission-shaped files (waveforms_l1b.h5, photons_atl03.h5) and the instrument's record
+//! (noise, detector response, digitiser): read back with our HDF5 crate against the Parquet
+//! tables, and with h5py, as the missions' users read theirs.
+
+mod common;
+use common::*;
+use lidarsim::testdata::most_outside_3se;
+use lidarsim::waveform::file::read_waveforms;
+use std::path::Path;
+
+fn h5(path: &Path) -> hdf5_pure::File {
+    hdf5_pure::File::open(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+}
+
+fn f64s(f: &hdf5_pure::File, p: &str) -> Vec<f64> {
+    f.dataset(p)
+        .and_then(|d| d.read_f64())
+        .unwrap_or_else(|e| panic!("{p}: {e}"))
+}
+
+fn f32s(f: &hdf5_pure::File, p: &str) -> Vec<f32> {
+    f.dataset(p)
+        .and_then(|d| d.read_f32())
+        .unwrap_or_else(|e| panic!("{p}: {e}"))
+}
+
+fn u64s(f: &hdf5_pure::File, p: &str) -> Vec<u64> {
+    f.dataset(p)
+        .and_then(|d| d.read_u64())
+        .unwrap_or_else(|e| panic!("{p}: {e}"))
+}
+
+fn u32s(f: &hdf5_pure::File, p: &str) -> Vec<u32> {
+    f.dataset(p)
+        .and_then(|d| d.read_u32())
+        .unwrap_or_else(|e| panic!("{p}: {e}"))
+}
+
+fn run_cli(campaign: &Path, out: &Path) {
+    let (code, _, err) = lidarsim(&[
+        "run",
+        campaign.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+}
+
+fn all_waveforms(out: &Path) -> Vec<lidarsim::waveform::Waveform> {
+    let mut parts: Vec<_> = std::fs::read_dir(out.join("waveforms"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|x| x == "parquet"))
+        .collect();
+    parts.sort();
+    parts
+        .iter()
+        .flat_map(|p| read_waveforms(p).unwrap())
+        .collect()
+}
+
+const ORIGIN: [f64; 3] = [500_000.0, 4_800_000.0, 120.0];
+
+/// A waveform instrument along a nadir track 500 m over a plane of reflectance 0.4.
+fn track_campaign(name: &str, pulses_step: f64, extra: &str) -> String {
+    format!(
+        "name: {name}\nscene: plane.yaml\nseed: 5\nwavelength_nm: 1064\nframe: {{ crs: EPSG:32631, origin: [{}, {}, {}] }}\ninstrument: {{ kind: waveform, pulse_energy_j: 1.0e-6, pulse_fwhm_ns: 4, footprint_half_angle_mrad: 0.5, fov_half_angle_mrad: 0.75, receiver_area_m2: 0.05, bin_ns: 1, quantum_efficiency: 0.5, dark_count_hz: 5.0e7{extra} }}\nplatform: {{ kind: track, altitude_m: 500, track: {{ start: [-40, 0], end: [40, 0] }}, along_track_step_m: {pulses_step} }}\nsimulation: {{ method: forward, rays_per_pulse: 16, max_order: 1 }}\n",
+        ORIGIN[0], ORIGIN[1], ORIGIN[2]
+    )
+}
+
+/// Without noise the L1B record is the Parquet waveform in photoelectrons, shot by shot, and
+/// the geolocation of its bins puts the plane at the frame's height.
+#[test]
+fn l1b_holds_the_waveforms_where_the_plane_is() {
+    let dir = tmp("mission_l1b");
+    plane_scene(&dir, 0.4, 60.0);
+    let camp = write(&dir, "c.yaml", &track_campaign("l1b", 2.0, ""));
+    let out = dir.join("run");
+    run_cli(&camp, &out);
+    let ws = all_waveforms(&out);
+    let f = h5(&out.join("waveforms_l1b.h5"));
+    let b = "BEAM0000";
+    let rx = f32s(&f, &format!("{b}/rxwaveform"));
+    let count = u32s(&f, &format!("{b}/rx_sample_count"));
+    let start = u64s(&f, &format!("{b}/rx_sample_start_index"));
+    let shot = u64s(&f, &format!("{b}/shot_number"));
+    let noise = f64s(&f, &format!("{b}/noise_mean_corrected"));
+    let e0 = f64s(&f, &format!("{b}/geolocation/elevation_bin0"));
+    let e1 = f64s(&f, &format!("{b}/geolocation/elevation_lastbin"));
+    let lat = f64s(&f, &format!("{b}/geolocation/latitude_bin0"));
+    let lon = f64s(&f, &format!("{b}/geolocation/longitude_bin0"));
+    assert_eq!(ws.len(), 40);
+    assert_eq!((shot.len(), count.len(), e0.len()), (40, 40, 40));
+    let bin_m = C * 1e-9 / 2.0;
+    for (i, w) in ws.iter().enumerate() {
+        assert_eq!(shot[i], w.pulse_id);
+        let n = w.laser_photons.len();
+        assert_eq!(count[i] as usize, n);
+        let s = start[i] as usize - 1; // counted from 1, as in GEDI L1B
+        let dark = 5.0e7 * 1e-9;
+        assert!((noise[i] - dark).abs() < 1e-12, "{}", noise[i]);
+        for k in 0..n {
+            let want = 0.5 * w.laser_photons[k] as f64 + dark;
+            assert!(
+                (rx[s + k] as f64 - want).abs() <= 1e-6 * want.max(1.0),
+                "shot {i} bin {k}"
+            );
+        }
+        // nadir: bins step one bin's range down, the first at the centre of bin 0
+        assert!(((e0[i] - e1[i]) - (n - 1) as f64 * bin_m).abs() < 1e-6);
+        assert!((lat[i] - ORIGIN[1]).abs() < 1e-6, "{}", lat[i]);
+        assert!(
+            (lon[i] - (ORIGIN[0] - 40.0 + 2.0 * i as f64)).abs() < 1e-6,
+            "{}",
+            lon[i]
+        );
+        // the peak bin's height is the plane's, within a bin
+        let peak = (0..n)
+            .max_by(|&a, &b| w.laser_photons[a].total_cmp(&w.laser_photons[b]))
+            .unwrap();
+        let h = e0[i] + (e1[i] - e0[i]) * peak as f64 / (n - 1) as f64;
+        assert!((h - ORIGIN[2]).abs() <= bin_m, "shot {i}: {h}");
+    }
+    assert_eq!(start[0], 1);
+    assert_eq!(start[1], 1 + count[0] as u64);
+    let tx = f32s(&f, &format!("{b}/txwaveform"));
+    let tx_count = u32s(&f, &format!("{b}/tx_sample_count"));
+    let one: f32 = tx[..tx_count[0] as usize].iter().sum();
+    assert!((one - 1.0).abs() < 1e-4, "{one}");
+}
+
+/// A digitiser without noise records round(offset + gain x photoelectrons), clipped at its
+/// saturation, exactly: the L1B record against the Parquet waveform, count by count.
+#[test]
+fn l1b_record_is_digitised_exactly() {
+    let dir = tmp("mission_digitiser");
+    plane_scene(&dir, 0.4, 60.0);
+    let camp = write(
+        &dir,
+        "c.yaml",
+        &track_campaign(
+            "dig",
+            8.0,
+            ", digitiser: { gain: 0.25, offset: 7.3, bits: 12, saturation: 3000 }",
+        ),
+    );
+    let out = dir.join("run");
+    run_cli(&camp, &out);
+    let ws = all_waveforms(&out);
+    let f = h5(&out.join("waveforms_l1b.h5"));
+    let rx = f32s(&f, "BEAM0000/rxwaveform");
+    let noise = f64s(&f, "BEAM0000/noise_mean_corrected");
+    let (mut saturated, mut between) = (0, 0);
+    let mut s = 0;
+    for (i, w) in ws.iter().enumerate() {
+        let background = 0.5 * 0.0 + 5.0e7 * 1.0 * 1e-9;
+        assert!((noise[i] - (7.3 + 0.25 * background)).abs() < 1e-12);
+        for &l in &w.laser_photons {
+            let pe = 0.5 * l as f64 + background;
+            let want = (7.3 + 0.25 * pe).round().clamp(0.0, 3000.0);
+            assert_eq!(rx[s] as f64, want, "shot {i}: {pe} photoelectrons");
+            saturated += usize::from(want == 3000.0);
+            between += usize::from(want > 7.0 && want < 3000.0);
+            s += 1;
+        }
+    }
+    assert_eq!(s, rx.len());
+    assert!(
+        saturated > 0 && between > 0,
+        "{saturated} saturated, {between} between"
+    );
+}
+
+/// The mean of 10,000 noisy records equals the noise-free waveform (Poisson shot noise of
+/// signal, background and dark counts, Gaussian electronic noise): per bin within 3 standard
+/// errors, but for as many bins as chance allows ([`most_outside_3se`]), none beyond 5 SE.
+#[test]
+fn mean_of_noisy_records_is_the_noise_free_waveform() {
+    let dir = tmp("mission_noise");
+    plane_scene(&dir, 0.4, 60.0);
+    let camp = write(
+        &dir,
+        "c.yaml",
+        &track_campaign("noise", 0.008, ", noise: { electronic_sd_photons: 1.5 }"),
+    );
+    let out = dir.join("run");
+    run_cli(&camp, &out);
+    let ws = all_waveforms(&out);
+    assert_eq!(ws.len(), 10_000);
+    let f = h5(&out.join("waveforms_l1b.h5"));
+    let rx = f32s(&f, "BEAM0000/rxwaveform");
+    let n = ws[0].laser_photons.len();
+    assert!(ws
+        .iter()
+        .all(|w| w.laser_photons.len() == n && w.t0_ns == ws[0].t0_ns));
+    let dark = 5.0e7 * 1e-9;
+    let (mut sum, mut sum2) = (vec![0.0f64; n], vec![0.0f64; n]);
+    for (i, w) in ws.iter().enumerate() {
+        for k in 0..n {
+            let d = rx[i * n + k] as f64 - (0.5 * w.laser_photons[k] as f64 + dark);
+            sum[k] += d;
+            sum2[k] += d * d;
+        }
+    }
+    let m = ws.len() as f64;
+    let mut outside = 0;
+    for k in 0..n {
+        let mean = sum[k] / m;
+        let se = ((sum2[k] / m - mean * mean) / (m - 1.0)).sqrt();
+        let z = mean.abs() / se;
+        assert!(z < 5.0, "bin {k}: mean difference {mean}, se {se}");
+        outside += usize::from(z > 3.0);
+    }
+    assert!(
+        outside <= most_outside_3se(n),
+        "{outside} of {n} bins outside 3 SE"
+    );
+    // the noise is there: the records' variance in a signal-free bin is the Poisson mean
+    // plus the electronic variance
+    let var0 = sum2[0] / m - (sum[0] / m).powi(2);
+    let want = dark + 1.5 * 1.5;
+    assert!(
+        (var0 - want).abs() < 5.0 * want * (2.0 / m).sqrt(),
+        "{var0} vs {want}"
+    );
+}
+
+/// Discrete returns are found in the digitised, noisy record: a plane still gives one return
+/// per pulse at its height, and a digitiser that saturates at the offset flattens every
+/// return away.
+#[test]
+fn points_come_from_the_record() {
+    let dir = tmp("mission_points");
+    plane_scene(&dir, 0.4, 60.0);
+    let base = track_campaign("pts", 1.0, "")
+        .replace("kind: waveform", "kind: discrete_return")
+        .replace("pulse_energy_j: 1.0e-6", "pulse_energy_j: 2.0e-8");
+    let noisy = base.replace(
+        "dark_count_hz: 5.0e7",
+        "dark_count_hz: 5.0e7, noise: { electronic_sd_photons: 0.5 }, detector_response_fwhm_ns: 2, digitiser: { gain: 4, offset: 40, bits: 12 }",
+    );
+    let flat = base.replace(
+        "dark_count_hz: 5.0e7",
+        "dark_count_hz: 5.0e7, digitiser: { gain: 4, offset: 40, bits: 12, saturation: 40 }",
+    );
+    for (name, text, returns) in [("noisy", &noisy, true), ("flat", &flat, false)] {
+        let d = dir.join(name);
+        std::fs::create_dir_all(&d).unwrap();
+        std::fs::copy(dir.join("plane.yaml"), d.join("plane.yaml")).unwrap();
+        let camp = write(&d, "c.yaml", text);
+        run_cli(&camp, &d.join("run"));
+        let las = d.join("run/points.las");
+        let pts = lidarsim::products::las::read_las(&las).unwrap();
+        if returns {
+            assert_eq!(pts.len(), 80, "one return per pulse");
+            for p in &pts {
+                assert!((p.z - ORIGIN[2]).abs() < 0.15, "{}", p.z);
+            }
+        } else {
+            assert!(
+                pts.is_empty(),
+                "{} points from a saturated digitiser",
+                pts.len()
+            );
+        }
+    }
+}
+
+/// ATL03: one row per photon of photons.parquet, signal confidence from the truth, heights in
+/// the frame.
+#[test]
+fn atl03_photons_are_the_parquet_photons() {
+    let dir = tmp("mission_atl03");
+    plane_scene(&dir, 0.4, 60.0);
+    let camp = write(
+        &dir,
+        "c.yaml",
+        &format!(
+            "name: atl\nscene: plane.yaml\nseed: 9\nwavelength_nm: 532\nframe: {{ crs: EPSG:32631, origin: [{}, {}, {}] }}\ninstrument: {{ kind: photon_counting, pulse_energy_j: 2.0e-5, pulse_fwhm_ns: 1.5, footprint_half_angle_mrad: 0.05, fov_half_angle_mrad: 0.105, receiver_area_m2: 0.0314, bin_ns: 0.5, bandwidth_nm: 1.0, quantum_efficiency: 0.125, dead_time_ns: 2.5, dark_count_hz: 5.0e7 }}\nplatform: {{ kind: track, altitude_m: 20000, track: {{ start: [-40, -5], end: [40, 5] }}, along_track_step_m: 0.5 }}\nsimulation: {{ method: bdpt, rays_per_pulse: 50, max_order: 1 }}\nsun: {{ zenith_deg: 40, azimuth_deg: 180, irradiance_w_m2_um: 1850 }}\n",
+            ORIGIN[0], ORIGIN[1], ORIGIN[2]
+        ),
+    );
+    let out = dir.join("run");
+    run_cli(&camp, &out);
+    let f = h5(&out.join("photons_atl03.h5"));
+    let g = "gt1l/heights";
+    let h = f64s(&f, &format!("{g}/h_ph"));
+    let lat = f64s(&f, &format!("{g}/lat_ph"));
+    let lon = f64s(&f, &format!("{g}/lon_ph"));
+    let along = f64s(&f, &format!("{g}/dist_ph_along"));
+    let pulse = u64s(&f, &format!("{g}/ph_id_pulse"));
+    let truth = f
+        .dataset(&format!("{g}/truth_source"))
+        .and_then(|d| d.read_u8())
+        .unwrap();
+    let conf = f.dataset(&format!("{g}/signal_conf_ph")).unwrap();
+    assert_eq!(conf.shape().unwrap(), vec![h.len() as u64, 5]);
+    let conf = conf.read_i8().unwrap();
+    // photons.parquet, read with arrow
+    let file = std::fs::File::open(out.join("photons.parquet")).unwrap();
+    let reader =
+        parquet::arrow::arrow_reader::ParquetRecordBatchReader::try_new(file, 1 << 16).unwrap();
+    let (mut rows, mut by_source) = (0usize, [0usize; 3]);
+    for batch in reader {
+        let batch = batch.unwrap();
+        let col = |name: &str| batch.column_by_name(name).unwrap().clone();
+        let x = col("x");
+        let x = x
+            .as_any()
+            .downcast_ref::<arrow_array::Float64Array>()
+            .unwrap();
+        let y = col("y");
+        let y = y
+            .as_any()
+            .downcast_ref::<arrow_array::Float64Array>()
+            .unwrap();
+        let z = col("z");
+        let z = z
+            .as_any()
+            .downcast_ref::<arrow_array::Float64Array>()
+            .unwrap();
+        let s = col("source");
+        let s = s
+            .as_any()
+            .downcast_ref::<arrow_array::UInt8Array>()
+            .unwrap();
+        let id = col("pulse_id");
+        let id = id
+            .as_any()
+            .downcast_ref::<arrow_array::UInt64Array>()
+            .unwrap();
+        for k in 0..batch.num_rows() {
+            let r = rows + k;
+            assert_eq!(pulse[r], id.value(k));
+            assert_eq!(truth[r], s.value(k));
+            assert!((lon[r] - (x.value(k) + ORIGIN[0])).abs() < 1e-6);
+            assert!((lat[r] - (y.value(k) + ORIGIN[1])).abs() < 1e-6);
+            assert!((h[r] - (z.value(k) + ORIGIN[2])).abs() < 1e-9);
+            let want = if s.value(k) == 0 { 4 } else { 0 };
+            assert!(conf[5 * r..5 * r + 5].iter().all(|&c| c == want));
+            by_source[s.value(k) as usize] += 1;
+        }
+        rows += batch.num_rows();
+    }
+    assert_eq!(rows, h.len());
+    assert!(
+        by_source.iter().all(|&n| n > 20),
+        "photons by source {by_source:?}"
+    );
+    // signal photons lie on the plane, within a bin (7.5 cm): their median height
+    let mut sig: Vec<f64> = (0..rows)
+        .filter(|&r| conf[5 * r] >= 3)
+        .map(|r| h[r])
+        .collect();
+    sig.sort_by(f64::total_cmp);
+    let median = sig[sig.len() / 2];
+    assert!((median - ORIGIN[2]).abs() < C * 0.5e-9 / 2.0, "{median}");
+    assert!(
+        along.windows(2).all(|w| w[1] >= w[0] - 1e-9),
+        "along-track distance decreases"
+    );
+    assert!(
+        (along[rows - 1] - 80.0f64.hypot(10.0)).abs() < 1.0,
+        "{}",
+        along[rows - 1]
+    );
+}
+
+/// h5py reads both files, and readers in the style of the missions' users find the plane:
+/// rGEDI-like (elevation from bin 0 and the last bin, noise mean removed) and ATL03-like
+/// (signal photons by signal_conf_ph >= 3).
+#[test]
+fn h5py_reads_both_files_as_mission_users_do() {
+    if !python_with("h5py, numpy", "h5py") {
+        return;
+    }
+    let dir = tmp("mission_h5py");
+    plane_scene(&dir, 0.4, 60.0);
+    let gedi = write(
+        &dir,
+        "gedi.yaml",
+        &track_campaign(
+            "gedi",
+            4.0,
+            ", noise: { electronic_sd_photons: 2 }, digitiser: { gain: 8, offset: 100, bits: 14 }",
+        )
+        .replace("pulse_energy_j: 1.0e-6", "pulse_energy_j: 1.0e-8"),
+    );
+    let atl = write(
+        &dir,
+        "atl.yaml",
+        &track_campaign("atl", 1.0, "")
+            .replace("kind: waveform", "kind: photon_counting")
+            .replace("pulse_energy_j: 1.0e-6", "pulse_energy_j: 1.0e-8")
+            .replace(
+                "dark_count_hz: 5.0e7",
+                "dark_count_hz: 1.0e8, dead_time_ns: 2",
+            ),
+    );
+    run_cli(&gedi, &dir.join("gedi"));
+    run_cli(&atl, &dir.join("atl"));
+    let script = format!(
+        r#"
+import sys, h5py, numpy as np
+d = sys.argv[1]
+bin_m = 299792458.0 * 1e-9 / 2
+with h5py.File(d + "/gedi/waveforms_l1b.h5", "r") as f:
+    assert f.attrs["crs"].decode() == "EPSG:32631", dict(f.attrs)
+    b = f["BEAM0000"]
+    for k in ["rxwaveform", "rx_sample_count", "rx_sample_start_index", "txwaveform",
+              "shot_number", "delta_time", "noise_mean_corrected", "stale_return_flag",
+              "geolocation/elevation_bin0", "geolocation/elevation_lastbin",
+              "geolocation/latitude_bin0", "geolocation/longitude_bin0"]:
+        assert k in b, k
+    rx = b["rxwaveform"][:]
+    assert rx.max() <= 2**14 - 1 and np.all(rx == np.round(rx)), "not digitised"
+    start, count = b["rx_sample_start_index"][:], b["rx_sample_count"][:]
+    e0, e1 = b["geolocation/elevation_bin0"][:], b["geolocation/elevation_lastbin"][:]
+    noise = b["noise_mean_corrected"][:]
+    assert len(start) == 20, len(start)
+    for i in range(len(start)):
+        w = rx[start[i] - 1 : start[i] - 1 + count[i]] - noise[i]
+        z = e0[i] + (e1[i] - e0[i]) * np.arange(count[i]) / (count[i] - 1)
+        s = w > 5 * np.sqrt(max(noise[i], 1.0))
+        assert s.sum() > 3, (i, s.sum())
+        h = np.sum(z[s] * w[s]) / np.sum(w[s])
+        assert abs(h - {h0}) < bin_m, (i, h)
+with h5py.File(d + "/atl/photons_atl03.h5", "r") as f:
+    g = f["gt1l/heights"]
+    for k in ["h_ph", "lat_ph", "lon_ph", "delta_time", "dist_ph_along", "dist_ph_across",
+              "ph_id_pulse", "ph_id_count", "quality_ph", "signal_conf_ph"]:
+        assert k in g, k
+    conf = g["signal_conf_ph"][:]
+    assert conf.ndim == 2 and conf.shape[1] == 5, conf.shape
+    h = g["h_ph"][:]
+    sig = conf[:, 0] >= 3
+    assert sig.sum() > 50 and (~sig).sum() > 50, (sig.sum(), (~sig).sum())
+    assert abs(np.median(h[sig]) - {h0}) < bin_m, np.median(h[sig])
+print("h5py ok")
+"#,
+        h0 = ORIGIN[2]
+    );
+    run_python(&script, &dir);
+}

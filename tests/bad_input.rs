@@ -454,6 +454,12 @@ fn bad_noise_and_digitisers() {
             &[][..],
         ),
         (
+            "offset",
+            "  receiver_offset_m: [0, 5000, 0]\n",
+            "instrument.receiver_offset_m[1]",
+            &["between -1000 and 1000"][..],
+        ),
+        (
             "resp",
             "  detector_response_fwhm_ns: .nan\n",
             "instrument.detector_response_fwhm_ns",
@@ -466,6 +472,44 @@ fn bad_noise_and_digitisers() {
         );
         let (code, err, _) = check(&format!("detector_{name}"), &text, SCENE);
         let mut expect = vec!["campaign.yaml:10", key];
+        expect.extend_from_slice(words);
+        assert_one_message(code, &err, &expect);
+    }
+}
+
+/// An atmosphere layer without an optical depth at the campaign's wavelength, or with a
+/// scale height or optical depth that is no physical value: one message at the layer's line.
+#[test]
+fn bad_atmospheres() {
+    for (name, layer, key, words) in [
+        (
+            "missing",
+            "{ scale_height_m: 8000, optical_depth: { 532: 0.1 } }",
+            "atmosphere.layers[0].optical_depth",
+            &["no value for 1064 nm", "532"][..],
+        ),
+        (
+            "height",
+            "{ scale_height_m: 0, optical_depth: 0.1 }",
+            "atmosphere.layers[0].scale_height_m",
+            &["positive"][..],
+        ),
+        (
+            "negative",
+            "{ scale_height_m: 8000, optical_depth: -0.1 }",
+            "atmosphere.layers[0].optical_depth",
+            &[][..],
+        ),
+        (
+            "unknown",
+            "{ scale_height_m: 8000, optical_depth: 0.1, angstrom: 1.3 }",
+            "angstrom",
+            &[][..],
+        ),
+    ] {
+        let text = format!("{CAMPAIGN}atmosphere:\n  layers:\n    - {layer}\n");
+        let (code, err, _) = check(&format!("atmosphere_{name}"), &text, SCENE);
+        let mut expect = vec!["campaign.yaml:18", key];
         expect.extend_from_slice(words);
         assert_one_message(code, &err, &expect);
     }

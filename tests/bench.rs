@@ -124,7 +124,7 @@ fn campaign_rows_are_measured_and_missing_data_is_skipped() {
             bc::Planned::Run { .. } => None,
         })
         .collect();
-    assert_eq!(skipped.len(), 5, "{skipped:?}");
+    assert_eq!(skipped.len(), 6, "{skipped:?}");
     assert!(skipped[0].contains("no_such_rami.yaml not found"));
     let table = bc::table(&[row], &[("mabel_532".into(), "absent".into())]);
     assert!(table.contains(

@@ -4,18 +4,8 @@ mod common;
 use common::*;
 use std::f64::consts::PI;
 
-const E: f64 = 640.0; // W m⁻² µm⁻¹
-const BAND_NM: f64 = 0.8;
-
 fn with_sun(campaign: &str, zenith: f64, azimuth: f64) -> String {
     with_sun_selected(campaign, zenith, azimuth, "fixed")
-}
-
-fn with_sun_selected(campaign: &str, zenith: f64, azimuth: f64, selection: &str) -> String {
-    campaign.replace("instrument:\n", "instrument:\n  bandwidth_nm: 0.8\n")
-        + &format!(
-            "sun: {{ zenith_deg: {zenith}, azimuth_deg: {azimuth}, irradiance_w_m2_um: {E}, selection: {selection} }}\n"
-        )
 }
 
 /// Closed form 4: a Lambertian plane filling the field of view, nadir view:
@@ -23,14 +13,7 @@ fn with_sun_selected(campaign: &str, zenith: f64, azimuth: f64, selection: &str)
 #[test]
 fn solar_photons_and_brfs_on_a_plane() {
     let rho = 0.3;
-    let inst = Inst {
-        fp_mrad: 1.0,
-        fov_mrad: 5.0,
-        area: 0.1,
-        energy: 0.001,
-        fwhm_ns: 2.0,
-        ..Inst::default()
-    };
+    let inst = sun_inst(5.0);
     // both ways of choosing the light are unbiased; by power picks the sun here with
     // probability ~0.9 (a 1 mJ pulse against a 1.2 km disk of sunlight over a 2.2 µs gate)
     for (zenith, selection) in [
@@ -57,10 +40,7 @@ fn solar_photons_and_brfs_on_a_plane() {
             selection,
         );
         let w = run(&dir, &c, None).remove(0);
-        let hv = 6.626_070_15e-34 * C / 1064e-9;
-        let s2 = (inst.fov_mrad * 1e-3).sin().powi(2);
-        let p_sun = rho * E * BAND_NM * 1e-3 * zenith.to_radians().cos() * inst.area * s2;
-        let expect = p_sun * 1e-9 / hv;
+        let (p_sun, expect) = solar_closed_form(&inst, rho, zenith);
         let got = w.solar_photons_per_bin as f64;
         let se = w.solar_power_se_w / p_sun;
         println!(

@@ -58,6 +58,9 @@ pub fn peak_memory_mb() -> Option<f64> {
 pub enum BenchScene {
     /// The RAMI orchard (skipped without its files).
     Orchard,
+    /// The RAMI orchard as one period of an infinite orchard (`repeat: true`), as DART and
+    /// the paper treat it.
+    OrchardRepeated,
     /// The generated forest.
     Forest,
     /// The generated town of buildings and sparse trees.
@@ -66,11 +69,16 @@ pub enum BenchScene {
 
 /// The bench's campaigns, in the order of its table: file stem under the campaigns folder
 /// (`pipelines/bench/`), what it measures, and the scene it flies over.
-pub const CAMPAIGNS: [(&str, &str, BenchScene); 7] = [
+pub const CAMPAIGNS: [(&str, &str, BenchScene); 8] = [
     (
         "orchard_gedi_sun",
         "orchard, GEDI-like waveform, sun 50°/180° (section 3.3)",
         BenchScene::Orchard,
+    ),
+    (
+        "orchard_gedi_sun_repeated",
+        "orchard repeated (repeat: true), GEDI-like waveform, sun 50°/180° (section 3.3)",
+        BenchScene::OrchardRepeated,
     ),
     (
         "mabel_532",
@@ -181,22 +189,23 @@ pub fn plan(dir: &Path, campaigns: &Path, rami: &Path, full: bool) -> Result<Vec
     let rami = find_rami(rami);
     let mut out = Vec::new();
     for (name, what, source) in CAMPAIGNS {
-        let (scene, what) = match source {
-            BenchScene::Orchard => match &rami {
-                Ok(scene) => (scene.clone(), what.to_string()),
-                Err(why) => {
-                    out.push(Planned::Skipped {
-                        name: name.into(),
-                        why: why.clone(),
-                    });
-                    continue;
-                }
-            },
-            BenchScene::Forest => {
+        let (scene, what) = match (source, &rami) {
+            (BenchScene::Orchard | BenchScene::OrchardRepeated, Err(why)) => {
+                out.push(Planned::Skipped {
+                    name: name.into(),
+                    why: why.clone(),
+                });
+                continue;
+            }
+            (BenchScene::Orchard, Ok(scene)) => (scene.clone(), what.to_string()),
+            (BenchScene::OrchardRepeated, Ok(scene)) => {
+                (repeated_orchard(dir, scene)?, what.to_string())
+            }
+            (BenchScene::Forest, _) => {
                 let (scene, size) = forest_scene(dir, full)?;
                 (scene, format!("{what}, {size} m stand"))
             }
-            BenchScene::Town => (town_scene(dir)?, what.to_string()),
+            (BenchScene::Town, _) => (town_scene(dir)?, what.to_string()),
         };
         let overrides = if full {
             serde_yaml::Mapping::new()
@@ -209,6 +218,22 @@ pub fn plan(dir: &Path, campaigns: &Path, rami: &Path, full: bool) -> Result<Vec
             text: campaign_text(campaigns, name, &overrides, &scene)?,
         });
     }
+    Ok(out)
+}
+
+/// The orchard's scene file with `repeat: true`, written into the bench's folder with its
+/// geometry's paths made absolute (they are relative to `scenes/`).
+fn repeated_orchard(dir: &Path, scene: &Path) -> Result<PathBuf> {
+    let text = crate::error::read_text(scene)?;
+    let base = scene.parent().unwrap_or(Path::new("."));
+    let shared = format!("{}/../../shared/", base.display());
+    let text = text.replace("../../shared/", &shared).replacen(
+        "\nmaterials:",
+        "\nrepeat: true\nmaterials:",
+        1,
+    );
+    let out = dir.join("rami_wco_repeated.yaml");
+    crate::fsutil::write_text_atomic(&out, &text)?;
     Ok(out)
 }
 

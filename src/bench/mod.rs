@@ -198,6 +198,7 @@ impl Bench<'_> {
             laser: Laser::new(&self.inst, self.origin, axis),
             receiver: Receiver::new(&self.inst, self.origin, axis),
             gate: self.gate,
+            atmosphere: None,
             sub_bins: self.sub_bins,
             method,
             heuristic: MisHeuristic::Power,

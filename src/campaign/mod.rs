@@ -5,6 +5,7 @@
 //! Units are those the key names say; conversion to SI happens once, in `sensor`.
 
 pub mod frame;
+pub mod spectral;
 pub mod yaml;
 
 use crate::error::{Error, Result};
@@ -36,6 +37,24 @@ pub struct Campaign {
     /// Georeference of the products; absent = local metres, no CRS.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub frame: Option<Frame>,
+    /// A plane-parallel exponential atmosphere; absent = vacuum.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub atmosphere: Option<Atmosphere>,
+}
+
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Atmosphere {
+    pub layers: Vec<AtmosphereLayer>,
+}
+
+/// One exponential layer: extinction per metre (τ / H) e^(-z/H) at height z above z = 0.
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct AtmosphereLayer {
+    pub scale_height_m: f64,
+    /// Vertical optical depth from z = 0 to the top of the atmosphere, per wavelength.
+    pub optical_depth: spectral::Spectral,
 }
 
 fn default_seed() -> u64 {
@@ -91,6 +110,18 @@ pub struct Instrument {
     /// Analogue-to-digital conversion of the recorded waveform; absent: not quantised.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub digitiser: Option<Digitiser>,
+    /// The telescope's centre relative to the laser in the platform frame (x along track,
+    /// y left, z up), m; absent: [0, 0, 0], mono-static.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub receiver_offset_m: Option<[f64; 3]>,
+}
+
+impl Instrument {
+    /// |receiver_offset_m|, m: how much longer than 2R a path may be.
+    pub fn receiver_offset_length(&self) -> f64 {
+        self.receiver_offset_m
+            .map_or(0.0, |o| (o[0] * o[0] + o[1] * o[1] + o[2] * o[2]).sqrt())
+    }
 }
 
 /// Noise of an analogue detector: the photoelectrons of signal, solar background and dark
@@ -609,6 +640,17 @@ impl Campaign {
             "instrument.detector_response_fwhm_ns",
             i.detector_response_fwhm_ns,
         )?;
+        if let Some(o) = i.receiver_offset_m {
+            for (k, v) in o.iter().enumerate() {
+                c.within(
+                    &format!("instrument.receiver_offset_m[{k}]"),
+                    *v,
+                    -1000.0,
+                    1000.0,
+                    "metres between -1000 and 1000",
+                )?;
+            }
+        }
         if let Some(d) = &i.digitiser {
             c.positive("instrument.digitiser.gain", d.gain)?;
             c.finite("instrument.digitiser.offset", d.offset)?;
@@ -636,6 +678,20 @@ impl Campaign {
                     "instrument.range_gate.bins",
                     "must be between 1 and 10000000",
                 ));
+            }
+        }
+        if let Some(a) = &self.atmosphere {
+            for (k, layer) in a.layers.iter().enumerate() {
+                c.positive(
+                    &format!("atmosphere.layers[{k}].scale_height_m"),
+                    layer.scale_height_m,
+                )?;
+                let key = format!("atmosphere.layers[{k}].optical_depth");
+                let tau = layer
+                    .optical_depth
+                    .at(self.wavelength_nm)
+                    .map_err(|why| doc.error(&key, why))?;
+                c.non_negative(&key, tau)?;
             }
         }
         if let Some(s) = &self.sun {

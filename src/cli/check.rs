@@ -32,8 +32,18 @@ pub(super) fn check(path: &std::path::Path) -> Result<()> {
         println!("peak process memory: {:.1} MB", peak as f64 / 1e6);
     }
     println!(
-        "bounds: [{:.3}, {:.3}, {:.3}] .. [{:.3}, {:.3}, {:.3}] m",
-        lo.x, lo.y, lo.z, hi.x, hi.y, hi.z
+        "bounds: [{:.3}, {:.3}, {:.3}] .. [{:.3}, {:.3}, {:.3}] m{}",
+        lo.x,
+        lo.y,
+        lo.z,
+        hi.x,
+        hi.y,
+        hi.z,
+        if scene.is_repeated() {
+            " (repeat: one period of an infinite landscape in x and y)"
+        } else {
+            ""
+        }
     );
     println!("scene load: {load_s:.2} s");
     let rate = pipeline::probe_rays_per_second(&loaded, &scene, &plan);
@@ -72,8 +82,13 @@ fn run_memory_bound(loaded: &crate::campaign::Loaded, scene: &Scene, plan: &plan
         0.0
     } else {
         let p = plan.pulse(0);
-        crate::sensor::Gate::for_pulse(&c.instrument, p.origin, p.direction, scene.bounds()).bins
-            as f64
+        crate::sensor::Gate::for_pulse(
+            &c.instrument,
+            p.origin,
+            p.direction,
+            scene.bounds_near(p.origin, p.direction),
+        )
+        .bins as f64
     };
     // a waveform: photons, impulse energy and its error, four classes, orders (f32 each)
     let waveform = bins * 4.0 * (3.0 + 4.0) + c.simulation.max_order as f64 * 16.0;

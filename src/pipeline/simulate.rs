@@ -8,9 +8,11 @@ use crate::plan::{Plan, Pulse};
 use crate::progress::{log, progress};
 use crate::scene::Scene;
 use crate::sensor::{pulse_sigma_s, Gate, Laser, Receiver, SunSource};
+use crate::transport::atmosphere::Atmosphere;
 use crate::transport::{simulate_pulse_in, PulseSetup, Scratch};
 use crate::waveform::file::{part_name, write_waveforms};
 use crate::waveform::{self, Radiometry, Waveform};
+use glam::DVec3;
 use indicatif::ProgressBar;
 use rayon::prelude::*;
 use std::io::IsTerminal;
@@ -128,6 +130,22 @@ pub(super) fn write_pulse_stats(path: &Path, waveforms: &[Waveform], secs: &[f64
     crate::fsutil::write_csv_atomic(path, &header, rows)
 }
 
+/// In a repeated scene, the box of the landscape a pulse sees: the copy of the scene's box
+/// under its beam grown sideways by the wider of its cones at the bottom of the scene (at
+/// most ten periods), which the sun's disk must cover for its light sub-paths to reach every
+/// point in view.
+fn viewed_box(
+    inst: &crate::campaign::Instrument,
+    p: &Pulse,
+    (lo, hi): (DVec3, DVec3),
+) -> (DVec3, DVec3) {
+    let half = inst.fov_half_angle_mrad.max(inst.footprint_half_angle_mrad) * 1e-3;
+    let down = (p.origin.z - lo.z).max(0.0) / p.direction.z.abs().max(1e-9);
+    let grow = (down * half.tan()).min(10.0 * (hi - lo).truncate().max_element());
+    let g = DVec3::new(grow, grow, 0.0);
+    (lo - g, hi + g)
+}
+
 /// Simulates pulses: pulses and each pulse's ray chunks run in parallel. Returns the
 /// waveforms and each pulse's wall time (with the threads it shared).
 pub fn simulate(
@@ -145,6 +163,11 @@ pub fn simulate(
         .sun
         .as_ref()
         .map(|s| SunSource::new(s, inst.bandwidth_nm.unwrap_or(0.0), bounds));
+    // every layer has an optical depth at the wavelength: the campaign's validation says so
+    let atmosphere = c
+        .atmosphere
+        .as_ref()
+        .and_then(|a| Atmosphere::new(a, c.wavelength_nm).ok());
     let radiometry = Radiometry {
         pulse_energy_j: inst.pulse_energy_j,
         receiver_area_m2: inst.receiver_area_m2,
@@ -154,18 +177,32 @@ pub fn simulate(
     pulses
         .par_iter()
         .map_init(Scratch::default, |scratch, p| {
-            let gate = Gate::for_pulse(inst, p.origin, p.direction, bounds);
+            let near = scene.bounds_near(p.origin, p.direction);
+            let gate = Gate::for_pulse(inst, p.origin, p.direction, near);
             let sub_bins = waveform::sub_bins_per_bin(gate.dt, sigma);
-            let sun = sun.map(|s| s.for_gate(inst.pulse_energy_j, gate.dt * gate.bins as f64));
+            let sun = sun.map(|s| {
+                let s = if scene.is_repeated() {
+                    let (lo, hi) = viewed_box(inst, p, near);
+                    s.covering(lo, hi)
+                } else {
+                    s
+                };
+                s.for_gate(inst.pulse_energy_j, gate.dt * gate.bins as f64)
+            });
             let setup = PulseSetup {
                 scene,
                 laser: Laser::new(inst, p.origin, p.direction),
-                receiver: Receiver::new(inst, p.origin, p.direction),
+                receiver: Receiver::new(
+                    inst,
+                    p.origin + p.platform_to_scene(inst.receiver_offset_m.unwrap_or_default()),
+                    p.direction,
+                ),
                 gate,
                 sub_bins,
                 method: c.simulation.method,
                 heuristic: c.simulation.mis,
                 sun,
+                atmosphere: atmosphere.as_ref(),
                 max_order: c.simulation.max_order,
                 seed: c.seed,
                 pulse_id: p.id,

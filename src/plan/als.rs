@@ -174,6 +174,7 @@ impl Als {
             direction,
             scan_angle_deg: angle as f32,
             line: index as u32,
+            along: f.path.along,
         }
     }
 }

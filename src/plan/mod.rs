@@ -54,6 +54,17 @@ pub struct Pulse {
     /// Angle between the beam and nadir, degrees (signed for scanners).
     pub scan_angle_deg: f32,
     pub line: u32,
+    /// The platform frame's x axis: the unit horizontal direction of travel; +x for static
+    /// and terrestrial platforms, whose frame is the scene's.
+    pub along: DVec3,
+}
+
+impl Pulse {
+    /// A point given in the platform frame (x along track, y left, z up), in the scene.
+    pub fn platform_to_scene(&self, v: [f64; 3]) -> DVec3 {
+        let left = DVec3::Z.cross(self.along);
+        self.along * v[0] + left * v[1] + DVec3::Z * v[2]
+    }
 }
 
 /// Unit vector of a beam with zenith angle θ from +z and azimuth φ from +x towards +y.
@@ -229,6 +240,7 @@ fn static_pulses(p: &Platform) -> Vec<Pulse> {
                 direction,
                 scan_angle_deg: off_nadir_deg(direction) as f32,
                 line: 0,
+                along: DVec3::X,
             }
         })
         .collect()

@@ -81,6 +81,7 @@ impl Spaceborne {
             direction,
             scan_angle_deg: self.off_nadir_deg as f32,
             line: b as u32,
+            along: g.along,
         }
     }
 }

@@ -473,3 +473,35 @@ fn als_paper_campaign_file_plans_160392() {
     super::check_campaign(&doc, &c).unwrap();
     assert_eq!(plan(&c).unwrap().len(), 160_392);
 }
+
+/// The platform frame: x along track, y left, z up; a track flown towards +y has its left
+/// towards -x, and every planner gives a unit horizontal direction of travel.
+#[test]
+fn platform_frame_points_along_track_and_left() {
+    let mut p = Pulse {
+        id: 0,
+        gps_time_s: 0.0,
+        origin: DVec3::ZERO,
+        direction: DVec3::NEG_Z,
+        scan_angle_deg: 0.0,
+        line: 0,
+        along: DVec3::X,
+    };
+    assert_eq!(
+        p.platform_to_scene([1.0, 2.0, 3.0]),
+        DVec3::new(1.0, 2.0, 3.0)
+    );
+    p.along = DVec3::Y;
+    assert_eq!(
+        p.platform_to_scene([1.0, 2.0, 3.0]),
+        DVec3::new(-2.0, 1.0, 3.0)
+    );
+    let along = pulses(
+        "platform: { kind: track, altitude_m: 500, track: { start: [0, 0], end: [-30, 40] }, along_track_step_m: 5 }\n",
+    )[3]
+    .along;
+    assert!(
+        (along - DVec3::new(-0.6, 0.8, 0.0)).length() < 1e-12,
+        "{along}"
+    );
+}

@@ -72,6 +72,7 @@ impl Tls {
             direction: direction_from_angles(ze, az),
             scan_angle_deg: ze as f32,
             line: 0,
+            along: DVec3::X,
         }
     }
 }

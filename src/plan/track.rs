@@ -53,6 +53,7 @@ impl Track {
             direction: DVec3::NEG_Z,
             scan_angle_deg: 0.0,
             line: 0,
+            along: g.along,
         }
     }
 }

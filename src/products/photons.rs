@@ -246,6 +246,7 @@ mod tests {
             direction: DVec3::new(0.0, 0.0, -1.0),
             scan_angle_deg: 0.0,
             line: 0,
+            along: DVec3::X,
         };
         let ev = [
             PhotonEvent {

@@ -161,6 +161,7 @@ mod tests {
             direction: DVec3::new(0.0, 0.0, -1.0),
             scan_angle_deg: -3.5,
             line: 2,
+            along: DVec3::X,
         };
         // A target at range h: t = 2h/c; ρ = 0.4 Lambertian returns Q_e ρ A / (π h²).
         let centre = (2.0 * h / C * 1e9 - T0_NS) / BIN_NS;
@@ -207,6 +208,7 @@ mod tests {
             direction: DVec3::new(0.0, 0.0, -1.0),
             scan_angle_deg: 0.0,
             line: 0,
+            along: DVec3::X,
         };
         let c = Component {
             centre_bin: f64::NAN,

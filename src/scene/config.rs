@@ -1,5 +1,6 @@
 //! The scene file as written by the user, and material resolution at one wavelength.
 
+use crate::campaign::spectral::Spectral;
 use crate::campaign::yaml::Doc;
 use crate::error::{Error, Result};
 use serde::de::{self, Deserializer, MapAccess, Visitor};
@@ -17,6 +18,9 @@ pub(crate) struct SceneFile {
     pub materials: BTreeMap<String, MaterialSpec>,
     #[serde(default)]
     pub objects: Vec<ObjectSpec>,
+    /// The x-y bounding box is one period of an infinite landscape (DART's repeated scene).
+    #[serde(default)]
+    pub repeat: bool,
 }
 
 #[derive(Debug, Deserialize)]
@@ -139,97 +143,6 @@ impl From<ClassSpec> for SurfaceClass {
     }
 }
 
-/// A value for all wavelengths, or a table wavelength_nm -> value.
-#[derive(Debug, Clone, PartialEq)]
-pub(crate) enum Spectral {
-    Single(f64),
-    Table(Vec<(f64, f64)>),
-}
-
-impl<'de> Deserialize<'de> for Spectral {
-    fn deserialize<D: Deserializer<'de>>(d: D) -> std::result::Result<Self, D::Error> {
-        struct V;
-        impl<'de> Visitor<'de> for V {
-            type Value = Spectral;
-            fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
-                f.write_str("a number or a table of wavelength_nm: value")
-            }
-            fn visit_f64<E: de::Error>(self, v: f64) -> std::result::Result<Spectral, E> {
-                Ok(Spectral::Single(v))
-            }
-            fn visit_i64<E: de::Error>(self, v: i64) -> std::result::Result<Spectral, E> {
-                Ok(Spectral::Single(v as f64))
-            }
-            fn visit_u64<E: de::Error>(self, v: u64) -> std::result::Result<Spectral, E> {
-                Ok(Spectral::Single(v as f64))
-            }
-            fn visit_map<A: MapAccess<'de>>(
-                self,
-                mut map: A,
-            ) -> std::result::Result<Spectral, A::Error> {
-                let mut table = Vec::new();
-                while let Some(Wavelength(w)) = map.next_key::<Wavelength>()? {
-                    let v: f64 = map.next_value()?;
-                    if table.iter().any(|&(k, _)| k == w) {
-                        return Err(de::Error::custom(format!(
-                            "wavelength {w} nm is given twice"
-                        )));
-                    }
-                    table.push((w, v));
-                }
-                if table.is_empty() {
-                    return Err(de::Error::custom("the table is empty"));
-                }
-                Ok(Spectral::Table(table))
-            }
-        }
-        d.deserialize_any(V)
-    }
-}
-
-/// A table key: YAML integers (`532:`), floats (`532.5:`) and numeric strings are accepted.
-struct Wavelength(f64);
-
-impl<'de> Deserialize<'de> for Wavelength {
-    fn deserialize<D: Deserializer<'de>>(d: D) -> std::result::Result<Self, D::Error> {
-        struct V;
-        impl Visitor<'_> for V {
-            type Value = Wavelength;
-            fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
-                f.write_str("a wavelength in nm")
-            }
-            fn visit_f64<E: de::Error>(self, v: f64) -> std::result::Result<Wavelength, E> {
-                check_wavelength(v)
-            }
-            fn visit_i64<E: de::Error>(self, v: i64) -> std::result::Result<Wavelength, E> {
-                check_wavelength(v as f64)
-            }
-            fn visit_u64<E: de::Error>(self, v: u64) -> std::result::Result<Wavelength, E> {
-                check_wavelength(v as f64)
-            }
-            fn visit_str<E: de::Error>(self, v: &str) -> std::result::Result<Wavelength, E> {
-                match v.trim().parse::<f64>() {
-                    Ok(x) => check_wavelength(x),
-                    Err(_) => Err(E::custom(format!(
-                        "expected a wavelength in nm as key, found \"{v}\""
-                    ))),
-                }
-            }
-        }
-        d.deserialize_any(V)
-    }
-}
-
-fn check_wavelength<E: de::Error>(v: f64) -> std::result::Result<Wavelength, E> {
-    if v.is_finite() && v > 0.0 {
-        Ok(Wavelength(v))
-    } else {
-        Err(E::custom(format!(
-            "wavelength {v} nm is not a positive number"
-        )))
-    }
-}
-
 /// A material's optical properties at the campaign wavelength.
 #[derive(Debug, Clone, PartialEq)]
 pub(crate) struct ResolvedMaterial {
@@ -238,27 +151,8 @@ pub(crate) struct ResolvedMaterial {
     pub transmittance: f64,
 }
 
-fn same_wavelength(a: f64, b: f64) -> bool {
-    (a - b).abs() <= 1e-9 * a.abs().max(b.abs())
-}
-
 fn value_at(doc: &Doc, key: &str, s: &Spectral, wavelength_nm: f64) -> Result<f64> {
-    let v = match s {
-        Spectral::Single(v) => *v,
-        Spectral::Table(t) => match t.iter().find(|(w, _)| same_wavelength(*w, wavelength_nm)) {
-            Some(&(_, v)) => v,
-            None => {
-                let given: Vec<String> = t.iter().map(|(w, _)| format!("{w}")).collect();
-                return Err(doc.error(
-                    key,
-                    format!(
-                        "no value for {wavelength_nm} nm (the table gives {} nm); add {wavelength_nm}: <value> or give a single number",
-                        given.join(", ")
-                    ),
-                ));
-            }
-        },
-    };
+    let v = s.at(wavelength_nm).map_err(|why| doc.error(key, why))?;
     if !v.is_finite() || !(0.0..=1.0).contains(&v) {
         return Err(doc.error(
             key,

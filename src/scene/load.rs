@@ -157,6 +157,7 @@ pub(crate) fn load(path: &Path, wavelength_nm: f64) -> Result<Scene> {
     files.sort();
     files.dedup();
     Ok(Scene {
+        repeat: file.repeat,
         name: file.name,
         files,
         surfaces: slots.surfaces,

@@ -152,7 +152,13 @@ pub struct Scene {
     instanced_triangles: u64,
     /// Every query while on (`start_ray_log`): the bench replays them against the bare BVH.
     ray_log: Option<std::sync::Mutex<Vec<LoggedRay>>>,
+    /// `repeat: true`: the x-y box `world_lo..world_hi` is one period of an infinite landscape.
+    repeat: bool,
 }
+
+/// Most periods a query crosses in a repeated scene before its ray is taken to have left:
+/// only a ray nearly parallel to the ground stays within the scene's heights that long.
+pub const MAX_PERIODS: usize = 4096;
 
 /// A query the scene answered, as the bench replays it.
 #[derive(Clone, Copy, Debug)]
@@ -287,10 +293,8 @@ impl Scene {
     }
 
     /// Closest hit along the ray `origin + t dir`, `dir` a unit vector, with 0 < t < t_max,
-    /// ignoring the facet `skip` (the one the ray leaves).
-    ///
-    /// The top-level traversal with each instance's traversal nested in its closure: the hot
-    /// path, kept in one place so that the two levels' skip and coplanar rules read together.
+    /// ignoring the facet `skip` (the one the ray leaves). In a repeated scene the ray meets
+    /// the copies of the scene in turn, and the hit is where it lies in the world.
     pub fn intersect(&self, origin: DVec3, dir: DVec3, t_max: f64, skip: FacetId) -> Option<Hit> {
         if let Some(log) = &self.ray_log {
             if let Ok(mut v) = log.lock() {
@@ -302,6 +306,84 @@ impl Scene {
                 });
             }
         }
+        if !self.repeat {
+            return self.intersect_copy(origin, dir, t_max, skip);
+        }
+        let mut found = None;
+        self.copies_along(origin, dir, t_max, |shift, first, _| {
+            let skip = if first { skip } else { FacetId::NONE };
+            found = self
+                .intersect_copy(origin - shift, dir, t_max, skip)
+                .map(|h| Hit {
+                    position: h.position + shift,
+                    ..h
+                });
+            found.is_some()
+        });
+        found
+    }
+
+    /// The copies of a repeated scene that the ray `origin + t dir`, 0 < t < t_max, crosses
+    /// within the scene's heights, in the order it meets them, as the shift (whole periods in
+    /// x and y) that moves each onto the scene's own box; `visit(shift, first, last)` returns
+    /// true to stop. A copy's geometry lies within its own column, so a query of the shifted
+    /// ray against the scene finds exactly that copy's facets.
+    fn copies_along(
+        &self,
+        origin: DVec3,
+        dir: DVec3,
+        t_max: f64,
+        mut visit: impl FnMut(DVec3, bool, bool) -> bool,
+    ) {
+        let (lo, hi) = (self.world_lo, self.world_hi);
+        let (zlo, zhi) = (self.clip_lo.z, self.clip_hi.z);
+        let (t0, t1) = if dir.z == 0.0 {
+            if origin.z < zlo || origin.z > zhi {
+                return;
+            }
+            (0.0, t_max)
+        } else {
+            let (a, b) = ((zlo - origin.z) / dir.z, (zhi - origin.z) / dir.z);
+            (a.min(b).max(0.0), a.max(b).min(t_max))
+        };
+        if t0.is_nan() || t1.is_nan() || t0 > t1 {
+            return;
+        }
+        let period = hi - lo;
+        let p = origin + dir * t0;
+        // a box flat in x or y repeats only in the other direction
+        let cell = |x: f64, lo: f64, w: f64| if w > 0.0 { ((x - lo) / w).floor() } else { 0.0 };
+        let (mut kx, mut ky) = (cell(p.x, lo.x, period.x), cell(p.y, lo.y, period.y));
+        let exit = |k: f64, o: f64, d: f64, lo: f64, w: f64| {
+            if w <= 0.0 || d == 0.0 {
+                f64::INFINITY
+            } else if d > 0.0 {
+                (lo + (k + 1.0) * w - o) / d
+            } else {
+                (lo + k * w - o) / d
+            }
+        };
+        for n in 0..MAX_PERIODS {
+            let tx = exit(kx, origin.x, dir.x, lo.x, period.x);
+            let ty = exit(ky, origin.y, dir.y, lo.y, period.y);
+            let next = tx.min(ty);
+            let last = next.is_nan() || next >= t1;
+            let shift = DVec3::new(kx * period.x.max(0.0), ky * period.y.max(0.0), 0.0);
+            if visit(shift, n == 0, last) || last {
+                return;
+            }
+            if tx <= ty {
+                kx += dir.x.signum();
+            } else {
+                ky += dir.y.signum();
+            }
+        }
+    }
+
+    /// [`Scene::intersect`] on the scene's own copy: the top-level traversal with each
+    /// instance's traversal nested in its closure, the hot path, kept in one place so that
+    /// the two levels' skip and coplanar rules read together.
+    fn intersect_copy(&self, origin: DVec3, dir: DVec3, t_max: f64, skip: FacetId) -> Option<Hit> {
         let lr = self.local_ray(origin, dir, t_max)?;
         // only a ray that starts on a facet (not one clipped to the box) can meet its
         // facet's coplanar neighbours at distance 0
@@ -386,13 +468,20 @@ impl Scene {
     /// `skip_a` before it leaves the scene: an any-hit query (the traversal stops at the first
     /// blocker), for visibility towards a light at infinity such as the sun.
     pub fn occluded_towards(&self, a: DVec3, dir: DVec3, skip_a: FacetId) -> bool {
-        // a point beyond the clip box: no facet lies between it and the box
-        let beyond = (self.clip_hi - self.clip_lo).length() + (a - self.clip_lo).length() + 1.0;
+        // a point beyond the clip box (beyond its heights, when repeated): no facet lies
+        // between it and the box
+        let mut beyond = (self.clip_hi - self.clip_lo).length() + (a - self.clip_lo).length() + 1.0;
+        if self.repeat {
+            let dz = (self.clip_hi.z - self.clip_lo.z) + (a.z - self.clip_lo.z).abs() + 1.0;
+            let periods = (self.world_hi - self.world_lo).truncate().length() * MAX_PERIODS as f64;
+            beyond = (dz / dir.z.abs()).min(periods).max(beyond);
+        }
         self.occluded(a, a + dir * beyond, skip_a, FacetId::NONE)
     }
 
     /// True when the open segment from `a` to `b` crosses any facet other than `skip_a`
-    /// (the facet `a` lies on) and `skip_b` (the facet `b` lies on).
+    /// (the facet `a` lies on) and `skip_b` (the facet `b` lies on); in a repeated scene, of
+    /// any copy it crosses (the skipped facets are those of the copies `a` and `b` lie in).
     pub fn occluded(&self, a: DVec3, b: DVec3, skip_a: FacetId, skip_b: FacetId) -> bool {
         if let Some(log) = &self.ray_log {
             if let Ok(mut v) = log.lock() {
@@ -404,6 +493,25 @@ impl Scene {
                 });
             }
         }
+        if !self.repeat {
+            return self.occluded_copy(a, b, skip_a, skip_b);
+        }
+        let len = (b - a).length();
+        if len.is_nan() || len <= 0.0 || !len.is_finite() {
+            return false;
+        }
+        let mut blocked = false;
+        self.copies_along(a, (b - a) / len, len, |shift, first, last| {
+            let sa = if first { skip_a } else { FacetId::NONE };
+            let sb = if last { skip_b } else { FacetId::NONE };
+            blocked = self.occluded_copy(a - shift, b - shift, sa, sb);
+            blocked
+        });
+        blocked
+    }
+
+    /// [`Scene::occluded`] on the scene's own copy.
+    fn occluded_copy(&self, a: DVec3, b: DVec3, skip_a: FacetId, skip_b: FacetId) -> bool {
         let delta = b - a;
         let len = delta.length();
         if len.is_nan() || len <= 0.0 || !len.is_finite() {
@@ -490,9 +598,43 @@ impl Scene {
             .unwrap_or_default()
     }
 
-    /// World-space bounding box (min, max) of all geometry.
+    /// World-space bounding box (min, max) of all geometry: one period of a repeated scene.
     pub fn bounds(&self) -> (DVec3, DVec3) {
         (self.world_lo, self.world_hi)
+    }
+
+    /// `repeat: true`: the x-y box of [`Scene::bounds`] is one period of an infinite landscape.
+    pub fn is_repeated(&self) -> bool {
+        self.repeat
+    }
+
+    /// The copy of the scene's box that a beam from `origin` along `dir` crosses at the
+    /// scene's mid-height (or that holds `origin`, for a beam along the ground): the box a
+    /// pulse's range gate and sun are sized by. [`Scene::bounds`] when not repeated.
+    pub fn bounds_near(&self, origin: DVec3, dir: DVec3) -> (DVec3, DVec3) {
+        let (lo, hi) = (self.world_lo, self.world_hi);
+        if !self.repeat {
+            return (lo, hi);
+        }
+        let mid = 0.5 * (lo.z + hi.z);
+        let at = if dir.z != 0.0
+            && ((mid - origin.z) / dir.z).is_finite()
+            && (mid - origin.z) / dir.z > 0.0
+        {
+            origin + dir * ((mid - origin.z) / dir.z)
+        } else {
+            origin
+        };
+        let period = hi - lo;
+        let k = |x: f64, lo: f64, w: f64| {
+            if w > 0.0 {
+                ((x - lo) / w).floor() * w
+            } else {
+                0.0
+            }
+        };
+        let shift = DVec3::new(k(at.x, lo.x, period.x), k(at.y, lo.y, period.y), 0.0);
+        (lo + shift, hi + shift)
     }
 
     pub fn stats(&self) -> SceneStats {

@@ -74,6 +74,8 @@ struct Item {
     instance: usize,
     start: usize,
     end: usize,
+    /// Whole periods (x, y) the instance is moved by: its copy in a repeated scene.
+    shift: (f64, f64),
 }
 
 /// The highest z found by one work item over a rectangle of cells (NEG_INFINITY = none).
@@ -127,17 +129,45 @@ impl Scene {
         top
     }
 
-    /// Work items of the instances whose transformed bounding box meets the grid.
+    /// Work items of the instances whose transformed bounding box meets the grid, for every
+    /// copy of a repeated scene that does.
     fn dsm_items(&self, grid: &Grid) -> Vec<Item> {
         let gx1 = grid.x0 + grid.nx as f64 * grid.cell;
         let gy1 = grid.y0 + grid.ny as f64 * grid.cell;
+        let (lo, hi) = self.bounds();
+        let period = hi - lo;
+        let range = |g0: f64, g1: f64, lo: f64, hi: f64, w: f64| -> (i64, i64) {
+            if !self.is_repeated() || w <= 0.0 {
+                return (0, 0);
+            }
+            (
+                ((g0 - hi) / w).floor() as i64,
+                ((g1 - lo) / w).ceil() as i64,
+            )
+        };
+        let (kx, ky) = (
+            range(grid.x0, gx1, lo.x, hi.x, period.x),
+            range(grid.y0, gy1, lo.y, hi.y, period.y),
+        );
         let mut items = Vec::new();
+        for i in kx.0..=kx.1 {
+            for j in ky.0..=ky.1 {
+                let shift = (i as f64 * period.x.max(0.0), j as f64 * period.y.max(0.0));
+                self.dsm_items_of_copy(grid, shift, &mut items);
+            }
+        }
+        items
+    }
+
+    fn dsm_items_of_copy(&self, grid: &Grid, shift: (f64, f64), items: &mut Vec<Item>) {
+        let gx1 = grid.x0 + grid.nx as f64 * grid.cell;
+        let gy1 = grid.y0 + grid.ny as f64 * grid.cell;
         for (k, inst) in self.instances.iter().enumerate() {
             let blas = &self.meshes[inst.mesh as usize];
             if blas.tris.is_empty() {
                 continue;
             }
-            let xf = InstanceXf::new(self, inst, 0.0, 0.0);
+            let xf = InstanceXf::new(self, inst, -shift.0, -shift.1);
             let (mut lo, mut hi) = (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY));
             for c in 0..8 {
                 let corner = Vec3::new(
@@ -162,11 +192,11 @@ impl Scene {
                     instance: k,
                     start,
                     end,
+                    shift,
                 });
                 start = end;
             }
         }
-        items
     }
 
     /// The highest surface of one run of an instance's triangles over the cells it covers:
@@ -176,7 +206,7 @@ impl Scene {
         let inst = &self.instances[item.instance];
         let tris = &self.meshes[inst.mesh as usize].tris[item.start..item.end];
         // Coordinates relative to the grid's corner keep the clipping in small numbers.
-        let xf = InstanceXf::new(self, inst, grid.x0, grid.y0);
+        let xf = InstanceXf::new(self, inst, grid.x0 - item.shift.0, grid.y0 - item.shift.1);
         let inv = 1.0 / grid.cell;
         let (nx, ny) = (grid.nx as f64, grid.ny as f64);
 

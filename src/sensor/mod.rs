@@ -259,8 +259,10 @@ impl Gate {
         let (r_min, r_max) = cone_range(origin, direction.normalize(), lo, hi, inst);
         let sigma = pulse_sigma_s(inst);
         let margin = (4.0 * sigma / dt).ceil() + 2.0;
-        let t0 = 2.0 * r_min / crate::C - (margin + 0.5) * dt;
-        let bins = ((2.0 * r_max / crate::C - t0) / dt).ceil() + margin;
+        // an offset telescope makes a path up to |offset| shorter or longer than 2R
+        let offset = inst.receiver_offset_length();
+        let t0 = (2.0 * r_min - offset) / crate::C - (margin + 0.5) * dt;
+        let bins = (((2.0 * r_max + offset) / crate::C - t0) / dt).ceil() + margin;
         Gate {
             t0,
             dt,
@@ -377,6 +379,24 @@ impl SunSource {
             s.probability = if q.is_finite() { q.clamp(lo, hi) } else { 0.5 };
         }
         s
+    }
+
+    /// The sun with its disk over the bounding sphere of the box `lo..hi` instead: in a
+    /// repeated scene, the part of the landscape a pulse sees.
+    pub fn covering(&self, lo: DVec3, hi: DVec3) -> SunSource {
+        SunSource {
+            center: (lo + hi) * 0.5,
+            radius: ((hi - lo).length() * 0.5).max(1e-3),
+            ..*self
+        }
+    }
+
+    /// True when sunlight through the disk reaches `p`: `p` lies within the disk's radius of
+    /// its axis. Every point of a scene that is not repeated does.
+    pub fn covers(&self, p: DVec3) -> bool {
+        let d = p - self.center;
+        let across = (d - self.dir * d.dot(self.dir)).length_squared();
+        across <= self.radius * self.radius * (1.0 + 1e-9)
     }
 
     /// Uniform point on the disk (pdf 1 / πR²), outside the bounding sphere, up-sun.

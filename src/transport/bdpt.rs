@@ -30,6 +30,17 @@ pub(super) struct Buffers {
     scratch: Vec<f64>,
 }
 
+/// Transmittance of the segment from vertex `a` to the point `b`: 1 in vacuum; the sun's
+/// vertex stands for the top of the atmosphere up-sun of `b`.
+#[inline]
+pub(super) fn segment_transmittance(setup: &PulseSetup, a: &Vertex, b: DVec3) -> f64 {
+    match setup.atmosphere {
+        None => 1.0,
+        Some(atm) if a.kind == VertexKind::Sun => atm.transmittance_to_top(b, -a.n),
+        Some(atm) => atm.transmittance(a.p, b),
+    }
+}
+
 pub(super) fn surface_vertex(hit: &crate::scene::Hit, beta: f64, len: f64) -> Vertex {
     Vertex {
         kind: VertexKind::Surface,
@@ -89,21 +100,22 @@ pub(super) fn walk(
                         recv.frame.w,
                         0.0,
                     );
-                    q.beta = beta;
+                    q.beta = beta * segment_transmittance(setup, &last, q.p);
                     q.len = last.len + tq;
                     path.push(q);
                     link(setup, path);
                     let w = mis_weight(setup, path, &[], scratch);
                     if path[0].kind == VertexKind::Sun {
-                        acc.add_solar(beta * w);
+                        acc.add_solar(q.beta * w);
                     } else {
-                        acc.add(q.len, beta * w, surfaces, class_of(setup, &path[1]));
+                        acc.add(q.len, q.beta * w, surfaces, class_of(setup, &path[1]));
                     }
                     path.pop();
                 }
             }
         }
         let Some(hit) = hit else { break };
+        beta *= segment_transmittance(setup, &last, hit.position);
         path.push(surface_vertex(&hit, beta, last.len + hit.t));
         link(setup, path);
         if path.len() >= cap {
@@ -145,7 +157,7 @@ pub(super) fn contribution(
         let towards_prev = (cam[t - 2].p - y.p).normalize();
         let f_y = bsdf(&surfaces[y.surface as usize], y.n, -sun.dir, towards_prev)
             * y.n.dot(sun.dir).abs();
-        let c = x.beta * sun.band_irradiance * f_y * y.beta;
+        let c = x.beta * sun.band_irradiance * f_y * y.beta * segment_transmittance(setup, x, y.p);
         return (c > 0.0).then_some((c, 0.0));
     }
     let f_x = if s == 1 {
@@ -165,7 +177,7 @@ pub(super) fn contribution(
         let towards_prev = (cam[t - 2].p - y.p).normalize();
         bsdf(&surfaces[y.surface as usize], y.n, -w, towards_prev) * y.n.dot(w).abs()
     };
-    let c = x.beta * f_x * f_y * y.beta / r2;
+    let c = x.beta * f_x * f_y * y.beta / r2 * segment_transmittance(setup, x, y.p);
     (c > 0.0).then_some((c, x.len + r + y.len))
 }
 

@@ -21,10 +21,15 @@ pub(super) fn pdf_area(
     let w = d / r2.sqrt();
     let pdf_dir = match from.kind {
         // the disk's uniform density, projected onto the surface: no 1/r² for a direction
+        // (0 where the disk's light does not reach: parts of a repeated landscape)
         VertexKind::Sun => {
-            return setup
-                .sun
-                .map_or(0.0, |sun| to.n.dot(sun.dir).abs() / sun.disk_area());
+            return setup.sun.map_or(0.0, |sun| {
+                if sun.covers(to.p) {
+                    to.n.dot(sun.dir).abs() / sun.disk_area()
+                } else {
+                    0.0
+                }
+            });
         }
         VertexKind::Laser => setup.laser.pdf(w),
         VertexKind::Aperture => setup.receiver.pdf_dir(w),

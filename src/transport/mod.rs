@@ -27,6 +27,7 @@
 //! forward keeps the receiver sub-path to its aperture point (strategies t ≤ 1), backward the
 //! light sub-path to the laser (s = 1). So the three methods cannot drift apart.
 
+pub mod atmosphere;
 mod bdpt;
 mod bsdf;
 mod mis;
@@ -67,6 +68,8 @@ pub struct PulseSetup<'a> {
     pub heuristic: MisHeuristic,
     /// The sun, when the campaign has one: its paths share the receiver sub-paths.
     pub sun: Option<SunSource>,
+    /// The atmosphere at the campaign's wavelength; `None` is vacuum and costs nothing.
+    pub atmosphere: Option<&'a atmosphere::Atmosphere>,
     pub max_order: u32,
     pub seed: u64,
     pub pulse_id: u64,

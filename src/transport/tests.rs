@@ -36,6 +36,7 @@ fn setup<'a>(scene: &'a Scene, method: Method, heuristic: MisHeuristic) -> Pulse
         method,
         heuristic,
         sun: None,
+        atmosphere: None,
         max_order: 12,
         seed: 1,
         pulse_id: 0,

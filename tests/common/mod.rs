@@ -207,6 +207,63 @@ pub fn plane_energy(inst: &Inst, rho: f64, h: f64) -> f64 {
     inst.energy * rho / (PI * h * h) * sum
 }
 
+/// Closed form 1 with the telescope's centre offset horizontally by (ox, oy) from the laser
+/// (bistatic, small angles): a ground point g is seen by the part of the aperture inside the
+/// disk of radius H tan θ_fov around g, which now lies |g - o| from the aperture's centre, so
+/// Q_r = (Q_e ρ / (π H²)) ∫ p_ground(g) A_overlap(|g - o|) dA_g, by quadrature in polar
+/// coordinates over the footprint.
+pub fn plane_energy_offset(inst: &Inst, rho: f64, h: f64, offset: [f64; 2]) -> f64 {
+    let r_tel = (inst.area / PI).sqrt();
+    let r_fov = h * (inst.fov_mrad * 1e-3).tan();
+    let g_max = h * (inst.fp_mrad * 1e-3).tan();
+    let (nr, na) = (2000, 720);
+    let (dr, da) = (g_max / nr as f64, 2.0 * PI / na as f64);
+    let mut sum = 0.0;
+    for i in 0..nr {
+        let g = (i as f64 + 0.5) * dr;
+        let p_ground = p_tan(g / h, inst.fp_mrad, inst.eta) / (h * h);
+        for j in 0..na {
+            let a = (j as f64 + 0.5) * da;
+            let d = (g * a.cos() - offset[0]).hypot(g * a.sin() - offset[1]);
+            sum += p_ground * disk_overlap(r_tel, r_fov, d) * g * dr * da;
+        }
+    }
+    inst.energy * rho / (PI * h * h) * sum
+}
+
+/// The sun of the solar tests: E (W m⁻² µm⁻¹) over a band of `SUN_BAND_NM`.
+pub const SUN_E: f64 = 640.0;
+pub const SUN_BAND_NM: f64 = 0.8;
+
+/// A campaign text with the sun's band and a `sun:` section at `zenith`, `azimuth`.
+pub fn with_sun_selected(campaign: &str, zenith: f64, azimuth: f64, selection: &str) -> String {
+    campaign.replace("instrument:\n", &format!("instrument:\n  bandwidth_nm: {SUN_BAND_NM}\n"))
+        + &format!(
+            "sun: {{ zenith_deg: {zenith}, azimuth_deg: {azimuth}, irradiance_w_m2_um: {SUN_E}, selection: {selection} }}\n"
+        )
+}
+
+/// The instrument of the solar closed-form tests (1 mrad footprint, 1 mJ, 2 ns).
+pub fn sun_inst(fov_mrad: f64) -> Inst {
+    Inst {
+        fp_mrad: 1.0,
+        fov_mrad,
+        area: 0.1,
+        energy: 0.001,
+        fwhm_ns: 2.0,
+        ..Inst::default()
+    }
+}
+
+/// Closed form 4 at 1064 nm: (P_sun, N_SN per 1 ns bin) of a Lambertian plane filling the
+/// field of view, nadir view, P_sun = ρ E Δλ cos θ_s A_tel sin²θ_fov.
+pub fn solar_closed_form(inst: &Inst, rho: f64, zenith_deg: f64) -> (f64, f64) {
+    let hv = 6.626_070_15e-34 * C / 1064e-9;
+    let s2 = (inst.fov_mrad * 1e-3).sin().powi(2);
+    let p_sun = rho * SUN_E * SUN_BAND_NM * 1e-3 * zenith_deg.to_radians().cos() * inst.area * s2;
+    (p_sun, p_sun * 1e-9 / hv)
+}
+
 /// E_footprint[cos θ] of the laser's directions.
 pub fn footprint_mean_cos(fp_mrad: f64, eta: f64) -> f64 {
     let u_max = (fp_mrad * 1e-3).tan();
@@ -415,20 +472,23 @@ pub fn compare_bins(name: &str, a: &Waveform, b: &Waveform) {
 
 /// A layer of small leaves (ρ = τ = 0.45 at 1064 nm, LAI about 1.7) between 5 and 8 m over a
 /// soil plane: multiple scattering carries a fifth of the signal.
-pub fn leaf_layer(dir: &std::path::Path) -> std::path::PathBuf {
+/// OBJ text of `n` random leaves: triangles with two random edges of about 10 cm from a corner
+/// uniform in the box `lo..hi` (a fixed xorshift sequence from `seed`).
+pub fn random_leaves(n: usize, seed: u64, lo: [f64; 3], hi: [f64; 3]) -> String {
     use std::fmt::Write;
     let mut obj = String::new();
-    let mut state: u64 = 0x2545F4914F6CDD1D;
+    let mut state = seed;
     let mut rnd = || {
         state ^= state << 13;
         state ^= state >> 7;
         state ^= state << 17;
         (state >> 11) as f64 / (1u64 << 53) as f64
     };
-    let leaves = 100_000;
-    for i in 0..leaves {
-        let c = [rnd() * 12.0 - 6.0, rnd() * 12.0 - 6.0, 5.0 + 3.0 * rnd()];
-        // two random edge vectors of about 10 cm
+    for i in 0..n {
+        let mut c = [0.0; 3];
+        for k in 0..3 {
+            c[k] = lo[k] + rnd() * (hi[k] - lo[k]);
+        }
         let mut e = [[0.0; 3]; 2];
         for v in &mut e {
             for x in v.iter_mut() {
@@ -440,6 +500,16 @@ pub fn leaf_layer(dir: &std::path::Path) -> std::path::PathBuf {
         }
         writeln!(obj, "f {} {} {}", 3 * i + 1, 3 * i + 2, 3 * i + 3).unwrap();
     }
+    obj
+}
+
+pub fn leaf_layer(dir: &std::path::Path) -> std::path::PathBuf {
+    let obj = random_leaves(
+        100_000,
+        0x2545F4914F6CDD1D,
+        [-6.0, -6.0, 5.0],
+        [6.0, 6.0, 8.0],
+    );
     write(dir, "leaves.obj", &obj);
     write(
         dir,

@@ -318,7 +318,12 @@ impl Dsm {
             return None;
         };
         let (slo, shi) = scene.bounds();
-        let (lo, hi) = (lo.max(slo), hi.min(shi));
+        // a repeated scene has surfaces under every point
+        let (lo, hi) = if scene.is_repeated() {
+            (lo, hi)
+        } else {
+            (lo.max(slo), hi.min(shi))
+        };
         let grid = Grid::covering(
             DVec3::new(lo.x, lo.y, slo.z),
             DVec3::new(hi.x, hi.y, shi.z),

@@ -439,6 +439,18 @@ with rasterio.open(sys.argv[1] + "/dsm/dsm.tif") as r:
     a = r.read(1)
     h = a[a != r.nodata]
     assert abs(float(np.median(h)) - {z0}) < 0.05, np.median(h)
+# the difference raster is what dsm/report.json reports: its cells with a value, their mean,
+# root mean square and mean absolute value
+import json
+rep = json.load(open(sys.argv[1] + "/dsm/report.json"))
+with rasterio.open(sys.argv[1] + "/dsm/difference.tif") as r:
+    assert r.crs.to_epsg() == 32631 and r.nodata == -9999.0
+    a = r.read(1)
+    d = a[a != r.nodata].astype(np.float64)
+    assert len(d) == rep["cells_with_points"], (len(d), rep)
+    assert abs(d.mean() - rep["bias_m"]) < 1e-5, (d.mean(), rep["bias_m"])
+    assert abs(np.sqrt((d * d).mean()) - rep["rmse_m"]) < 1e-5, (np.sqrt((d * d).mean()), rep["rmse_m"])
+    assert abs(np.abs(d).mean() - rep["mae_m"]) < 1e-5, (np.abs(d).mean(), rep["mae_m"])
 print("laspy and rasterio ok")
 "#,
         n = pb.len(),

@@ -36,16 +36,6 @@ fn u32s(f: &hdf5_pure::File, p: &str) -> Vec<u32> {
         .unwrap_or_else(|e| panic!("{p}: {e}"))
 }
 
-fn run_cli(campaign: &Path, out: &Path) {
-    let (code, _, err) = lidarsim(&[
-        "run",
-        campaign.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-    ]);
-    assert_eq!(code, 0, "{err}");
-}
-
 fn all_waveforms(out: &Path) -> Vec<lidarsim::waveform::Waveform> {
     let mut parts: Vec<_> = std::fs::read_dir(out.join("waveforms"))
         .unwrap()
@@ -77,7 +67,7 @@ fn l1b_holds_the_waveforms_where_the_plane_is() {
     plane_scene(&dir, 0.4, 60.0);
     let camp = write(&dir, "c.yaml", &track_campaign("l1b", 2.0, ""));
     let out = dir.join("run");
-    run_cli(&camp, &out);
+    run_cli(&camp, &out, None);
     let ws = all_waveforms(&out);
     let f = h5(&out.join("waveforms_l1b.h5"));
     let b = "BEAM0000";
@@ -146,7 +136,7 @@ fn l1b_record_is_digitised_exactly() {
         ),
     );
     let out = dir.join("run");
-    run_cli(&camp, &out);
+    run_cli(&camp, &out, None);
     let ws = all_waveforms(&out);
     let f = h5(&out.join("waveforms_l1b.h5"));
     let rx = f32s(&f, "BEAM0000/rxwaveform");
@@ -185,7 +175,7 @@ fn mean_of_noisy_records_is_the_noise_free_waveform() {
         &track_campaign("noise", 0.008, ", noise: { electronic_sd_photons: 1.5 }"),
     );
     let out = dir.join("run");
-    run_cli(&camp, &out);
+    run_cli(&camp, &out, None);
     let ws = all_waveforms(&out);
     assert_eq!(ws.len(), 10_000);
     let f = h5(&out.join("waveforms_l1b.h5"));
@@ -249,7 +239,7 @@ fn points_come_from_the_record() {
         std::fs::create_dir_all(&d).unwrap();
         std::fs::copy(dir.join("plane.yaml"), d.join("plane.yaml")).unwrap();
         let camp = write(&d, "c.yaml", text);
-        run_cli(&camp, &d.join("run"));
+        run_cli(&camp, &d.join("run"), None);
         let las = d.join("run/points.las");
         let pts = lidarsim::products::las::read_las(&las).unwrap();
         if returns {
@@ -282,7 +272,7 @@ fn atl03_photons_are_the_parquet_photons() {
         ),
     );
     let out = dir.join("run");
-    run_cli(&camp, &out);
+    run_cli(&camp, &out, None);
     let f = h5(&out.join("photons_atl03.h5"));
     let g = "gt1l/heights";
     let h = f64s(&f, &format!("{g}/h_ph"));
@@ -398,8 +388,8 @@ fn h5py_reads_both_files_as_mission_users_do() {
                 "dark_count_hz: 1.0e8, dead_time_ns: 2",
             ),
     );
-    run_cli(&gedi, &dir.join("gedi"));
-    run_cli(&atl, &dir.join("atl"));
+    run_cli(&gedi, &dir.join("gedi"), None);
+    run_cli(&atl, &dir.join("atl"), None);
     let script = format!(
         r#"
 import sys, h5py, numpy as np

@@ -333,6 +333,9 @@ pub enum Method {
     Forward,
     /// Receiver paths from the aperture, each vertex connected to the laser.
     Backward,
+    /// One of the three, chosen per campaign by a pilot before the simulation (see
+    /// `pipeline::simulate::choose_method`).
+    Auto,
 }
 
 /// How multiple importance sampling weighs the strategies that can make a path.
@@ -465,6 +468,8 @@ pub struct Loaded {
     pub campaign: Campaign,
     pub doc: Doc,
     pub scene_path: PathBuf,
+    /// Why the campaign's `simulation.method` is what it is, when `auto` chose it.
+    pub method_note: Option<String>,
 }
 
 impl Loaded {
@@ -483,6 +488,7 @@ impl Loaded {
             campaign,
             doc,
             scene_path,
+            method_note: None,
         })
     }
 
@@ -496,7 +502,11 @@ impl Loaded {
     pub fn resolved_yaml(&self) -> String {
         let mut c = self.campaign.clone();
         c.scene = self.scene_path.display().to_string();
-        serde_yaml::to_string(&c).expect("a campaign always serialises")
+        let yaml = serde_yaml::to_string(&c).expect("a campaign always serialises");
+        match &self.method_note {
+            Some(note) => format!("# {note}\n{yaml}"),
+            None => yaml,
+        }
     }
 }
 

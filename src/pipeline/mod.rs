@@ -19,7 +19,7 @@ pub use simulate::{probe_rays_per_second, simulate};
 use sweep::run_sweep;
 pub use sweep::RunTotals;
 
-use crate::campaign::{Campaign, Loaded};
+use crate::campaign::{Campaign, Loaded, Method};
 use crate::error::{Error, Result};
 use crate::fsutil::write_text_atomic;
 use crate::plan::{self, Plan};
@@ -379,6 +379,25 @@ fn run_single(
     }
 
     let scene = cache.get(&loaded.scene_path, loaded.campaign.wavelength_nm)?;
+    // `auto` resolved here, once the scene is known: the pilot is deterministic, so the
+    // fingerprints (of the campaign as written) stand for the method it picks
+    let chosen;
+    let loaded = if loaded.campaign.simulation.method == Method::Auto {
+        let t = Instant::now();
+        let (method, note) = simulate::choose_method(loaded, scene, &plan);
+        log(&format!(
+            "{note} (pilot {:.2} s)",
+            t.elapsed().as_secs_f64()
+        ));
+        let mut c = loaded.clone();
+        c.campaign.simulation.method = method;
+        c.method_note = Some(note);
+        write_text_atomic(&out.join("campaign.resolved.yaml"), &c.resolved_yaml())?;
+        chosen = c;
+        &chosen
+    } else {
+        loaded
+    };
     let fp_sim = simulate_fingerprint(&fp_plan, scene)?;
     if run.done(Stage::Simulate, &fp_sim) {
         if let Some(bad) = first_broken_part(out, plan.len(), &fp_sim) {

@@ -2,14 +2,14 @@
 //! with per-pulse timing beside it.
 
 use super::PART_PULSES;
-use crate::campaign::Loaded;
+use crate::campaign::{Loaded, Method};
 use crate::error::{Error, Result};
 use crate::plan::{Plan, Pulse};
 use crate::progress::{log, progress};
 use crate::scene::Scene;
 use crate::sensor::{pulse_sigma_s, Gate, Laser, Receiver, SunSource};
 use crate::transport::atmosphere::Atmosphere;
-use crate::transport::{simulate_pulse_in, PulseSetup, Scratch};
+use crate::transport::{simulate_pulse, simulate_pulse_in, PulseSetup, Scratch};
 use crate::waveform::file::{part_name, write_waveforms};
 use crate::waveform::{self, Radiometry, Waveform};
 use glam::DVec3;
@@ -146,6 +146,73 @@ fn viewed_box(
     (lo - g, hi + g)
 }
 
+/// What every pulse of a campaign shares: its instrument, sun and atmosphere.
+struct Shared<'a> {
+    loaded: &'a Loaded,
+    scene: &'a Scene,
+    sun: Option<SunSource>,
+    atmosphere: Option<Atmosphere>,
+    sigma: f64,
+}
+
+impl<'a> Shared<'a> {
+    fn new(loaded: &'a Loaded, scene: &'a Scene) -> Shared<'a> {
+        let c = &loaded.campaign;
+        let inst = &c.instrument;
+        let sun = c
+            .sun
+            .as_ref()
+            .map(|s| SunSource::new(s, inst.bandwidth_nm.unwrap_or(0.0), scene.bounds()));
+        // every layer has an optical depth at the wavelength: the campaign's validation says so
+        let atmosphere = c
+            .atmosphere
+            .as_ref()
+            .and_then(|a| Atmosphere::new(a, c.wavelength_nm).ok());
+        Shared {
+            loaded,
+            scene,
+            sun,
+            atmosphere,
+            sigma: pulse_sigma_s(inst),
+        }
+    }
+
+    /// Pulse `p`'s setup, traced with `method`.
+    fn setup(&self, p: &Pulse, method: Method) -> PulseSetup<'_> {
+        let (c, scene) = (&self.loaded.campaign, self.scene);
+        let inst = &c.instrument;
+        let near = scene.bounds_near(p.origin, p.direction);
+        let gate = Gate::for_pulse(inst, p.origin, p.direction, near);
+        let sun = self.sun.map(|s| {
+            let s = if scene.is_repeated() {
+                let (lo, hi) = viewed_box(inst, p, near);
+                s.covering(lo, hi)
+            } else {
+                s
+            };
+            s.for_gate(inst.pulse_energy_j, gate.dt * gate.bins as f64)
+        });
+        PulseSetup {
+            scene,
+            laser: Laser::new(inst, p.origin, p.direction),
+            receiver: Receiver::new(
+                inst,
+                p.origin + p.platform_to_scene(inst.receiver_offset_m.unwrap_or_default()),
+                p.direction,
+            ),
+            gate,
+            sub_bins: waveform::sub_bins_per_bin(gate.dt, self.sigma),
+            method,
+            heuristic: c.simulation.mis,
+            sun,
+            atmosphere: self.atmosphere.as_ref(),
+            max_order: c.simulation.max_order,
+            seed: c.seed,
+            pulse_id: p.id,
+        }
+    }
+}
+
 /// Simulates pulses: pulses and each pulse's ray chunks run in parallel. Returns the
 /// waveforms and each pulse's wall time (with the threads it shared).
 pub fn simulate(
@@ -156,67 +223,124 @@ pub fn simulate(
 ) -> (Vec<Waveform>, Vec<f64>) {
     let c = &loaded.campaign;
     let inst = &c.instrument;
-    let sigma = pulse_sigma_s(inst);
+    let shared = Shared::new(loaded, scene);
     let hv = crate::photon_energy_j(c.wavelength_nm);
-    let bounds = scene.bounds();
-    let sun = c
-        .sun
-        .as_ref()
-        .map(|s| SunSource::new(s, inst.bandwidth_nm.unwrap_or(0.0), bounds));
-    // every layer has an optical depth at the wavelength: the campaign's validation says so
-    let atmosphere = c
-        .atmosphere
-        .as_ref()
-        .and_then(|a| Atmosphere::new(a, c.wavelength_nm).ok());
     let radiometry = Radiometry {
         pulse_energy_j: inst.pulse_energy_j,
         receiver_area_m2: inst.receiver_area_m2,
         fov_half_angle: inst.fov_half_angle_mrad * 1e-3,
-        sun: sun.map(|s| (s.band_irradiance, s.cos_zenith)),
+        sun: shared.sun.map(|s| (s.band_irradiance, s.cos_zenith)),
     };
     pulses
         .par_iter()
         .map_init(Scratch::default, |scratch, p| {
-            let near = scene.bounds_near(p.origin, p.direction);
-            let gate = Gate::for_pulse(inst, p.origin, p.direction, near);
-            let sub_bins = waveform::sub_bins_per_bin(gate.dt, sigma);
-            let sun = sun.map(|s| {
-                let s = if scene.is_repeated() {
-                    let (lo, hi) = viewed_box(inst, p, near);
-                    s.covering(lo, hi)
-                } else {
-                    s
-                };
-                s.for_gate(inst.pulse_energy_j, gate.dt * gate.bins as f64)
-            });
-            let setup = PulseSetup {
-                scene,
-                laser: Laser::new(inst, p.origin, p.direction),
-                receiver: Receiver::new(
-                    inst,
-                    p.origin + p.platform_to_scene(inst.receiver_offset_m.unwrap_or_default()),
-                    p.direction,
-                ),
-                gate,
-                sub_bins,
-                method: c.simulation.method,
-                heuristic: c.simulation.mis,
-                sun,
-                atmosphere: atmosphere.as_ref(),
-                max_order: c.simulation.max_order,
-                seed: c.seed,
-                pulse_id: p.id,
-            };
+            let setup = shared.setup(p, c.simulation.method);
             let t = Instant::now();
             let tally = simulate_pulse_in(&setup, c.simulation.rays_per_pulse, scratch);
             let secs = t.elapsed().as_secs_f64();
             bar.inc(1);
+            let (gate, sub_bins) = (&setup.gate, setup.sub_bins);
             (
-                waveform::waveform(p.id, tally, &gate, sub_bins, sigma, hv, &radiometry),
+                waveform::waveform(p.id, tally, gate, sub_bins, shared.sigma, hv, &radiometry),
                 secs,
             )
         })
         .unzip()
+}
+
+/// Pulses and rays per pulse of the pilot of `simulation.method: auto`: one chunk of rays per
+/// pulse (so the pilot's draws are those of the run's first chunk), pulses spread over the plan.
+const PILOT_PULSES: usize = 8;
+const PILOT_RAYS: u64 = crate::transport::CHUNK_RAYS;
+
+/// `simulation.method: auto`: the method whose estimate costs least for a given error on
+/// this campaign, and why. Each method traces the same pilot pulses; its score is the
+/// relative variance of the pilot's total laser energy (plus that of its solar power, with
+/// a sun) times the scene queries per pulse it made: variance falls as 1/rays and queries grow
+/// with rays, so the product is the cost of a given error, counted in queries (the same on any
+/// machine and thread count, so the choice, and the run's bytes, are too). A method that
+/// finds no energy where another does scores infinity; ties go to bdpt, the default.
+/// Returns the method and a note for the run log, the resolved campaign and report.md.
+pub fn choose_method(loaded: &Loaded, scene: &Scene, plan: &Plan) -> (Method, String) {
+    let n = plan.len().min(PILOT_PULSES);
+    if n == 0 {
+        return (
+            Method::Bdpt,
+            "simulation.method auto: no pulses to try, bdpt".into(),
+        );
+    }
+    let pulses: Vec<Pulse> = (0..n)
+        .map(|i| plan.pulse((i * plan.len() / n) as u64))
+        .collect();
+    let rays = loaded
+        .campaign
+        .simulation
+        .rays_per_pulse
+        .clamp(2, PILOT_RAYS);
+    let with_sun = loaded.campaign.sun.is_some();
+    let shared = Shared::new(loaded, scene);
+    let scores: Vec<(Method, f64)> = [Method::Bdpt, Method::Forward, Method::Backward]
+        .into_iter()
+        .map(|m| {
+            let tallies: Vec<_> = pulses
+                .par_iter()
+                .map(|p| simulate_pulse(&shared.setup(p, m), rays))
+                .collect();
+            let (mut e, mut var, mut sun, mut sun_var, mut queries) = (0.0, 0.0, 0.0, 0.0, 0);
+            for t in &tallies {
+                e += t.total_energy();
+                var += t.total_se().powi(2);
+                let (p, se) = t.solar_power();
+                sun += p;
+                sun_var += se * se;
+                queries += t.queries;
+            }
+            let relative = |v: f64, x: f64| if x > 0.0 { v / (x * x) } else { f64::INFINITY };
+            let mut rv = relative(var, e);
+            if with_sun {
+                rv += relative(sun_var, sun);
+            }
+            (m, rv * queries as f64 / n as f64)
+        })
+        .collect();
+    let table = scores
+        .iter()
+        .map(|(m, x)| format!("{} {x:.3e}", method_name(*m)))
+        .collect::<Vec<_>>()
+        .join(", ");
+    let best =
+        scores
+            .iter()
+            .filter(|(_, x)| x.is_finite())
+            .fold(None::<(Method, f64)>, |b, &(m, x)| match b {
+                Some((_, y)) if y <= x => b,
+                _ => Some((m, x)),
+            });
+    match best {
+        Some((m, _)) => (
+            m,
+            format!(
+                "simulation.method auto chose {}: relative variance x scene queries per pulse over {n} pilot pulses of {rays} rays (lower is better): {table}",
+                method_name(m)
+            ),
+        ),
+        None => (
+            Method::Bdpt,
+            format!(
+                "simulation.method auto: no method found energy in {n} pilot pulses of {rays} rays, bdpt (the default)"
+            ),
+        ),
+    }
+}
+
+/// A method as campaign files spell it.
+pub fn method_name(m: Method) -> &'static str {
+    match m {
+        Method::Bdpt => "bdpt",
+        Method::Forward => "forward",
+        Method::Backward => "backward",
+        Method::Auto => "auto",
+    }
 }
 
 /// Rays per second on this machine for this campaign, measured on up to 8 pulses spread

@@ -150,6 +150,7 @@ fn sub_campaign(
         campaign,
         doc: loaded.doc.clone(),
         scene_path: loaded.scene_path.clone(),
+        method_note: None,
     };
     let name = names.join("_").replace(['/', '\\', ' '], "-");
     Ok((sub, name))

@@ -66,6 +66,9 @@ pub fn report(
         total / received.max(1) as f64,
         if total > 0.0 { 100.0 * multiple / total } else { 0.0 },
     );
+    if let Some(note) = &loaded.method_note {
+        text += &format!("| method choice | {note} |\n");
+    }
     let n = received.max(1) as f64;
     text += &match lit {
         0 => "| scene BRF in the footprint, from the laser (π/ΔΩ)(Q_r/Q_e) | – (no laser energy in any gate) |\n".to_string(),

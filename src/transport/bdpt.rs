@@ -91,6 +91,7 @@ pub(super) fn walk(
         let last = *path.last().expect("a sub-path starts at its end point");
         let surfaces = path.len() - 1;
         let hit = scene.intersect(last.p, dir, f64::INFINITY, last.facet);
+        acc.tally.queries += 1;
         if light && surfaces >= 1 {
             if let Some(tq) = recv.hit_distance(last.p, dir) {
                 if hit.as_ref().is_none_or(|h| tq < h.t) && recv.accepts(-dir).is_some() {
@@ -290,6 +291,7 @@ fn connect_to_lights(setup: &PulseSetup, acc: &mut Accum, b: &mut Buffers) {
         let y = &cam[t - 1];
         let laser_light = [laser_end];
         if let Some((c, length)) = contribution(setup, &laser_light, cam) {
+            acc.tally.queries += 1;
             if !scene.occluded(laser_end.p, y.p, FacetId::NONE, y.facet) {
                 let w = mis_weight(setup, &laser_light, cam, &mut b.scratch);
                 acc.add(length, c * w, t - 1, class_of(setup, y));
@@ -304,6 +306,7 @@ fn connect_to_lights(setup: &PulseSetup, acc: &mut Accum, b: &mut Buffers) {
                 q_sun,
             )];
             if let Some((c, _)) = contribution(setup, &sun_light, cam) {
+                acc.tally.queries += 1;
                 if !scene.occluded_towards(y.p, -sun.dir, y.facet) {
                     let w = mis_weight(setup, &sun_light, cam, &mut b.scratch);
                     acc.add_solar(c * w);
@@ -349,6 +352,7 @@ fn connect_subpaths(
                 continue;
             };
             let (x, y) = (&light[s - 1], &cam[t - 1]);
+            acc.tally.queries += 1;
             if scene.occluded(x.p, y.p, x.facet, y.facet) {
                 continue;
             }

@@ -82,7 +82,8 @@ impl PulseSetup<'_> {
         match self.method {
             Method::Forward => (full, 1),
             Method::Backward => (1, full),
-            Method::Bdpt => (full, full),
+            // auto is resolved to one of the others before any pulse is traced
+            Method::Bdpt | Method::Auto => (full, full),
         }
     }
 }

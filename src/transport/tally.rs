@@ -32,6 +32,9 @@ pub struct Tally {
     /// Σ over rays of each ray's received solar power, W, and of its square.
     pub solar_sum: f64,
     pub solar_sq: f64,
+    /// Scene queries (closest hits and visibility tests) the rays made: their cost, counted
+    /// the same on any machine.
+    pub queries: u64,
 }
 
 impl Tally {
@@ -47,6 +50,7 @@ impl Tally {
             total_sq: 0.0,
             rays: 0,
             paths: 0,
+            queries: 0,
             solar_sum: 0.0,
             solar_sq: 0.0,
         }
@@ -68,6 +72,7 @@ impl Tally {
         self.paths += o.paths;
         self.solar_sum += o.solar_sum;
         self.solar_sq += o.solar_sq;
+        self.queries += o.queries;
     }
 
     /// Mean received solar power over the receiver band, W, and its standard error.
@@ -168,7 +173,7 @@ impl Accum {
         zero(&mut t.order_sum, setup.max_order as usize);
         zero(&mut t.order_sq, setup.max_order as usize);
         (t.outside, t.total_sq, t.rays, t.paths) = (0.0, 0.0, 0, 0);
-        (t.solar_sum, t.solar_sq) = (0.0, 0.0);
+        (t.solar_sum, t.solar_sq, t.queries) = (0.0, 0.0, 0);
         self.t0 = setup.gate.t0;
         self.sub_dt = setup.gate.dt / sub_bins as f64;
         self.sub_bins = sub_bins;

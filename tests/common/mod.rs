@@ -117,6 +117,23 @@ pub fn lidarsim(args: &[&str]) -> (i32, String, String) {
     )
 }
 
+/// `lidarsim run CAMPAIGN --out OUT [--threads N]`, which must succeed; returns its stderr.
+pub fn run_cli(campaign: &Path, out: &Path, threads: Option<usize>) -> String {
+    let threads = threads.map(|n| n.to_string());
+    let mut args = vec![
+        "run",
+        campaign.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ];
+    if let Some(n) = &threads {
+        args.extend(["--threads", n.as_str()]);
+    }
+    let (code, _, err) = lidarsim(&args);
+    assert_eq!(code, 0, "{err}");
+    err
+}
+
 /// Whether python3 imports `modules` (as an import statement lists them); if not, the test
 /// says so on stderr, or fails under `LIDARSIM_REQUIRE_TOOLS=1`.
 pub fn python_with(modules: &str, pip: &str) -> bool {

@@ -1,0 +1,96 @@
+//! `simulation.method: auto`: a pilot picks the method that costs least for a given error, and
+//! the run is then the run of that method, byte for byte.
+
+mod common;
+use common::*;
+
+/// (chosen method, the resolved campaign's text, report.md) of an auto run, after checking that
+/// its waveforms are those of a run with the chosen method written out, on 1 and 2 threads.
+fn auto_run(name: &str, inst: &Inst) -> (String, String, String) {
+    let dir = tmp(name);
+    let scene = plane_scene(&dir, 0.3, 200.0);
+    let text = |method: &str| {
+        campaign(
+            &scene,
+            inst,
+            [0.0, 0.0, 100.0],
+            [0.0, 0.0, -1.0],
+            method,
+            4096,
+            3,
+        )
+    };
+    let camp = write(&dir, "auto.yaml", &text("auto"));
+    let out = dir.join("auto");
+    let err = run_cli(&camp, &out, Some(2));
+    assert!(err.contains("simulation.method auto chose"), "{err}");
+    let resolved = std::fs::read_to_string(out.join("campaign.resolved.yaml")).unwrap();
+    let chosen = ["bdpt", "forward", "backward"]
+        .into_iter()
+        .find(|m| resolved.contains(&format!("method: {m}\n")))
+        .unwrap_or_else(|| panic!("{resolved}"))
+        .to_string();
+    // the scores in the note: the chosen one is the least
+    let note = resolved.lines().next().unwrap();
+    let score = |m: &str| -> f64 {
+        let at = note
+            .find(&format!(" {m} "))
+            .unwrap_or_else(|| panic!("{note}"))
+            + m.len()
+            + 2;
+        note[at..]
+            .split([',', ' '])
+            .next()
+            .unwrap()
+            .parse()
+            .unwrap()
+    };
+    for m in ["bdpt", "forward", "backward"] {
+        assert!(score(&chosen) <= score(m), "{note}");
+    }
+    let report = std::fs::read_to_string(out.join("report.md")).unwrap();
+    // the same campaign with the method written out, on one thread: the same waveforms
+    let explicit = write(&dir, "explicit.yaml", &text(&chosen));
+    let out1 = dir.join("explicit");
+    run_cli(&explicit, &out1, Some(1));
+    let part = "waveforms/part-00000.parquet";
+    assert!(
+        std::fs::read(out.join(part)).unwrap() == std::fs::read(out1.join(part)).unwrap(),
+        "auto's waveforms differ from {chosen}'s"
+    );
+    (chosen, resolved, report)
+}
+
+/// A narrow footprint in a wide field of view: receiver paths almost never find the lit spot,
+/// so backward tracing is the costliest by far; a wide footprint in a narrow field of view is
+/// the mirror case for forward tracing.
+#[test]
+fn auto_avoids_the_method_that_cannot_find_the_light() {
+    let narrow_beam = Inst {
+        fp_mrad: 0.5,
+        fov_mrad: 100.0,
+        area: 0.01,
+        ..Inst::default()
+    };
+    let (chosen, resolved, report) = auto_run("auto_narrow_beam", &narrow_beam);
+    println!("narrow beam: {}", resolved.lines().next().unwrap());
+    assert_ne!(chosen, "backward");
+    assert!(
+        resolved.starts_with("# simulation.method auto chose"),
+        "{resolved}"
+    );
+    assert!(
+        report.contains("| method choice | simulation.method auto chose"),
+        "{report}"
+    );
+
+    let narrow_view = Inst {
+        fp_mrad: 100.0,
+        fov_mrad: 0.5,
+        area: 0.01,
+        ..Inst::default()
+    };
+    let (chosen, resolved, _) = auto_run("auto_narrow_view", &narrow_view);
+    println!("narrow view: {}", resolved.lines().next().unwrap());
+    assert_ne!(chosen, "forward");
+}

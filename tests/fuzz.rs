@@ -26,6 +26,10 @@ instrument:
   bin_ns: 0.5
   bandwidth_nm: 1.0
   range_gate: { start_ns: 0, bins: 2000 }
+  noise: { electronic_sd_photons: 0.5 }
+  detector_response_fwhm_ns: 1.5
+  digitiser: { gain: 4, offset: 10, bits: 12, saturation: 4000 }
+  receiver_offset_m: [0.0, 0.3, 0.0]
 platform:
   kind: als
   altitude_m: 100
@@ -35,11 +39,18 @@ platform:
   scanner: { pattern: oscillating, scan_angle_deg: [-10, 10], scan_frequency_hz: 20 }
 simulation: { method: bdpt, rays_per_pulse: 10, max_order: 3 }
 sun: { zenith_deg: 30, azimuth_deg: 0, irradiance_w_m2_um: 600 }
+atmosphere:
+  layers:
+    - { scale_height_m: 8000, optical_depth: { 532: 0.12, 1064: 0.008 } }
+    - { scale_height_m: 1500, optical_depth: 0.1 }
+frame: { crs: EPSG:32631, origin: [500000.0, 4800000.0, 120.0] }
+products: { points: true, points_format: laz, dsm: { resolution_m: 2 } }
 sweep:
   platform.altitude_m: [100, 200]
 ";
 
 const SCENE: &str = "name: s
+repeat: true
 materials:
   soil: { reflectance: { 1064: 0.3, 532: 0.1 } }
   leaf: { reflectance: 0.4, transmittance: 0.4 }

@@ -58,31 +58,31 @@ pub fn waveform_batch(w: &[Waveform]) -> arrow_array::RecordBatch {
             ),
             (
                 "laser_photons",
-                list_f32(w.iter().map(|r| r.laser_photons.clone())),
+                list_f32(w.iter().map(|r| r.laser_photons.as_slice())),
             ),
             (
                 "impulse_energy_j",
-                list_f32(w.iter().map(|r| r.impulse_energy_j.clone())),
+                list_f32(w.iter().map(|r| r.impulse_energy_j.as_slice())),
             ),
             (
                 "impulse_energy_se_j",
-                list_f32(w.iter().map(|r| r.impulse_energy_se_j.clone())),
+                list_f32(w.iter().map(|r| r.impulse_energy_se_j.as_slice())),
             ),
             (
                 "ground_energy_j",
-                list_f32(w.iter().map(|r| r.class_energy_j[0].clone())),
+                list_f32(w.iter().map(|r| r.class_energy_j[0].as_slice())),
             ),
             (
                 "vegetation_energy_j",
-                list_f32(w.iter().map(|r| r.class_energy_j[1].clone())),
+                list_f32(w.iter().map(|r| r.class_energy_j[1].as_slice())),
             ),
             (
                 "building_energy_j",
-                list_f32(w.iter().map(|r| r.class_energy_j[2].clone())),
+                list_f32(w.iter().map(|r| r.class_energy_j[2].as_slice())),
             ),
             (
                 "other_energy_j",
-                list_f32(w.iter().map(|r| r.class_energy_j[3].clone())),
+                list_f32(w.iter().map(|r| r.class_energy_j[3].as_slice())),
             ),
             (
                 "received_energy_j",
@@ -98,11 +98,11 @@ pub fn waveform_batch(w: &[Waveform]) -> arrow_array::RecordBatch {
             ),
             (
                 "order_energy_j",
-                list_f64(w.iter().map(|r| r.order_energy_j.clone())),
+                list_f64(w.iter().map(|r| r.order_energy_j.as_slice())),
             ),
             (
                 "order_energy_se_j",
-                list_f64(w.iter().map(|r| r.order_energy_se_j.clone())),
+                list_f64(w.iter().map(|r| r.order_energy_se_j.as_slice())),
             ),
             (
                 "received_energy_se_j",

@@ -313,17 +313,45 @@ fn bounds(params: &[Params], hint: f64, n: usize) -> Option<(usize, usize)> {
 
 /// Adds bin-integrated Gaussians to `m`, whose first bin has index `offset`.
 fn add_gaussians(m: &mut [f64], offset: f64, params: &[Params]) {
+    add_gaussians_keeping(m, offset, params, None);
+}
+
+/// [`add_gaussians`], keeping in `edges` (when given) Φ at the edges of the bins each component
+/// touches, component after component: the solver's Jacobian at these parameters needs the
+/// same values, which are most of its cost to compute again.
+fn add_gaussians_keeping(
+    m: &mut [f64],
+    offset: f64,
+    params: &[Params],
+    mut edges: Option<&mut Vec<f64>>,
+) {
+    if let Some(e) = edges.as_deref_mut() {
+        e.clear();
+    }
     let n = m.len() as f64;
     for p in params {
-        let a = (p[0] - offset - 8.0 * p[1] - 1.0).floor().clamp(0.0, n) as usize;
-        let b = (p[0] - offset + 8.0 * p[1] + 1.0).ceil().clamp(0.0, n) as usize;
+        let (a, b) = span(p, offset, n);
         let mut prev = normal_cdf((offset + a as f64 - p[0]) / p[1]);
+        if let Some(e) = edges.as_deref_mut() {
+            e.push(prev);
+        }
         for (i, mi) in m.iter_mut().enumerate().take(b).skip(a) {
             let next = normal_cdf((offset + (i + 1) as f64 - p[0]) / p[1]);
             *mi += p[2] * (next - prev);
             prev = next;
+            if let Some(e) = edges.as_deref_mut() {
+                e.push(next);
+            }
         }
     }
+}
+
+/// Bins [a, b) of a window of `n` bins starting at bin `offset` that a component touches:
+/// ±8σ holds all but 1e-15 of it.
+fn span(p: &Params, offset: f64, n: f64) -> (usize, usize) {
+    let a = (p[0] - offset - 8.0 * p[1] - 1.0).floor().clamp(0.0, n) as usize;
+    let b = (p[0] - offset + 8.0 * p[1] + 1.0).ceil().clamp(0.0, n) as usize;
+    (a, b.max(a))
 }
 
 /// The bins a group is fitted on.
@@ -357,19 +385,22 @@ pub(super) fn pdf(z: f64) -> f64 {
 }
 
 impl Window<'_> {
-    /// Bins a component touches: ±8σ holds all but 1e-15 of it.
+    /// Bins a component touches (see [`span`]).
     pub(super) fn reach(&self, p: &Params) -> (usize, usize) {
-        let n = self.y.len();
-        let a = (p[0] - self.offset - 8.0 * p[1] - 1.0).floor();
-        let b = (p[0] - self.offset + 8.0 * p[1] + 1.0).ceil();
-        let a = a.clamp(0.0, n as f64) as usize;
-        let b = b.clamp(0.0, n as f64) as usize;
-        (a, b)
+        span(p, self.offset, self.y.len() as f64)
     }
 
     pub(super) fn model(&self, params: &[Params]) -> Vec<f64> {
         let mut m = self.base.clone();
         add_gaussians(&mut m, self.offset, params);
+        m
+    }
+
+    /// [`Window::model`], with Φ at each component's bin edges kept in `edges` (see
+    /// [`add_gaussians_keeping`]).
+    pub(super) fn model_keeping(&self, params: &[Params], edges: &mut Vec<f64>) -> Vec<f64> {
+        let mut m = self.base.clone();
+        add_gaussians_keeping(&mut m, self.offset, params, Some(edges));
         m
     }
 

@@ -2,7 +2,6 @@
 //! scoring for the curvature and a dense Cholesky solve for the step.
 
 use super::fit::{pdf, Params, Window};
-use crate::waveform::normal_cdf;
 
 impl Window<'_> {
     /// Levenberg-Marquardt on the Poisson deviance: gradient Σ (1 - y/m) ∂m/∂θ and the
@@ -11,7 +10,9 @@ impl Window<'_> {
     pub(super) fn fit(&self, mut params: Vec<Params>, floor: f64) -> Option<(Vec<Params>, f64)> {
         let np = 3 * params.len();
         let nb = self.y.len();
-        let mut m = self.model(&params);
+        // Φ at the bin edges of the current parameters, from the model that was made with them
+        let mut edges = Vec::new();
+        let mut m = self.model_keeping(&params, &mut edges);
         let mut dev = self.deviance(&m);
         if !dev.is_finite() {
             return None;
@@ -21,7 +22,7 @@ impl Window<'_> {
         let mut h = vec![0.0; np * np];
         let mut g = vec![0.0; np];
         for _ in 0..100 {
-            self.jacobian(&params, &mut jac);
+            self.jacobian(&params, &edges, &mut jac);
             self.scoring(&jac, &m, &mut h, &mut g);
             let dmax = (0..np).map(|a| h[a * np + a]).fold(0.0, f64::max);
             if !(dmax.is_finite() && dmax > 0.0) {
@@ -32,7 +33,7 @@ impl Window<'_> {
                 model: tm,
                 deviance: td,
                 step,
-            }) = self.damped_step(&params, &h, &g, dev, dmax, floor, &mut lambda)
+            }) = self.damped_step(&params, &h, &g, (dev, dmax, floor), &mut lambda, &mut edges)
             else {
                 break; // no downhill step left: a minimum within float precision
             };
@@ -61,19 +62,22 @@ impl Window<'_> {
 
     /// ∂m_i/∂(centre, sigma, area) of every component over the bins it reaches (row-major,
     /// one row per bin): the model integrates each Gaussian over a bin, so the derivatives
-    /// are differences of the normal pdf and cdf at the bin's edges.
-    fn jacobian(&self, params: &[Params], jac: &mut [f64]) {
+    /// are differences of the normal pdf and cdf at the bin's edges. `edges` holds Φ at those
+    /// edges, as the model at `params` computed them (see `Window::model_keeping`).
+    fn jacobian(&self, params: &[Params], edges: &[f64], jac: &mut [f64]) {
         let np = 3 * params.len();
         jac.iter_mut().for_each(|v| *v = 0.0);
+        let mut at = 0;
         for (c, p) in params.iter().enumerate() {
             let (a, b) = self.reach(p);
             let s = p[1];
+            let cdf = &edges[at..at + b - a + 1];
+            at += b - a + 1;
             let mut zl = (self.offset + a as f64 - p[0]) / s;
-            let mut cl = normal_cdf(zl);
+            let mut cl = cdf[0];
             let mut pl = pdf(zl);
-            for i in a..b {
-                let zh = zl + 1.0 / s;
-                let ch = normal_cdf(zh);
+            for (i, &ch) in (a..b).zip(&cdf[1..]) {
+                let zh = (self.offset + (i + 1) as f64 - p[0]) / s;
                 let ph = pdf(zh);
                 let row = &mut jac[i * np + 3 * c..i * np + 3 * c + 3];
                 row[0] = p[2] * (pl - ph) / s;
@@ -117,19 +121,20 @@ impl Window<'_> {
         }
     }
 
-    /// The first damped step that does not raise the deviance, raising the damping `lambda`
-    /// until one does (at most 12 tries) and lowering it after; None when none does.
-    #[allow(clippy::too_many_arguments)]
+    /// The first damped step that does not raise the deviance `dev`, raising the damping
+    /// `lambda` until one does (at most 12 tries) and lowering it after; None when none does.
+    /// `dmax` is the largest diagonal of `h`, `floor` the least sigma. `edges` takes Φ at the
+    /// bin edges of the step it returns.
     fn damped_step(
         &self,
         params: &[Params],
         h: &[f64],
         g: &[f64],
-        dev: f64,
-        dmax: f64,
-        floor: f64,
+        (dev, dmax, floor): (f64, f64, f64),
         lambda: &mut f64,
+        edges: &mut Vec<f64>,
     ) -> Option<Step> {
+        let mut trial_edges = Vec::with_capacity(edges.capacity());
         let np = g.len();
         for _ in 0..12 {
             let mut aug = h.to_vec();
@@ -152,10 +157,11 @@ impl Window<'_> {
                     ]
                 })
                 .collect();
-            let model = self.model(&trial);
+            let model = self.model_keeping(&trial, &mut trial_edges);
             let deviance = self.deviance(&model);
             if deviance.is_finite() && deviance <= dev {
                 *lambda = (*lambda / 3.0).max(1e-12);
+                std::mem::swap(edges, &mut trial_edges);
                 return Some(Step {
                     params: trial,
                     model,

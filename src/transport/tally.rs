@@ -35,6 +35,10 @@ pub struct Tally {
     /// Scene queries (closest hits and visibility tests) the rays made: their cost, counted
     /// the same on any machine.
     pub queries: u64,
+    /// Bins [lo, hi) that received energy in the gate (lo = hi: none). Every per-bin and
+    /// per-sub-bin sum is zero outside them, so a pulse of few paths in a long gate (3152
+    /// bins of 0.067 ns over a forest) is reset and turned into a waveform over its span only.
+    pub lit: (usize, usize),
 }
 
 impl Tally {
@@ -53,7 +57,20 @@ impl Tally {
             queries: 0,
             solar_sum: 0.0,
             solar_sq: 0.0,
+            lit: (0, 0),
         }
+    }
+
+    /// Adds bins [lo, hi) to the span that received energy.
+    fn light(&mut self, lo: usize, hi: usize) {
+        if lo >= hi {
+            return;
+        }
+        self.lit = if self.lit.0 >= self.lit.1 {
+            (lo, hi)
+        } else {
+            (self.lit.0.min(lo), self.lit.1.max(hi))
+        };
     }
 
     pub(super) fn merge(&mut self, o: &Tally) {
@@ -73,6 +90,7 @@ impl Tally {
         self.solar_sum += o.solar_sum;
         self.solar_sq += o.solar_sq;
         self.queries += o.queries;
+        self.light(o.lit.0, o.lit.1);
     }
 
     /// Mean received solar power over the receiver band, W, and its standard error.
@@ -106,13 +124,10 @@ impl Tally {
         se(self.order_sum.iter().sum(), self.total_sq, self.rays)
     }
 
-    /// Standard error of each bin's impulse energy, J.
-    pub fn bin_se(&self, sub_bins: usize) -> Vec<f64> {
-        self.sub
-            .chunks(sub_bins)
-            .zip(&self.bin_sq)
-            .map(|(c, q)| se(c.iter().sum(), *q, self.rays))
-            .collect()
+    /// Standard error of bin `b`'s impulse energy, J.
+    pub fn bin_se(&self, b: usize, sub_bins: usize) -> f64 {
+        let sum = self.sub[b * sub_bins..(b + 1) * sub_bins].iter().sum();
+        se(sum, self.bin_sq[b], self.rays)
     }
 }
 
@@ -156,7 +171,8 @@ impl Accum {
     }
 
     /// Ready for another pulse: every sum zero, sized for `setup`'s gate and orders, the
-    /// memory kept.
+    /// memory kept. The per-bin sums are zero outside the last pulse's lit span, so only
+    /// that span is cleared before they are sized for the new gate.
     pub(super) fn reset(&mut self, setup: &PulseSetup) {
         let (bins, sub_bins) = (setup.gate.bins, setup.sub_bins);
         let zero = |v: &mut Vec<f64>, n: usize| {
@@ -164,12 +180,21 @@ impl Accum {
             v.resize(n, 0.0);
         };
         let t = &mut self.tally;
-        zero(&mut t.sub, bins * sub_bins);
-        zero(&mut t.sub_moment, bins * sub_bins);
-        zero(&mut t.bin_sq, bins);
+        let (lo, hi) = t.lit;
+        let old = self.sub_bins;
+        let span = |v: &mut Vec<f64>, (a, b): (usize, usize), n: usize| {
+            let end = b.min(v.len());
+            v[a.min(end)..end].fill(0.0);
+            v.resize(n, 0.0);
+        };
+        span(&mut t.sub, (lo * old, hi * old), bins * sub_bins);
+        span(&mut t.sub_moment, (lo * old, hi * old), bins * sub_bins);
+        span(&mut t.bin_sq, (lo, hi), bins);
         for c in &mut t.class_bins {
-            zero(c, bins);
+            span(c, (lo, hi), bins);
         }
+        span(&mut self.ray_bin, (lo, hi), bins);
+        t.lit = (0, 0);
         zero(&mut t.order_sum, setup.max_order as usize);
         zero(&mut t.order_sq, setup.max_order as usize);
         (t.outside, t.total_sq, t.rays, t.paths) = (0.0, 0.0, 0, 0);
@@ -178,7 +203,6 @@ impl Accum {
         self.sub_dt = setup.gate.dt / sub_bins as f64;
         self.sub_bins = sub_bins;
         zero(&mut self.ray_order, setup.max_order as usize);
-        zero(&mut self.ray_bin, bins);
         self.touched_orders.clear();
         self.touched_bins.clear();
         self.ray_solar = 0.0;
@@ -203,6 +227,7 @@ impl Accum {
             self.tally.sub[i] += energy;
             self.tally.sub_moment[i] += energy * (x - i as f64);
             let b = i / self.sub_bins;
+            self.tally.light(b, b + 1);
             self.tally.class_bins[class][b] += energy;
             if self.ray_bin[b] == 0.0 {
                 self.touched_bins.push(b as u32);

@@ -160,7 +160,10 @@ pub fn waveform(
     photon_energy_j: f64,
     radiometry: &Radiometry,
 ) -> Waveform {
-    let impulse = impulse_bins(&tally.sub, sub_bins);
+    // every per-bin sum is zero outside the lit span: those bins are zero without a sum
+    let (lo, hi) = (tally.lit.0.min(gate.bins), tally.lit.1.min(gate.bins));
+    let lit = |f: &dyn Fn(usize) -> f64| -> Vec<f64> { spanned(gate.bins, lo, hi, f) };
+    let impulse = lit(&|b| tally.sub[b * sub_bins..(b + 1) * sub_bins].iter().sum());
     let convolved = convolve(&tally.sub, &tally.sub_moment, sub_bins, gate, pulse_sigma_s);
     let n = tally.rays.max(1) as f64;
     let (solar_w, solar_se) = tally.solar_power();
@@ -183,7 +186,10 @@ pub fn waveform(
             .map(|e| (e / n / photon_energy_j) as f32)
             .collect(),
         impulse_energy_j: impulse.iter().map(|e| (e / n) as f32).collect(),
-        impulse_energy_se_j: tally.bin_se(sub_bins).iter().map(|&e| e as f32).collect(),
+        impulse_energy_se_j: lit(&|b| tally.bin_se(b, sub_bins))
+            .iter()
+            .map(|&e| e as f32)
+            .collect(),
         received_energy_j: tally.total_energy(),
         outside_gate_energy_j: tally.outside / n,
         order_energy_j: tally.order_energy(),
@@ -199,11 +205,22 @@ pub fn waveform(
             f32::NAN
         },
         class_energy_j: std::array::from_fn(|k| {
-            tally.class_bins[k].iter().map(|e| (e / n) as f32).collect()
+            spanned(gate.bins, lo, hi, &|b| (tally.class_bins[k][b] / n) as f32)
         }),
         rays: tally.rays as u32,
         paths_per_ray: (tally.paths as f64 / n) as f32,
     }
+}
+
+/// `len` values, `f(b)` for b in [lo, hi) and zero elsewhere. The zeros are written, not
+/// asked of the allocator (`vec![0.0; n]` is calloc, whose fresh pages a part's thousand
+/// waveforms then fault in one by one: more system time than the sums saved).
+fn spanned<T: Copy + Default>(len: usize, lo: usize, hi: usize, f: &dyn Fn(usize) -> T) -> Vec<T> {
+    let mut v = Vec::with_capacity(len);
+    v.resize(lo, T::default());
+    v.extend((lo..hi).map(f));
+    v.resize(len, T::default());
+    v
 }
 
 #[cfg(test)]

@@ -350,8 +350,17 @@ fn a_georeferenced_survey_is_the_local_one_shifted_into_its_crs() {
             origin[0], origin[1], origin[2]
         ),
     );
-    let (a, b) = (dir.join("local"), dir.join("geo"));
-    for (camp, out) in [(&local, &a), (&geo, &b)] {
+    // the same georeferenced survey written as LAS, for laspy to read beside the LAZ
+    let geo_las = write(
+        &dir,
+        "geo_las.yaml",
+        &format!(
+            "name: geo_las\n{base}products: {{ points: true, dsm: {{ resolution_m: 4 }}, points_format: las }}\nframe: {{ crs: EPSG:32631, origin: [{}, {}, {}] }}\n",
+            origin[0], origin[1], origin[2]
+        ),
+    );
+    let (a, b, c) = (dir.join("local"), dir.join("geo"), dir.join("geo_las"));
+    for (camp, out) in [(&local, &a), (&geo, &b), (&geo_las, &c)] {
         let (code, _, err) = lidarsim(&[
             "run",
             camp.to_str().unwrap(),
@@ -431,6 +440,13 @@ assert len(f.points) == {n}, len(f.points)
 wkt = [v for v in f.header.vlrs if v.record_id == 2112][0].string
 assert "UTM zone 31N" in wkt, wkt
 assert abs(float(f.x.min()) - {xmin}) < 0.0011, f.x.min()
+# the LAS of the same survey: the same points, fields and CRS
+g = laspy.read(sys.argv[1] + "/../geo_las/points.las")
+assert not g.header.are_points_compressed and f.header.are_points_compressed
+assert [v for v in g.header.vlrs if v.record_id == 2112][0].string == wkt
+for d in ["X", "Y", "Z", "gps_time", "return_number", "number_of_returns", "classification",
+          "intensity", "pulse_id"]:
+    assert np.array_equal(np.asarray(f[d]), np.asarray(g[d])), d
 with rasterio.open(sys.argv[1] + "/dsm/dsm.tif") as r:
     assert r.crs.to_epsg() == 32631, r.crs
     assert r.nodata == -9999.0, r.nodata

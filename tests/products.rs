@@ -342,23 +342,18 @@ fn a_georeferenced_survey_is_the_local_one_shifted_into_its_crs() {
         "local.yaml",
         &format!("name: local\n{base}products: {{ points: true, dsm: {{ resolution_m: 4 }} }}\n"),
     );
-    let geo = write(
-        &dir,
-        "geo.yaml",
-        &format!(
-            "name: geo\n{base}products: {{ points: true, dsm: {{ resolution_m: 4 }}, points_format: laz }}\nframe: {{ crs: EPSG:32631, origin: [{}, {}, {}] }}\n",
-            origin[0], origin[1], origin[2]
-        ),
-    );
-    // the same georeferenced survey written as LAS, for laspy to read beside the LAZ
-    let geo_las = write(
-        &dir,
-        "geo_las.yaml",
-        &format!(
-            "name: geo_las\n{base}products: {{ points: true, dsm: {{ resolution_m: 4 }}, points_format: las }}\nframe: {{ crs: EPSG:32631, origin: [{}, {}, {}] }}\n",
-            origin[0], origin[1], origin[2]
-        ),
-    );
+    // the georeferenced survey as LAZ, and as LAS for laspy to read beside it
+    let georeferenced = |name: &str, format: &str| {
+        write(
+            &dir,
+            &format!("{name}.yaml"),
+            &format!(
+                "name: {name}\n{base}products: {{ points: true, dsm: {{ resolution_m: 4 }}, points_format: {format} }}\nframe: {{ crs: EPSG:32631, origin: [{}, {}, {}] }}\n",
+                origin[0], origin[1], origin[2]
+            ),
+        )
+    };
+    let (geo, geo_las) = (georeferenced("geo", "laz"), georeferenced("geo_las", "las"));
     let (a, b, c) = (dir.join("local"), dir.join("geo"), dir.join("geo_las"));
     for (camp, out) in [(&local, &a), (&geo, &b), (&geo_las, &c)] {
         let (code, _, err) = lidarsim(&[

@@ -136,6 +136,7 @@ pub struct GenerateArgs {
 
 /// Parses the arguments and runs the command; returns the process exit code.
 pub fn main() -> i32 {
+    crate::progress::tune_allocator();
     let cli = match Cli::try_parse() {
         Ok(c) => c,
         Err(e) => {

@@ -28,21 +28,16 @@ impl Window<'_> {
             if !(dmax.is_finite() && dmax > 0.0) {
                 return None;
             }
+            // None: the next step is too small to mean anything, or no step goes downhill
+            // (a minimum within float precision)
             let Some(Step {
                 params: trial,
                 model: tm,
                 deviance: td,
-                step,
             }) = self.damped_step(&params, &h, &g, (dev, dmax, floor), &mut lambda, &mut edges)
             else {
-                break; // no downhill step left: a minimum within float precision
+                break;
             };
-            // Far below any statistical or geometric meaning: 1e-4 bin is 0.015 mm at 1 ns.
-            let small = params.iter().enumerate().all(|(c, p)| {
-                step[3 * c].abs() < 1e-4
-                    && step[3 * c + 1].abs() < 1e-4 * p[1]
-                    && step[3 * c + 2].abs() < 1e-5 * p[2].max(1.0)
-            });
             let gain = dev - td;
             params = trial;
             m = tm;
@@ -53,7 +48,7 @@ impl Window<'_> {
             // ~0.02 % an iteration for a hundred iterations: once a step removes less than
             // 0.1 % of that excess, further steps change nothing the fit can mean.
             let excess = dev - nb as f64;
-            if small || gain < 1e-6 || gain < 1e-3 * excess {
+            if gain < 1e-6 || gain < 1e-3 * excess {
                 break;
             }
         }
@@ -122,7 +117,10 @@ impl Window<'_> {
     }
 
     /// The first damped step that does not raise the deviance `dev`, raising the damping
-    /// `lambda` until one does (at most 12 tries) and lowering it after; None when none does.
+    /// `lambda` until one does (at most 12 tries) and lowering it after; None when none does,
+    /// or when a step is too small to mean anything: then the fit has converged, and the
+    /// step is not worth the model it would cost to try (most fits ended with such a step,
+    /// often tried several times as float noise in the deviance rejected it).
     /// `dmax` is the largest diagonal of `h`, `floor` the least sigma. `edges` takes Φ at the
     /// bin edges of the step it returns.
     fn damped_step(
@@ -146,6 +144,15 @@ impl Window<'_> {
                 *lambda *= 10.0;
                 continue;
             }
+            // Far below any statistical or geometric meaning: 1e-4 bin is 0.015 mm at 1 ns.
+            let small = params.iter().enumerate().all(|(c, p)| {
+                step[3 * c].abs() < 1e-4
+                    && step[3 * c + 1].abs() < 1e-4 * p[1]
+                    && step[3 * c + 2].abs() < 1e-5 * p[2].max(1.0)
+            });
+            if small {
+                return None;
+            }
             let trial: Vec<Params> = params
                 .iter()
                 .enumerate()
@@ -166,7 +173,6 @@ impl Window<'_> {
                     params: trial,
                     model,
                     deviance,
-                    step,
                 });
             }
             *lambda *= 4.0;
@@ -180,7 +186,6 @@ struct Step {
     params: Vec<Params>,
     model: Vec<f64>,
     deviance: f64,
-    step: Vec<f64>,
 }
 
 /// Solves A x = b in place for a symmetric positive definite A (row-major n×n).

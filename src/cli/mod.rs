@@ -135,7 +135,37 @@ pub struct GenerateArgs {
 }
 
 /// Parses the arguments and runs the command; returns the process exit code.
+/// Why this build cannot run on this CPU, if it cannot: `.cargo/config.toml` builds for
+/// x86-64-v3, and a CPU without its instructions would otherwise stop on the first one it
+/// meets, with no message.
+fn unsupported_cpu() -> Option<String> {
+    #[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
+    {
+        let lacks = |f: bool, name: &str| (!f).then(|| name.to_string());
+        let missing: Vec<String> = [
+            lacks(std::arch::is_x86_feature_detected!("avx2"), "avx2"),
+            lacks(std::arch::is_x86_feature_detected!("bmi2"), "bmi2"),
+            lacks(std::arch::is_x86_feature_detected!("fma"), "fma"),
+            lacks(std::arch::is_x86_feature_detected!("lzcnt"), "lzcnt"),
+        ]
+        .into_iter()
+        .flatten()
+        .collect();
+        if !missing.is_empty() {
+            return Some(format!(
+                "this lidarsim was built for x86-64-v3 CPUs and this CPU lacks {}: rebuild it with RUSTFLAGS=\"-C target-cpu=native\" cargo build --release",
+                missing.join(", ")
+            ));
+        }
+    }
+    None
+}
+
 pub fn main() -> i32 {
+    if let Some(why) = unsupported_cpu() {
+        eprintln!("error: {why}");
+        return 1;
+    }
     crate::progress::tune_allocator();
     let cli = match Cli::try_parse() {
         Ok(c) => c,

@@ -59,3 +59,42 @@ fn orchard_check_reports_counts_and_memory() {
         "scene {mb} MB, process peak {peak} MB"
     );
 }
+
+/// The bench's repeated orchard is named by an absolute path in its campaign, as every other
+/// bench scene is: with a relative output folder (the default, runs/bench) the campaign,
+/// written one folder down, named a scene that did not exist there.
+#[test]
+fn bench_names_the_repeated_orchard_by_an_absolute_path() {
+    let Some(_) = rami_dir() else { return };
+    use lidarsim::bench::campaigns as bc;
+    let repo = lidarsim::testdata::repo();
+    let abs = tmp("bench_relative");
+    let cwd = std::env::current_dir().unwrap();
+    let dir = abs.strip_prefix(&cwd).unwrap_or(&abs);
+    let planned = bc::plan(
+        dir,
+        &repo.join("pipelines/bench"),
+        &repo.join("scenes/rami_wco.yaml"),
+        false,
+    )
+    .unwrap();
+    let text = planned
+        .iter()
+        .find_map(|p| match p {
+            bc::Planned::Run { name, text, .. } if name == "orchard_gedi_sun_repeated" => {
+                Some(text.clone())
+            }
+            _ => None,
+        })
+        .expect("the repeated orchard row is planned");
+    let scene = text
+        .lines()
+        .find_map(|l| l.strip_prefix("scene: "))
+        .expect("the campaign names its scene");
+    let scene = std::path::Path::new(scene.trim().trim_matches('"').trim_matches('\''));
+    assert!(
+        scene.is_absolute() && scene.is_file(),
+        "{}",
+        scene.display()
+    );
+}

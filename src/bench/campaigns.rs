@@ -234,7 +234,8 @@ fn repeated_orchard(dir: &Path, scene: &Path) -> Result<PathBuf> {
     );
     let out = dir.join("rami_wco_repeated.yaml");
     crate::fsutil::write_text_atomic(&out, &text)?;
-    Ok(out)
+    // absolute, as the other scenes are: the campaign that names it lies in another folder
+    Ok(out.canonicalize().unwrap_or(out))
 }
 
 /// The generated forest of the bench (made once, then reused): the paper's stand size in full

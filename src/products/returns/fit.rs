@@ -2,7 +2,9 @@
 //! extra components accepted only when they pay for their parameters in deviance.
 
 use super::detect::{smooth, smoothing_sigma};
-use super::{Component, Noise, COLLAPSED_SIGMA, MAX_JOINT, MIN_DEVIANCE_GAIN, SIGMA_FLOOR};
+use super::{
+    Component, Noise, Threshold, COLLAPSED_SIGMA, MAX_JOINT, MIN_DEVIANCE_GAIN, SIGMA_FLOOR,
+};
 use crate::waveform::normal_cdf;
 
 /// A Gaussian's parameters during the fit: centre, sigma (bins), area (photons).
@@ -14,7 +16,7 @@ pub(super) type Params = [f64; 3];
 pub(super) fn fit_all(
     y: &[f64],
     peaks: &[Component],
-    threshold: f64,
+    threshold: Threshold,
     hint: f64,
     noise: &Noise,
 ) -> Vec<Component> {
@@ -98,8 +100,8 @@ pub(super) fn fit_all(
                 continue;
             }
             let win = Window::new(y, lo, hi, Some(&others));
-            if let Some((p, _)) =
-                fit_clean(&win, start, floor).filter(|(p, _)| p.iter().any(|q| q[2] > threshold))
+            if let Some((p, _)) = fit_clean(&win, start, floor)
+                .filter(|(p, _)| p.iter().any(|q| q[2] > threshold.area))
             {
                 fitted[k] = p;
             }
@@ -120,8 +122,8 @@ pub(super) fn fit_all(
 /// What a group's fit is held to.
 #[derive(Clone, Copy)]
 struct Limits {
-    /// Least area of a component, photons.
-    threshold: f64,
+    /// Least level of signal per bin and least area of a component.
+    threshold: Threshold,
     /// The pulse's sigma, bins.
     hint: f64,
     /// Least sigma of a component, bins.
@@ -155,8 +157,8 @@ fn fit_group(
     let win = Window::new(y, lo, hi, Some(others));
     // a fit that fails (diverges, leaves its window, or shrinks every component below the
     // threshold) keeps the detector's seeds: it must not erase a return
-    let Some((mut params, mut dev)) =
-        fit_clean(&win, seeds.clone(), floor).filter(|(p, _)| p.iter().any(|q| q[2] > threshold))
+    let Some((mut params, mut dev)) = fit_clean(&win, seeds.clone(), floor)
+        .filter(|(p, _)| p.iter().any(|q| q[2] > threshold.area))
     else {
         return seeds;
     };
@@ -183,7 +185,7 @@ fn fit_group(
         // may sit under a strong return whose shape the current model misses.
         let mut excess: Vec<usize> = (0..z.len())
             .filter(|&j| {
-                rs[j] > threshold
+                rs[j] > threshold.per_bin
                     && (j == 0 || z[j - 1] < z[j])
                     && (j + 1 == z.len() || z[j + 1] <= z[j])
             })
@@ -201,7 +203,7 @@ fn fit_group(
             }
             let sd = var.sqrt();
             // Only a loose screen: the deviance test below decides.
-            if area > threshold && area > 2.0 * sd {
+            if area > threshold.area && area > 2.0 * sd {
                 let mut t = params.clone();
                 t.push([win.offset + j as f64 + 0.5, hint.max(1.0), area]);
                 trials.push(t);

@@ -124,24 +124,94 @@ pub fn decompose(
             }
         })
         .collect();
+    let f = coarsening(hint);
+    if f == 1 {
+        let threshold = Threshold {
+            per_bin: threshold,
+            area: threshold,
+        };
+        return decompose_bins(&y, &mc_se, threshold, max_returns, method, hint);
+    }
+    // bin k of the coarse waveform is bins [f k, f k + f): its photons and (correlated, as
+    // `Noise::mc_var` adds them) Monte Carlo errors are their sums
+    let sum = |v: &[f64]| -> Vec<f64> { v.chunks(f).map(|c| c.iter().sum()).collect() };
+    let (coarse, coarse_se) = (sum(&y), sum(&mc_se));
+    let threshold = Threshold {
+        per_bin: threshold * f as f64,
+        area: threshold,
+    };
+    let k = f as f64;
+    decompose_bins(
+        &coarse,
+        &coarse_se,
+        threshold,
+        max_returns,
+        method,
+        hint / k,
+    )
+    .into_iter()
+    .map(|c| Component {
+        centre_bin: c.centre_bin * k,
+        sigma_bins: c.sigma_bins * k,
+        area_photons: c.area_photons,
+        amplitude: c.amplitude / k,
+    })
+    .collect()
+}
+
+/// [`decompose`] on bins as given (see [`coarsening`]).
+fn decompose_bins(
+    y: &[f64],
+    mc_se: &[f64],
+    threshold: Threshold,
+    max_returns: usize,
+    method: Decomposition,
+    hint: f64,
+) -> Vec<Component> {
     let noise = Noise {
-        mc_se: &mc_se,
+        mc_se,
         pulse_sigma: hint,
     };
-    let peaks = detect_peaks(&y, threshold, hint);
-    let peaks = resolve(peaks, &y, threshold, &noise, false);
+    let peaks = detect_peaks(y, threshold.per_bin, hint);
+    let peaks = resolve(peaks, y, threshold.per_bin, &noise, false);
     let comps = match method {
         Decomposition::PeakDetection => peaks,
-        Decomposition::Gaussian => fit_all(&y, &peaks, threshold, hint, &noise),
+        Decomposition::Gaussian => fit_all(y, &peaks, threshold, hint, &noise),
     };
     let comps = resolve(
         comps,
-        &y,
-        threshold,
+        y,
+        threshold.per_bin,
         &noise,
         method == Decomposition::Gaussian,
     );
-    select(comps, threshold, max_returns)
+    select(comps, threshold.area, max_returns)
+}
+
+/// The detection threshold in its two uses: a level per bin (a peak's height, a run of
+/// signal) and a least area (photons). They differ only where the waveform is decomposed
+/// on coarsened bins, whose levels are the sums of `f` bins.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Threshold {
+    pub(super) per_bin: f64,
+    pub(super) area: f64,
+}
+
+/// Bins of a waveform summed into one for its decomposition, for a pulse of `sigma_bins`: 1
+/// while the pulse spans fewer than 8 bins, else the most that leave it 4 bins or more. A
+/// gate much finer than its pulse (0.067 ns bins against a 1.27 ns sigma: 19 bins) holds
+/// little that bins of σ/4 lose: the model integrates each Gaussian over its bins exactly,
+/// and Poisson counts summed are Poisson counts. On the paper's ALS campaign over the
+/// generated forest (160,392 pulses of 3152 bins) the products stage took 153 s on the
+/// gate's own bins and 44 s on σ/4 bins, with the points within 5 and 25 cm of a surface, the
+/// points per pulse and the DSM's bias and RMSE the same to 0.15 %, 0.04 %, 0.08 % and 3 mm;
+/// on σ/2 bins 28 s, but 0.5 % fewer points within 5 cm.
+pub fn coarsening(sigma_bins: f64) -> usize {
+    if sigma_bins.is_finite() && sigma_bins >= 8.0 {
+        (sigma_bins / 4.0).floor() as usize
+    } else {
+        1
+    }
 }
 
 /// What a return must stand out from besides its own photon noise: the simulation's.

@@ -440,3 +440,61 @@ fn smoothing_skips_empty_windows_to_the_same_bits() {
         }
     }
 }
+
+/// On a gate much finer than the pulse the decomposition works on coarsened bins (see
+/// [`coarsening`]). Noise-free sums of 1-3 Gaussians of 8-40 bins, at least 3σ apart, areas
+/// within a decade: where the count is right, centres, widths and areas come back in the
+/// gate's own bins as the model is exact; the count itself is found as on the gate's bins
+/// but for a weak return between two strong ones, which the residual search (a heuristic
+/// whose path depends on the bins) finds on the gate's own bins and may miss on coarse ones
+/// (1 case of these 600; it printed, and at most 1 % is allowed).
+#[test]
+fn fine_gates_are_decomposed_on_coarser_bins_without_loss() {
+    let mut r = SplitMix64::new(11);
+    let (mut worst_c, mut worst_a, mut worst_s) = (0.0f64, 0.0f64, 0.0f64);
+    let (mut cases, mut missed_coarse, mut missed_fine) = (0, 0, 0);
+    for count in 1..=3 {
+        for _ in 0..200 {
+            let sigma = 8.0 + 32.0 * r.uniform();
+            assert!(coarsening(sigma) > 1);
+            let mut t: Vec<Truth> = Vec::new();
+            let mut pos = 6.0 * sigma + 20.0 * r.uniform();
+            for _ in 0..count {
+                t.push(Truth {
+                    centre: pos,
+                    sigma,
+                    area: 5000.0 * 10f64.powf(r.uniform()),
+                });
+                pos += (3.0 + 2.0 * r.uniform()) * sigma;
+            }
+            let len = (pos + 5.0 * sigma) as usize;
+            let y: Vec<f32> = mean_waveform(&t, len).iter().map(|&v| v as f32).collect();
+            cases += 1;
+            // the same waveform decomposed on its own bins
+            let fine: Vec<f64> = y.iter().map(|&v| v as f64).collect();
+            let th = Threshold {
+                per_bin: 0.5,
+                area: 0.5,
+            };
+            let on_fine = decompose_bins(&fine, &[], th, 4, Decomposition::Gaussian, sigma);
+            missed_fine += usize::from(on_fine.len() != count);
+            let c = decompose(&y, &[], 0.5, 4, Decomposition::Gaussian, sigma);
+            if c.len() != count {
+                missed_coarse += 1;
+                continue;
+            }
+            for (g, f) in t.iter().zip(&c) {
+                worst_c = worst_c.max((f.centre_bin - g.centre).abs() / g.sigma);
+                worst_a = worst_a.max((f.area_photons / g.area - 1.0).abs());
+                worst_s = worst_s.max((f.sigma_bins / g.sigma - 1.0).abs());
+            }
+        }
+    }
+    println!(
+        "coarsened: {missed_coarse} of {cases} cases with a wrong count ({missed_fine} on the \
+         gate's own bins); max centre error {worst_c:.2e} sigma, width {worst_s:.2e}, area \
+         {worst_a:.2e}"
+    );
+    assert!(missed_coarse * 100 <= cases, "{missed_coarse} of {cases}");
+    assert!(worst_c < 1e-3 && worst_s < 1e-3 && worst_a < 2e-3);
+}

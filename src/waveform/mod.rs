@@ -186,10 +186,7 @@ pub fn waveform(
             .map(|e| (e / n / photon_energy_j) as f32)
             .collect(),
         impulse_energy_j: impulse.iter().map(|e| (e / n) as f32).collect(),
-        impulse_energy_se_j: lit(&|b| tally.bin_se(b, sub_bins))
-            .iter()
-            .map(|&e| e as f32)
-            .collect(),
+        impulse_energy_se_j: spanned(gate.bins, lo, hi, &|b| tally.bin_se(b, sub_bins) as f32),
         received_energy_j: tally.total_energy(),
         outside_gate_energy_j: tally.outside / n,
         order_energy_j: tally.order_energy(),

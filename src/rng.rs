@@ -64,6 +64,17 @@ impl SplitMix64 {
         SplitMix64(seed)
     }
 
+    /// The seed of band `band` (0-based) of a run of several bands: the campaign's seed for
+    /// the first band (so a one-band run's draws are unchanged), a distinct one for each
+    /// other, so that bands draw independent noise and photon events.
+    pub fn band_seed(seed: u64, band: usize) -> u64 {
+        if band == 0 {
+            seed
+        } else {
+            seed ^ splitmix64(0x6261_6e64_0000_0000 | band as u64)
+        }
+    }
+
     /// A stream for one pulse: mixing the id first keeps neighbouring ids uncorrelated.
     pub fn for_pulse(seed: u64, pulse_id: u64) -> Self {
         SplitMix64(mix(seed ^ splitmix64(pulse_id)))

@@ -374,6 +374,94 @@ fn run_row_on(
     })
 }
 
+/// The bands of the bench's multispectral comparison: those of Optech Titan-like instruments,
+/// all in the orchard's material table.
+pub const THREE_BANDS: [f64; 3] = [532.0, 1064.0, 1550.0];
+
+/// One campaign traced in its own band and in [`THREE_BANDS`] in one pass, each run `pairs`
+/// times in alternation (the machines are shared and noisy): the medians of the simulate
+/// stage's wall time and their ratio.
+#[derive(Clone, Debug)]
+pub struct BandsRow {
+    pub name: String,
+    pub pulses: usize,
+    pub one_band_s: f64,
+    pub three_bands_s: f64,
+    pub pairs: usize,
+    /// Mean received laser energy per pulse in each of the three bands, J.
+    pub energy_j: Vec<f64>,
+}
+
+/// Runs [`BandsRow`] for the campaign `text` (of one band).
+pub fn bands_row(dir: &Path, name: &str, text: &str, pairs: usize) -> Result<BandsRow> {
+    let mut doc: serde_yaml::Value = serde_yaml::from_str(text)
+        .map_err(|e| Error::msg(format!("bench campaign {name}: not YAML: {e}")))?;
+    let bands: Vec<serde_yaml::Value> = THREE_BANDS.iter().map(|&w| w.into()).collect();
+    crate::campaign::yaml::set_path(&mut doc, "wavelength_nm", bands.into()).map_err(Error::msg)?;
+    let three = serde_yaml::to_string(&doc)
+        .map_err(|e| Error::msg(format!("bench campaign {name}: {e}")))?;
+    let (mut one_s, mut three_s) = (Vec::new(), Vec::new());
+    let mut last = None;
+    for _ in 0..pairs {
+        one_s.push(run_row(dir, &format!("{name}_1band"), name, text)?.simulate_s);
+        let row = run_row(dir, &format!("{name}_3bands"), name, &three)?;
+        three_s.push(row.simulate_s);
+        last = Some(row);
+    }
+    let pulses = last.map_or(0, |r| r.pulses);
+    let run = dir.join(format!("{name}_3bands")).join("run");
+    let mut sums = vec![0.0; THREE_BANDS.len()];
+    for k in 0..crate::waveform::file::part_count(pulses) {
+        let part =
+            crate::waveform::file::read_waveforms(&run.join(crate::waveform::file::part_name(k)))?;
+        for w in part {
+            let b = THREE_BANDS.iter().position(|&x| Some(x) == w.wavelength_nm);
+            if let Some(b) = b {
+                sums[b] += w.received_energy_j;
+            }
+        }
+    }
+    Ok(BandsRow {
+        name: name.to_string(),
+        pulses,
+        one_band_s: super::median(&mut one_s),
+        three_bands_s: super::median(&mut three_s),
+        pairs,
+        energy_j: sums.iter().map(|s| s / pulses.max(1) as f64).collect(),
+    })
+}
+
+pub fn bands_table(rows: &[BandsRow]) -> String {
+    if rows.is_empty() {
+        return String::new();
+    }
+    let mut s = String::from(
+        "
+### Several bands in one pass (532, 1064 and 1550 nm)
+
+The campaign in its own band and in three bands at once: every path traced once, with one throughput per band (README, \"Several bands in one pass\"). Simulate stage wall time, median of alternating runs.
+
+| campaign | pulses | runs each | 1 band s | 3 bands s | 3 bands / 1 band | mean received energy per pulse, J (532 / 1064 / 1550 nm) |
+| --- | ---: | ---: | ---: | ---: | ---: | --- |
+",
+    );
+    for r in rows {
+        let energy: Vec<String> = r.energy_j.iter().map(|e| format!("{e:.3e}")).collect();
+        let _ = writeln!(
+            s,
+            "| {} | {} | {} | {:.2} | {:.2} | {:.2} | {} |",
+            r.name,
+            r.pulses,
+            r.pairs,
+            r.one_band_s,
+            r.three_bands_s,
+            r.three_bands_s / r.one_band_s,
+            energy.join(" / ")
+        );
+    }
+    s
+}
+
 /// A campaign run on one thread and on all, for Amdahl's law: with a serial fraction f, n
 /// threads take T1 (f + (1 - f) / n), so f = (n Tn / T1 - 1) / (n - 1), and N threads would
 /// run N / (1 + f (N - 1)) times faster than one.

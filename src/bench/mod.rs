@@ -199,6 +199,7 @@ impl Bench<'_> {
             receiver: Receiver::new(&self.inst, self.origin, axis),
             gate: self.gate,
             atmosphere: None,
+            bands: None,
             sub_bins: self.sub_bins,
             method,
             heuristic: MisHeuristic::Power,
@@ -462,12 +463,16 @@ fn sun_section(opts: &BenchOptions, b: &Bench, reference: &Waveform) -> String {
 fn campaigns_section(opts: &BenchOptions) -> Result<String> {
     let planned = campaigns::plan(&opts.dir, &opts.campaigns_dir, &opts.rami_scene, opts.full)?;
     let (mut rows, mut skipped, mut traversals) = (Vec::new(), Vec::new(), Vec::new());
-    let mut scaling = Vec::new();
+    let (mut scaling, mut bands) = (Vec::new(), Vec::new());
     for p in planned {
         match p {
             campaigns::Planned::Run { name, what, text } => {
                 eprintln!("lidarsim bench: campaign {name}");
                 let row = campaigns::run_row(&opts.dir, &name, &what, &text)?;
+                if name == "mabel_1064" {
+                    eprintln!("lidarsim bench: campaign {name} in one band and in three");
+                    bands.push(campaigns::bands_row(&opts.dir, &name, &text, 3)?);
+                }
                 if name.starts_with("als_") {
                     // 2000 pulses spread over the campaign, with its rays per pulse
                     let path = opts.dir.join(&name).join("campaign.yaml");
@@ -485,7 +490,8 @@ fn campaigns_section(opts: &BenchOptions) -> Result<String> {
     }
     Ok(campaigns::table(&rows, &skipped)
         + &campaigns::scaling_table(&scaling)
-        + &traversal::table(&traversals))
+        + &traversal::table(&traversals)
+        + &campaigns::bands_table(&bands))
 }
 
 /// Table 2 of the paper: rays (and wall seconds) each method needs for rRMSE ≤ 5% by

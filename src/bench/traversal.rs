@@ -31,7 +31,7 @@ pub struct TraversalRow {
 /// timed and once logging the scene's queries, then replays the log.
 pub fn measure(name: &str, path: &Path, max_pulses: usize) -> Result<TraversalRow> {
     let loaded = crate::plan::read_campaign(path)?;
-    let mut scene = Scene::load(&loaded.scene_path, loaded.campaign.wavelength_nm)?;
+    let mut scene = Scene::load_bands(&loaded.scene_path, loaded.campaign.wavelength_nm.all())?;
     let all = crate::plan::plan(&loaded.campaign)?;
     let n = all.len().min(max_pulses).max(1);
     let pulses: Vec<_> = (0..n.min(all.len()))

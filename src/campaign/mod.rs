@@ -23,7 +23,8 @@ pub struct Campaign {
     pub scene: String,
     #[serde(default = "default_seed")]
     pub seed: u64,
-    pub wavelength_nm: f64,
+    /// One wavelength, or several bands traced in one pass.
+    pub wavelength_nm: spectral::Wavelengths,
     pub instrument: Instrument,
     pub platform: Platform,
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -589,13 +590,20 @@ impl Campaign {
                 "must be a non-empty name without slashes (it names the run folder)",
             ));
         }
-        c.within(
-            "wavelength_nm",
-            self.wavelength_nm,
-            100.0,
-            20_000.0,
-            "a wavelength in nm between 100 and 20000",
-        )?;
+        for (k, &w) in self.wavelength_nm.all().iter().enumerate() {
+            let key = if self.wavelength_nm.several() {
+                format!("wavelength_nm[{k}]")
+            } else {
+                "wavelength_nm".to_string()
+            };
+            c.within(
+                &key,
+                w,
+                100.0,
+                20_000.0,
+                "a wavelength in nm between 100 and 20000",
+            )?;
+        }
         let i = &self.instrument;
         c.positive("instrument.pulse_energy_j", i.pulse_energy_j)?;
         c.non_negative("instrument.pulse_fwhm_ns", i.pulse_fwhm_ns)?;
@@ -697,11 +705,13 @@ impl Campaign {
                     layer.scale_height_m,
                 )?;
                 let key = format!("atmosphere.layers[{k}].optical_depth");
-                let tau = layer
-                    .optical_depth
-                    .at(self.wavelength_nm)
-                    .map_err(|why| doc.error(&key, why))?;
-                c.non_negative(&key, tau)?;
+                for &w in self.wavelength_nm.all() {
+                    let tau = layer
+                        .optical_depth
+                        .at(w)
+                        .map_err(|why| doc.error(&key, why))?;
+                    c.non_negative(&key, tau)?;
+                }
             }
         }
         if let Some(s) = &self.sun {

@@ -135,3 +135,104 @@ impl Spectral {
 fn same_wavelength(a: f64, b: f64) -> bool {
     (a - b).abs() <= 1e-9 * a.abs().max(b.abs())
 }
+
+/// Most bands one campaign may trace at once: a path carries one throughput per band.
+pub const MAX_BANDS: usize = 8;
+
+/// The campaign's `wavelength_nm`: one number, or a list of bands traced in one pass (every
+/// path traced once, one throughput per band). The first band is the campaign's wavelength
+/// wherever one is needed alone.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Wavelengths(Vec<f64>);
+
+impl Wavelengths {
+    pub fn one(wavelength_nm: f64) -> Wavelengths {
+        Wavelengths(vec![wavelength_nm])
+    }
+
+    /// The first band.
+    pub fn first(&self) -> f64 {
+        self.0[0]
+    }
+
+    pub fn all(&self) -> &[f64] {
+        &self.0
+    }
+
+    /// The index of a table row's band (`None`: a run of one band, index 0).
+    pub fn index_of(&self, wavelength_nm: Option<f64>) -> usize {
+        wavelength_nm
+            .and_then(|w| self.0.iter().position(|&k| k == w))
+            .unwrap_or(0)
+    }
+
+    /// True when the campaign traces several bands (its tables gain a `wavelength_nm` column).
+    pub fn several(&self) -> bool {
+        self.0.len() > 1
+    }
+}
+
+impl<'de> Deserialize<'de> for Wavelengths {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> std::result::Result<Self, D::Error> {
+        struct V;
+        impl<'de> Visitor<'de> for V {
+            type Value = Wavelengths;
+            fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
+                f.write_str("a wavelength in nm or a list of them, e.g. [532, 1064]")
+            }
+            fn visit_f64<E: de::Error>(self, v: f64) -> std::result::Result<Wavelengths, E> {
+                Ok(Wavelengths(vec![v]))
+            }
+            fn visit_i64<E: de::Error>(self, v: i64) -> std::result::Result<Wavelengths, E> {
+                Ok(Wavelengths(vec![v as f64]))
+            }
+            fn visit_u64<E: de::Error>(self, v: u64) -> std::result::Result<Wavelengths, E> {
+                Ok(Wavelengths(vec![v as f64]))
+            }
+            fn visit_seq<A: de::SeqAccess<'de>>(
+                self,
+                mut seq: A,
+            ) -> std::result::Result<Wavelengths, A::Error> {
+                let mut v: Vec<f64> = Vec::new();
+                while let Some(w) = seq.next_element::<f64>()? {
+                    if v.iter().any(|&k| same_wavelength(k, w)) {
+                        return Err(de::Error::custom(format!(
+                            "wavelength {w} nm is listed twice"
+                        )));
+                    }
+                    v.push(w);
+                }
+                if v.is_empty() {
+                    return Err(de::Error::custom(
+                        "the list of wavelengths is empty: give at least one, e.g. [1064]",
+                    ));
+                }
+                if v.len() > MAX_BANDS {
+                    return Err(de::Error::custom(format!(
+                        "{} wavelengths listed; at most {MAX_BANDS} bands are traced in one pass",
+                        v.len()
+                    )));
+                }
+                Ok(Wavelengths(v))
+            }
+        }
+        d.deserialize_any(V)
+    }
+}
+
+impl Serialize for Wavelengths {
+    fn serialize<S: Serializer>(&self, s: S) -> std::result::Result<S::Ok, S::Error> {
+        if self.several() {
+            self.0.serialize(s)
+        } else {
+            s.serialize_f64(self.0[0])
+        }
+    }
+}
+
+impl fmt::Display for Wavelengths {
+    fn fmt(&self, f: &mut fmt::Formatter) -> fmt::Result {
+        let all: Vec<String> = self.0.iter().map(|w| w.to_string()).collect();
+        f.write_str(&all.join(", "))
+    }
+}

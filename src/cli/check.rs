@@ -15,7 +15,7 @@ pub(super) fn check(path: &std::path::Path) -> Result<()> {
     let c = &loaded.campaign;
     let plan = plan::Plan::new(c)?;
     let t = Instant::now();
-    let scene = Scene::load(&loaded.scene_path, c.wavelength_nm)?;
+    let scene = Scene::load_bands(&loaded.scene_path, c.wavelength_nm.all())?;
     let load_s = t.elapsed().as_secs_f64();
     let s = scene.stats();
     let (lo, hi) = scene.bounds();

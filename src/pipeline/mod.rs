@@ -111,15 +111,15 @@ pub fn with_threads<T: Send>(
     pool.install(f)
 }
 
-/// Scenes already loaded, by (file, wavelength): sweep combinations share them.
+/// Scenes already loaded, by (file, wavelengths): sweep combinations share them.
 #[derive(Default)]
 struct SceneCache {
-    scenes: Vec<(PathBuf, u64, Scene)>,
+    scenes: Vec<(PathBuf, Vec<u64>, Scene)>,
 }
 
 impl SceneCache {
-    fn get(&mut self, path: &Path, wavelength_nm: f64) -> Result<&Scene> {
-        let key = wavelength_nm.to_bits();
+    fn get(&mut self, path: &Path, wavelengths_nm: &[f64]) -> Result<&Scene> {
+        let key: Vec<u64> = wavelengths_nm.iter().map(|w| w.to_bits()).collect();
         if let Some(i) = self
             .scenes
             .iter()
@@ -128,7 +128,7 @@ impl SceneCache {
             return Ok(&self.scenes[i].2);
         }
         let t = Instant::now();
-        let scene = Scene::load(path, wavelength_nm)?;
+        let scene = Scene::load_bands(path, wavelengths_nm)?;
         let s = scene.stats();
         log(&format!(
             "scene {}: {} instances, {} triangles ({} distinct), {:.1} MB, loaded in {:.2} s",
@@ -378,7 +378,7 @@ fn run_single(
         return Ok(summary);
     }
 
-    let scene = cache.get(&loaded.scene_path, loaded.campaign.wavelength_nm)?;
+    let scene = cache.get(&loaded.scene_path, loaded.campaign.wavelength_nm.all())?;
     // `auto` resolved here, once the scene is known: the pilot is deterministic, so the
     // fingerprints (of the campaign as written) stand for the method it picks
     let chosen;
@@ -400,7 +400,7 @@ fn run_single(
     };
     let fp_sim = simulate_fingerprint(&fp_plan, scene)?;
     if run.done(Stage::Simulate, &fp_sim) {
-        if let Some(bad) = first_broken_part(out, plan.len(), &fp_sim) {
+        if let Some(bad) = first_broken_part(out, plan.len(), bands_of(loaded), &fp_sim) {
             // the manifest says done, the files disagree: the files win
             log(&format!(
                 "simulate: a part file is missing or damaged ({bad}): it is simulated again"
@@ -538,11 +538,20 @@ fn simulate_fingerprint(fp_plan: &str, scene: &Scene) -> Result<String> {
     Ok(fingerprint(&inputs))
 }
 
-/// The first part of a run of `pulses` pulses that is missing or not whole, by its name.
-fn first_broken_part(out: &Path, pulses: usize, fp: &str) -> Option<String> {
+/// The first part of a run of `pulses` pulses in `bands` bands that is missing or not whole,
+/// by its name.
+fn first_broken_part(out: &Path, pulses: usize, bands: usize, fp: &str) -> Option<String> {
     (0..part_count(pulses))
-        .find(|&k| !part_is_whole(&out.join(part_name(k)), part_range(k, pulses).len(), fp))
+        .find(|&k| {
+            let rows = part_range(k, pulses).len() * bands;
+            !part_is_whole(&out.join(part_name(k)), rows, fp)
+        })
         .map(part_name)
+}
+
+/// Bands the campaign traces: rows per pulse in its waveform parts.
+fn bands_of(loaded: &Loaded) -> usize {
+    loaded.campaign.wavelength_nm.all().len()
 }
 
 /// The simulate stage: the parts this invocation owns (all, or its shard's) that are not
@@ -567,8 +576,8 @@ fn simulate_stage(
         let _ = std::fs::remove_dir_all(&wf_dir);
     }
     write_text_atomic(&marker, fp)?;
-    let whole =
-        |k: usize| part_is_whole(&out.join(part_name(k)), part_range(k, plan.len()).len(), fp);
+    let rows = |k: usize| part_range(k, plan.len()).len() * bands_of(loaded);
+    let whole = |k: usize| part_is_whole(&out.join(part_name(k)), rows(k), fp);
     let todo: Vec<usize> = (0..parts)
         .filter(|k| shard.is_none_or(|(i, n)| k % n == i))
         .filter(|&k| !whole(k))

@@ -9,6 +9,7 @@ use crate::progress::{log, progress};
 use crate::scene::Scene;
 use crate::sensor::{pulse_sigma_s, Gate, Laser, Receiver, SunSource};
 use crate::transport::atmosphere::Atmosphere;
+use crate::transport::bands::Bands;
 use crate::transport::{simulate_pulse, simulate_pulse_in, PulseSetup, Scratch};
 use crate::waveform::file::{part_name, write_waveforms};
 use crate::waveform::{self, Radiometry, Waveform};
@@ -42,6 +43,7 @@ pub(super) fn simulate_parts(
     let mut last_log = 0.0;
     let mut written = 0usize;
     let mut stopped = None;
+    let bands = loaded.campaign.wavelength_nm.all().len();
     std::thread::scope(|scope| -> Result<()> {
         let (queue, finished) =
             std::sync::mpsc::sync_channel::<(usize, Vec<Waveform>, Vec<f64>)>(1);
@@ -50,7 +52,7 @@ pub(super) fn simulate_parts(
                 write_waveforms(&out.join(part_name(k)), &waveforms, fingerprint)?;
                 write_pulse_stats(
                     &out.join(format!("waveforms/part-{k:05}.stats.csv")),
-                    &waveforms,
+                    waveforms.iter().step_by(bands),
                     &secs,
                 )?;
                 drop(waveforms);
@@ -65,8 +67,12 @@ pub(super) fn simulate_parts(
             }
             let pulses = plan.pulses(part_range(k, plan.len()));
             let (waveforms, secs) = simulate(loaded, scene, &pulses, &bar);
-            rays += waveforms.iter().map(|w| w.rays as u64).sum::<u64>();
-            done_pulses += waveforms.len();
+            rays += waveforms
+                .iter()
+                .step_by(bands)
+                .map(|w| w.rays as u64)
+                .sum::<u64>();
+            done_pulses += pulses.len();
             let elapsed = t.elapsed().as_secs_f64();
             let rate = done_pulses as f64 / elapsed;
             // a log, not a terminal: a line per tenth of the work, or per minute if slower
@@ -108,10 +114,14 @@ pub(super) fn part_range(k: usize, n: usize) -> std::ops::Range<usize> {
     k * PART_PULSES..((k + 1) * PART_PULSES).min(n)
 }
 
-/// Per-pulse counters beside the waveforms: effective paths per ray and time per ray. Kept
-/// out of the waveform files, which must not depend on timing.
-pub(super) fn write_pulse_stats(path: &Path, waveforms: &[Waveform], secs: &[f64]) -> Result<()> {
-    let rows = waveforms.iter().zip(secs).map(|(w, s)| {
+/// Per-pulse counters beside the waveforms (of the first band): effective paths per ray and
+/// time per ray. Kept out of the waveform files, which must not depend on timing.
+pub(super) fn write_pulse_stats<'w>(
+    path: &Path,
+    waveforms: impl Iterator<Item = &'w Waveform>,
+    secs: &[f64],
+) -> Result<()> {
+    let rows = waveforms.zip(secs).map(|(w, s)| {
         vec![
             w.pulse_id.to_string(),
             w.rays.to_string(),
@@ -146,12 +156,15 @@ fn viewed_box(
     (lo - g, hi + g)
 }
 
-/// What every pulse of a campaign shares: its instrument, sun and atmosphere.
+/// What every pulse of a campaign shares: its instrument, sun, atmosphere and bands.
 struct Shared<'a> {
     loaded: &'a Loaded,
     scene: &'a Scene,
     sun: Option<SunSource>,
+    /// The first band's atmosphere, which paths are weighted with.
     atmosphere: Option<Atmosphere>,
+    /// With several bands, what turns a path's throughput into each band's.
+    bands: Option<Bands>,
     sigma: f64,
 }
 
@@ -163,16 +176,25 @@ impl<'a> Shared<'a> {
             .sun
             .as_ref()
             .map(|s| SunSource::new(s, inst.bandwidth_nm.unwrap_or(0.0), scene.bounds()));
-        // every layer has an optical depth at the wavelength: the campaign's validation says so
-        let atmosphere = c
+        // every layer has an optical depth at each wavelength: the campaign's validation says so
+        let per_band: Vec<Atmosphere> = c
             .atmosphere
             .as_ref()
-            .and_then(|a| Atmosphere::new(a, c.wavelength_nm).ok());
+            .map(|a| {
+                let bands = c.wavelength_nm.all().iter();
+                bands.filter_map(|&w| Atmosphere::new(a, w).ok()).collect()
+            })
+            .unwrap_or_default();
+        let bands = c
+            .wavelength_nm
+            .several()
+            .then(|| Bands::new(scene, &per_band));
         Shared {
             loaded,
             scene,
             sun,
-            atmosphere,
+            atmosphere: per_band.into_iter().next(),
+            bands,
             sigma: pulse_sigma_s(inst),
         }
     }
@@ -206,6 +228,7 @@ impl<'a> Shared<'a> {
             heuristic: c.simulation.mis,
             sun,
             atmosphere: self.atmosphere.as_ref(),
+            bands: self.bands.as_ref(),
             max_order: c.simulation.max_order,
             seed: c.seed,
             pulse_id: p.id,
@@ -214,7 +237,8 @@ impl<'a> Shared<'a> {
 }
 
 /// Simulates pulses: pulses and each pulse's ray chunks run in parallel. Returns the
-/// waveforms and each pulse's wall time (with the threads it shared).
+/// waveforms (one per pulse and band, in pulse order then the campaign's band order) and
+/// each pulse's wall time (with the threads it shared).
 pub fn simulate(
     loaded: &Loaded,
     scene: &Scene,
@@ -224,28 +248,49 @@ pub fn simulate(
     let c = &loaded.campaign;
     let inst = &c.instrument;
     let shared = Shared::new(loaded, scene);
-    let hv = crate::photon_energy_j(c.wavelength_nm);
     let radiometry = Radiometry {
         pulse_energy_j: inst.pulse_energy_j,
         receiver_area_m2: inst.receiver_area_m2,
         fov_half_angle: inst.fov_half_angle_mrad * 1e-3,
         sun: shared.sun.map(|s| (s.band_irradiance, s.cos_zenith)),
     };
-    pulses
+    let several = c.wavelength_nm.several();
+    // (the first band's row, the other bands' rows, seconds) per pulse: one band allocates
+    // nothing beyond its row
+    let per_pulse: Vec<(Waveform, Vec<Waveform>, f64)> = pulses
         .par_iter()
         .map_init(Scratch::default, |scratch, p| {
             let setup = shared.setup(p, c.simulation.method);
             let t = Instant::now();
-            let tally = simulate_pulse_in(&setup, c.simulation.rays_per_pulse, scratch);
+            simulate_pulse_in(&setup, c.simulation.rays_per_pulse, scratch);
             let secs = t.elapsed().as_secs_f64();
             bar.inc(1);
             let (gate, sub_bins) = (&setup.gate, setup.sub_bins);
+            let row = |b: usize, nm: f64| {
+                let hv = crate::photon_energy_j(nm);
+                let tally = scratch.band(b);
+                let mut w =
+                    waveform::waveform(p.id, tally, gate, sub_bins, shared.sigma, hv, &radiometry);
+                w.wavelength_nm = several.then_some(nm);
+                w
+            };
+            let bands = c.wavelength_nm.all();
+            let others = bands.iter().enumerate().skip(1);
             (
-                waveform::waveform(p.id, tally, gate, sub_bins, shared.sigma, hv, &radiometry),
+                row(0, bands[0]),
+                others.map(|(b, &nm)| row(b, nm)).collect(),
                 secs,
             )
         })
-        .unzip()
+        .collect();
+    let mut rows = Vec::with_capacity(per_pulse.len() * c.wavelength_nm.all().len());
+    let mut secs = Vec::with_capacity(per_pulse.len());
+    for (first, others, s) in per_pulse {
+        rows.push(first);
+        rows.extend(others);
+        secs.push(s);
+    }
+    (rows, secs)
 }
 
 /// Pulses and rays per pulse of the pilot of `simulation.method: auto`: one chunk of rays per

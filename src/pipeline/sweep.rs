@@ -185,6 +185,8 @@ pub struct RunTotals {
 impl RunTotals {
     pub fn read(run: &Path) -> Result<RunTotals> {
         let mut t = RunTotals::default();
+        // with several bands, the first band's rows (the first row's band: pulse 0's first)
+        let mut first_band = None;
         // the parts by index (part-00000, part-00001, ...), as every stage reads them
         for k in 0.. {
             let f = run.join(part_name(k));
@@ -192,6 +194,9 @@ impl RunTotals {
                 break;
             }
             for w in read_waveforms(&f)? {
+                if *first_band.get_or_insert(w.wavelength_nm) != w.wavelength_nm {
+                    continue;
+                }
                 t.pulses += 1;
                 t.received_energy_j += w.received_energy_j;
                 t.solar_photons_per_bin += w.solar_photons_per_bin as f64;

@@ -1,4 +1,5 @@
-//! points.las: LAS 1.4, point format 6, millimetre precision, with two extra dimensions.
+//! points.las: LAS 1.4, point format 6, millimetre precision, with two extra dimensions (three
+//! in a run of several bands: `wavelength_nm` too).
 
 use crate::error::{Error, Result};
 use crate::fsutil::{write_atomic, WRITE_ADVICE};
@@ -21,6 +22,9 @@ const EXTRA: [(&str, u8, usize, &str); 2] = [
     ("pulse_id", 7, 8, "pulse index in pulses.parquet"),
 ];
 
+/// The extra dimension of a run of several bands, after the others: the point's band.
+const BAND: (&str, u8, usize, &str) = ("wavelength_nm", 9, 4, "band of the return, nm");
+
 /// LAS 1.4 data types: 1 u8, 2 i8, 3 u16, 4 i16, 5 u32, 6 i32, 7 u64, 8 i64, 9 f32, 10 f64.
 fn type_size(t: u8) -> Option<usize> {
     match t {
@@ -34,9 +38,10 @@ fn type_size(t: u8) -> Option<usize> {
 
 /// The Extra Bytes VLR (LAS 1.4 R15, table 24): one 192-byte descriptor per field, options
 /// 0 (no no-data, min, max, scale or offset).
-fn extra_bytes_vlr() -> Vlr {
-    let mut data = Vec::with_capacity(192 * EXTRA.len());
-    for (name, data_type, _, description) in EXTRA {
+fn extra_bytes_vlr(bands: bool) -> Vlr {
+    let mut data = Vec::with_capacity(192 * (EXTRA.len() + 1));
+    let band = bands.then_some(BAND);
+    for (name, data_type, _, description) in EXTRA.into_iter().chain(band) {
         let mut d = [0u8; 192];
         d[2] = data_type;
         d[4..4 + name.len()].copy_from_slice(name.as_bytes());
@@ -51,8 +56,8 @@ fn extra_bytes_vlr() -> Vlr {
     }
 }
 
-fn extra_len() -> u16 {
-    EXTRA.iter().map(|e| e.2).sum::<usize>() as u16
+fn extra_len(bands: bool) -> u16 {
+    (EXTRA.iter().map(|e| e.2).sum::<usize>() + if bands { BAND.2 } else { 0 }) as u16
 }
 
 /// Writes the points (in the given order) to a LAS 1.4 point format 6 file. The offset is
@@ -77,6 +82,8 @@ pub struct Layout {
     pub shift: [f64; 3],
     pub wkt: Option<&'static str>,
     pub laz: bool,
+    /// A run of several bands: each point's `wavelength_nm` is written too.
+    pub bands: bool,
 }
 
 impl Layout {
@@ -87,6 +94,7 @@ impl Layout {
             shift: [0.0; 3],
             wkt: None,
             laz: false,
+            bands: false,
         }
     }
 }
@@ -163,7 +171,7 @@ pub fn write_las_chunks(
     let mut b = Builder::from((1, 4));
     b.version = Version::new(1, 4);
     b.point_format = las::point::Format::new(6).map_err(err)?;
-    b.point_format.extra_bytes = extra_len();
+    b.point_format.extra_bytes = extra_len(layout.bands);
     b.point_format.is_compressed = layout.laz;
     let transform = |offset| Transform {
         scale: SCALE,
@@ -175,7 +183,7 @@ pub fn write_las_chunks(
         z: transform(offset[2]),
     };
     b.generating_software = format!("lidarsim {}", env!("CARGO_PKG_VERSION"));
-    b.vlrs.push(extra_bytes_vlr());
+    b.vlrs.push(extra_bytes_vlr(layout.bands));
     let mut header = b.into_header().map_err(err)?;
     if let Some(wkt) = layout.wkt {
         header.set_wkt_crs(wkt.as_bytes().to_vec()).map_err(err)?;
@@ -188,7 +196,7 @@ pub fn write_las_chunks(
         let mut w = Writer::new(sink, header).map_err(err)?;
         let written = chunks(&mut |points| {
             for p in points {
-                w.write_point(to_las(p, layout.shift)).map_err(err)?;
+                w.write_point(to_las(p, layout)).map_err(err)?;
             }
             Ok(())
         });
@@ -243,10 +251,14 @@ impl<W: Seek> Seek for Sticky<W> {
     }
 }
 
-fn to_las(p: &Point, shift: [f64; 3]) -> las::Point {
-    let mut extra = Vec::with_capacity(extra_len() as usize);
+fn to_las(p: &Point, layout: &Layout) -> las::Point {
+    let shift = layout.shift;
+    let mut extra = Vec::with_capacity(extra_len(layout.bands) as usize);
     extra.extend_from_slice(&p.apparent_reflectance.to_le_bytes());
     extra.extend_from_slice(&p.pulse_id.to_le_bytes());
+    if layout.bands {
+        extra.extend_from_slice(&p.wavelength_nm.unwrap_or(f32::NAN).to_le_bytes());
+    }
     // Code 12 (overlap) is a flag in LAS 1.4, not a class: such a point is unclassified.
     let classification =
         Classification::new(p.classification).unwrap_or(Classification::Unclassified);
@@ -289,6 +301,7 @@ pub fn read_las(path: &Path) -> Result<Vec<Point>> {
             .ok_or_else(|| Error::file(path, "no Extra Bytes VLR"))?;
         let mut at = 0usize;
         let mut found = [None; 2];
+        let mut band = None;
         for d in vlr.data.chunks_exact(192) {
             let name_end = d[4..36].iter().position(|&c| c == 0).unwrap_or(32);
             let name = std::str::from_utf8(&d[4..4 + name_end]).unwrap_or("");
@@ -302,10 +315,13 @@ pub fn read_las(path: &Path) -> Result<Vec<Point>> {
                     found[k] = Some(at);
                 }
             }
+            if BAND.0 == name && BAND.1 == d[2] {
+                band = Some(at);
+            }
             at += size;
         }
         match found {
-            [Some(a), Some(b)] => (a, b),
+            [Some(a), Some(b)] => (a, b, band),
             _ => {
                 return Err(Error::file(
                     path,
@@ -324,6 +340,15 @@ pub fn read_las(path: &Path) -> Result<Vec<Point>> {
         }
         let rho = f32::from_le_bytes(e[offsets.0..offsets.0 + 4].try_into().expect("4 bytes"));
         let id = u64::from_le_bytes(e[offsets.1..offsets.1 + 8].try_into().expect("8 bytes"));
+        let wavelength_nm = match offsets.2 {
+            Some(at) => {
+                let b = e
+                    .get(at..at + 4)
+                    .ok_or_else(|| Error::file(path, "point too short for its wavelength_nm"))?;
+                Some(f32::from_le_bytes(b.try_into().expect("4 bytes")))
+            }
+            None => None,
+        };
         out.push(Point {
             x: p.x,
             y: p.y,
@@ -337,6 +362,7 @@ pub fn read_las(path: &Path) -> Result<Vec<Point>> {
             classification: u8::from(p.classification),
             apparent_reflectance: rho,
             pulse_id: id,
+            wavelength_nm,
         });
     }
     Ok(out)
@@ -366,6 +392,7 @@ mod tests {
                     classification: [1, 2, 5, 6][i % 4],
                     apparent_reflectance: r.uniform() as f32,
                     pulse_id: (1u64 << 40) + i as u64,
+                    wavelength_nm: None,
                 }
             })
             .collect()

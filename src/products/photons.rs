@@ -94,6 +94,8 @@ pub struct PhotonRow {
     pub z: f64,
     pub along_track_m: f64,
     pub source: u8,
+    /// The band, in a run of several bands.
+    pub wavelength_nm: Option<f64>,
 }
 
 /// Rows for one pulse: each event placed at range c t / 2 along the pulse axis, with t the
@@ -117,23 +119,25 @@ pub fn photon_rows(
                 z: p.z,
                 along_track_m,
                 source: e.source,
+                wavelength_nm: None,
             }
         })
         .collect()
 }
 
 /// Writes photons.parquet (outputs.md): pulse_id u64, time_ns f64, x, y, z f64,
-/// along_track_m f64, source u8.
-pub fn write_photons(path: &Path, rows: &[PhotonRow]) -> Result<()> {
-    write_batch(path, photon_table(rows))
+/// along_track_m f64, source u8 (and wavelength_nm f64 with `bands`).
+pub fn write_photons(path: &Path, rows: &[PhotonRow], bands: bool) -> Result<()> {
+    write_batch(path, photon_table(rows, bands))
 }
 
-/// The rows as `photons.parquet` holds them.
-pub fn photon_table(rows: &[PhotonRow]) -> RecordBatch {
+/// The rows as `photons.parquet` holds them; with `bands` (a run of several bands), each
+/// row's `wavelength_nm` last.
+pub fn photon_table(rows: &[PhotonRow], bands: bool) -> RecordBatch {
     let f64col = |f: fn(&PhotonRow) -> f64| -> ArrayRef {
         Arc::new(Float64Array::from_iter_values(rows.iter().map(f)))
     };
-    let columns: Vec<(&str, ArrayRef)> = vec![
+    let mut columns: Vec<(&str, ArrayRef)> = vec![
         (
             "pulse_id",
             Arc::new(UInt64Array::from_iter_values(
@@ -150,6 +154,12 @@ pub fn photon_table(rows: &[PhotonRow]) -> RecordBatch {
             Arc::new(UInt8Array::from_iter_values(rows.iter().map(|r| r.source))),
         ),
     ];
+    if bands {
+        columns.push((
+            "wavelength_nm",
+            f64col(|r| r.wavelength_nm.unwrap_or(f64::NAN)),
+        ));
+    }
     batch(columns)
 }
 
@@ -264,7 +274,7 @@ mod tests {
         assert!((rows[1].time_ns - t0 - 2.0).abs() < 1e-9);
         let dir = std::env::temp_dir().join(format!("lidarsim-photons-{}", std::process::id()));
         let path = dir.join("photons.parquet");
-        write_photons(&path, &rows).unwrap();
+        write_photons(&path, &rows, false).unwrap();
         let file = std::fs::File::open(&path).unwrap();
         let reader = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file)
             .unwrap()

@@ -30,6 +30,8 @@ pub struct Point {
     pub classification: u8,
     pub apparent_reflectance: f32,
     pub pulse_id: u64,
+    /// The band of the waveform it came from, in a run of several bands.
+    pub wavelength_nm: Option<f32>,
 }
 
 /// Sensor constants the points need.
@@ -132,6 +134,7 @@ pub fn points_on_axis(
                 classification: classes.get(i).copied().unwrap_or(1),
                 apparent_reflectance: rho as f32,
                 pulse_id: pulse.id,
+                wavelength_nm: None,
             }
         })
         .collect()

@@ -28,7 +28,11 @@ pub fn report(
                 for k in 0..part_count(pulses) {
                     crate::progress::release_after_part(k);
                     for w in read_waveforms(&out.join(part_name(k)))? {
-                        t.add(&w);
+                        if w.wavelength_nm
+                            .is_none_or(|nm| nm == c.wavelength_nm.first())
+                        {
+                            t.add(&w);
+                        }
                     }
                 }
                 t
@@ -68,6 +72,13 @@ pub fn report(
     );
     if let Some(note) = &loaded.method_note {
         text += &format!("| method choice | {note} |\n");
+    }
+    if c.wavelength_nm.several() {
+        text += &format!(
+            "| bands | {} nm traced in one pass; the figures of this report, the DSM and the mission files are of the first band, {} nm; waveforms, points and photons are in every band (column `wavelength_nm`) |\n",
+            c.wavelength_nm,
+            c.wavelength_nm.first()
+        );
     }
     let n = received.max(1) as f64;
     text += &match lit {

@@ -11,8 +11,9 @@ use std::io::{BufReader, BufWriter, Read, Write};
 use std::path::Path;
 
 /// Bytes of one record: x, y, z, gps_time f64; intensity u16; return number, number of
-/// returns u8; scan angle f32; point source u16; class u8; apparent reflectance f32; pulse u64.
-const RECORD: usize = 4 * 8 + 2 + 1 + 1 + 4 + 2 + 1 + 4 + 8;
+/// returns u8; scan angle f32; point source u16; class u8; apparent reflectance f32; pulse u64;
+/// band f32 (NaN: none).
+const RECORD: usize = 4 * 8 + 2 + 1 + 1 + 4 + 2 + 1 + 4 + 8 + 4;
 
 /// Points read back at a time.
 pub const CHUNK: usize = 1 << 16;
@@ -90,6 +91,7 @@ fn encode(p: &Point, out: &mut Vec<u8>) {
     out.push(p.classification);
     out.extend_from_slice(&p.apparent_reflectance.to_le_bytes());
     out.extend_from_slice(&p.pulse_id.to_le_bytes());
+    out.extend_from_slice(&p.wavelength_nm.unwrap_or(f32::NAN).to_le_bytes());
 }
 
 fn decode(b: &[u8]) -> Point {
@@ -113,6 +115,7 @@ fn decode(b: &[u8]) -> Point {
     let classification = take(1)[0];
     let apparent_reflectance = f32::from_le_bytes(take(4).try_into().unwrap_or_default());
     let pulse_id = u64::from_le_bytes(take(8).try_into().unwrap_or_default());
+    let nm = f32::from_le_bytes(take(4).try_into().unwrap_or_default());
     Point {
         x,
         y,
@@ -126,6 +129,7 @@ fn decode(b: &[u8]) -> Point {
         classification,
         apparent_reflectance,
         pulse_id,
+        wavelength_nm: (!nm.is_nan()).then_some(nm),
     }
 }
 
@@ -151,6 +155,7 @@ mod tests {
                 classification: (i % 7) as u8,
                 apparent_reflectance: 0.3 + i as f32 * 1e-6,
                 pulse_id: u64::MAX - i,
+                wavelength_nm: (i % 2 == 0).then_some(532.0 + i as f32),
             })
             .collect();
         let path = dir.join("points.las");

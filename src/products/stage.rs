@@ -17,6 +17,7 @@ use crate::products::returns::{decompose, Component, Decomposition};
 use crate::products::spill::Spill;
 use crate::products::summary::{PhotonCounts, PointsSummary, ProductsSummary, WaveformTotals};
 use crate::progress::{log, progress};
+use crate::rng::SplitMix64;
 use crate::scene::{Scene, SurfaceClass};
 use crate::sensor::pulse_sigma_s;
 use crate::waveform::file::{part_name, read_waveforms};
@@ -80,14 +81,16 @@ fn class_of(w: &Waveform, centre: f64, sigma: f64) -> u8 {
 /// The decomposition of one waveform as the campaign asks for it: of the instrument's
 /// record (noise, detector response, digitiser) when it has one, else of the mean photons.
 fn components(loaded: &Loaded, w: &Waveform) -> Vec<Component> {
-    let inst = &loaded.campaign.instrument;
-    let hv = crate::photon_energy_j(loaded.campaign.wavelength_nm);
+    let c = &loaded.campaign;
+    let inst = &c.instrument;
+    let hv = crate::photon_energy_j(band_of(loaded, w));
     let mc_se: Vec<f32> = w
         .impulse_energy_se_j
         .iter()
         .map(|&s| (s as f64 / hv) as f32)
         .collect();
-    let recorder = Recorder::new(inst, loaded.campaign.seed);
+    let band = c.wavelength_nm.index_of(w.wavelength_nm);
+    let recorder = Recorder::new(inst, SplitMix64::band_seed(c.seed, band));
     let (photons, sigma_s) = if recorder.changes_returns() {
         let recorded = recorder.laser_photons(&recorder.record(w));
         (recorded, recorder.return_sigma_s(pulse_sigma_s(inst)))
@@ -104,7 +107,20 @@ fn components(loaded: &Loaded, w: &Waveform) -> Vec<Component> {
     )
 }
 
-/// Discrete returns of every pulse, in pulse order then time.
+/// The wavelength of a waveform row, nm: its band's, or the campaign's.
+fn band_of(loaded: &Loaded, w: &Waveform) -> f64 {
+    w.wavelength_nm
+        .unwrap_or(loaded.campaign.wavelength_nm.first())
+}
+
+/// Whether a waveform row is of the campaign's first band: the one the DSM, the mission files,
+/// the figures and the summaries are made from.
+fn first_band(loaded: &Loaded, w: &Waveform) -> bool {
+    w.wavelength_nm
+        .is_none_or(|nm| nm == loaded.campaign.wavelength_nm.first())
+}
+
+/// Discrete returns of every pulse, in pulse order then time (then band).
 pub fn discrete_returns(loaded: &Loaded, plan: &Plan, waveforms: &[Waveform]) -> Vec<Point> {
     let c = &loaded.campaign;
     let inst = &c.instrument;
@@ -113,22 +129,27 @@ pub fn discrete_returns(loaded: &Loaded, plan: &Plan, waveforms: &[Waveform]) ->
     } else {
         plan.pulse(0).origin.z.abs().max(1.0)
     };
-    let config = PointConfig {
-        emitted_energy_j: inst.pulse_energy_j,
-        photon_energy_j: crate::photon_energy_j(c.wavelength_nm),
-        telescope_area_m2: inst.receiver_area_m2,
-        reference_range_m: reference_range,
-    };
     let by_pulse: Vec<Vec<Point>> = waveforms
         .par_iter()
         .map(|w| {
+            let config = PointConfig {
+                emitted_energy_j: inst.pulse_energy_j,
+                photon_energy_j: crate::photon_energy_j(band_of(loaded, w)),
+                telescope_area_m2: inst.receiver_area_m2,
+                reference_range_m: reference_range,
+            };
             let pulse = &plan.pulse(w.pulse_id);
             let comps = components(loaded, w);
             let classes: Vec<u8> = comps
                 .iter()
                 .map(|k| class_of(w, k.centre_bin, k.sigma_bins))
                 .collect();
-            points_on_axis(pulse, w.t0_ns, w.bin_ns as f64, &comps, &classes, &config)
+            let mut points =
+                points_on_axis(pulse, w.t0_ns, w.bin_ns as f64, &comps, &classes, &config);
+            for p in &mut points {
+                p.wavelength_nm = w.wavelength_nm.map(|nm| nm as f32);
+            }
+            points
         })
         .collect();
     by_pulse.into_iter().flatten().collect()
@@ -271,11 +292,15 @@ pub fn photon_events(loaded: &Loaded, plan: &Plan, waveforms: &[Waveform]) -> Ve
                 inst.quantum_efficiency.unwrap_or(1.0),
                 inst.dark_count_hz.unwrap_or(0.0),
                 inst.dead_time_ns.unwrap_or(0.0) * 1e-9,
-                c.seed,
+                SplitMix64::band_seed(c.seed, c.wavelength_nm.index_of(w.wavelength_nm)),
                 w.pulse_id,
             );
             let along = (pulse.origin - first).truncate().length();
-            photon_rows(pulse, w.t0_ns, &events, along)
+            let mut rows = photon_rows(pulse, w.t0_ns, &events, along);
+            for r in &mut rows {
+                r.wavelength_nm = w.wavelength_nm;
+            }
+            rows
         })
         .collect();
     by_pulse.into_iter().flatten().collect()
@@ -296,6 +321,7 @@ pub fn run(
 ) -> Result<(Vec<String>, String)> {
     let want = wanted(loaded);
     let c = &loaded.campaign;
+    let several = c.wavelength_nm.several();
     let format = c.points_format();
     let las_path = out.join(format.file_name());
     let mut points = if want.points {
@@ -362,31 +388,53 @@ pub fn run(
                     out.display()
                 )));
             }
-            seen += part.len();
-            for w in &part {
+            // with several bands, the rows of the first band (all rows with one) make the
+            // products of one band; points and photons are made in every band
+            let first: Vec<&Waveform> = part.iter().filter(|w| first_band(loaded, w)).collect();
+            let pulses_in_part = first.len();
+            seen += pulses_in_part;
+            for w in &first {
                 totals.add(w);
             }
             if let Some(pass) = &mut points {
                 let p = discrete_returns(loaded, plan, &part);
-                examples.offer(&part, &p);
-                pass.add(scene, plan, &las_path, &p)?;
+                let of_first = |p: &Point| {
+                    p.wavelength_nm
+                        .is_none_or(|nm| nm == c.wavelength_nm.first() as f32)
+                };
+                if several {
+                    let first_points: Vec<Point> =
+                        p.iter().filter(|p| of_first(p)).cloned().collect();
+                    let first_rows: Vec<Waveform> = first.iter().map(|w| (*w).clone()).collect();
+                    examples.offer(&first_rows, &first_points);
+                    pass.tally_first_band(scene, plan, &first_points);
+                } else {
+                    examples.offer(&part, &p);
+                    pass.tally_first_band(scene, plan, &p);
+                }
+                pass.add(&las_path, &p)?;
             }
             if want.photons {
                 let events = photon_events(loaded, plan, &part);
                 if let Some(a) = &mut atl03 {
-                    for rows in events.chunk_by(|a, b| a.pulse_id == b.pulse_id) {
+                    let first_events = events.iter().filter(|r| {
+                        r.wavelength_nm
+                            .is_none_or(|nm| nm == c.wavelength_nm.first())
+                    });
+                    let first_events: Vec<PhotonRow> = first_events.copied().collect();
+                    for rows in first_events.chunk_by(|a, b| a.pulse_id == b.pulse_id) {
                         a.add(&plan.pulse(rows[0].pulse_id), rows)?;
                     }
                 }
-                photons.add(&photons_path, &events)?;
+                photons.add(&photons_path, &events, several)?;
             }
             if let Some(l) = &mut l1b {
-                let records: Vec<_> = part.par_iter().map(|w| recorder.record(w)).collect();
-                for (w, r) in part.iter().zip(&records) {
+                let records: Vec<_> = first.par_iter().map(|w| recorder.record(w)).collect();
+                for (w, r) in first.iter().zip(&records) {
                     l.add(&plan.pulse(w.pulse_id), w, r)?;
                 }
             }
-            bar.inc(part.len() as u64);
+            bar.inc(pulses_in_part as u64);
             if bar.is_hidden() && (k + 1) % every == 0 && k + 1 < parts {
                 let rate = seen as f64 / start.elapsed().as_secs_f64().max(1e-9);
                 log(&format!(
@@ -425,13 +473,23 @@ pub fn run(
             shift,
             wkt,
             laz: format == PointsFormat::Laz,
+            bands: several,
         };
         let PointsPass {
             mut spill, tally, ..
         } = pass;
+        let first_nm = c.wavelength_nm.first() as f32;
         write_las_chunks(&las_path, &layout, |write| {
             spill.read(|chunk| {
                 write(chunk)?;
+                let first: Vec<Point>;
+                let chunk = if several {
+                    let band = chunk.iter().filter(|p| p.wavelength_nm == Some(first_nm));
+                    first = band.cloned().collect();
+                    &first
+                } else {
+                    chunk
+                };
                 top.offer(chunk);
                 if let Some(d) = &mut dsm {
                     d.add_points(chunk);
@@ -451,7 +509,7 @@ pub fn run(
         }
     }
     if want.photons {
-        let counts = photons.finish(&photons_path, plan.len())?;
+        let counts = photons.finish(&photons_path, plan.len(), several)?;
         outputs.push("photons.parquet".to_string());
         summary.photons = Some(counts);
     }
@@ -493,8 +551,14 @@ impl PointsPass {
         })
     }
 
-    fn add(&mut self, scene: &Scene, plan: &Plan, las: &Path, points: &[Point]) -> Result<()> {
+    /// Points of every band, into points.las.
+    fn add(&mut self, las: &Path, points: &[Point]) -> Result<()> {
         self.extent.add(las, points)?;
+        self.spill.push(points)
+    }
+
+    /// The first band's points, into the summary and the DSM grid.
+    fn tally_first_band(&mut self, scene: &Scene, plan: &Plan, points: &[Point]) {
         self.tally.add(points);
         self.tally
             .distances
@@ -504,7 +568,6 @@ impl PointsPass {
             let (lo, hi) = self.first.get_or_insert((v, v));
             (*lo, *hi) = (lo.min(v), hi.max(v));
         }
-        self.spill.push(points)
     }
 }
 
@@ -518,8 +581,8 @@ struct PhotonsPass {
 }
 
 impl PhotonsPass {
-    fn add(&mut self, path: &Path, rows: &[PhotonRow]) -> Result<()> {
-        let table = photon_table(rows);
+    fn add(&mut self, path: &Path, rows: &[PhotonRow], bands: bool) -> Result<()> {
+        let table = photon_table(rows, bands);
         let sink = match &mut self.sink {
             Some(s) => s,
             None => self.sink.insert(Sink::create(path, table.schema())?),
@@ -534,9 +597,9 @@ impl PhotonsPass {
         Ok(())
     }
 
-    fn finish(mut self, path: &Path, pulses: usize) -> Result<PhotonCounts> {
+    fn finish(mut self, path: &Path, pulses: usize, bands: bool) -> Result<PhotonCounts> {
         if self.sink.is_none() {
-            self.add(path, &[])?;
+            self.add(path, &[], bands)?;
         }
         if let Some(s) = self.sink {
             s.finish()?;

@@ -158,6 +158,7 @@ mod tests {
             class_energy_j: Default::default(),
             rays: 2,
             paths_per_ray: 1.5,
+            wavelength_nm: None,
         };
         let mut t = WaveformTotals::default();
         t.add(&w(0.25));

@@ -143,12 +143,35 @@ impl From<ClassSpec> for SurfaceClass {
     }
 }
 
-/// A material's optical properties at the campaign wavelength.
+/// A material's optical properties at the campaign's wavelengths: the largest over its bands
+/// (what paths are sampled with) and each band's (ρ, ρ_back, τ).
 #[derive(Debug, Clone, PartialEq)]
 pub(crate) struct ResolvedMaterial {
     pub reflectance: f64,
     pub back_reflectance: f64,
     pub transmittance: f64,
+    pub bands: Vec<[f64; 3]>,
+}
+
+/// Resolves every material at each of `wavelengths_nm`, with located errors; a material's
+/// scalar values are the largest over the bands (the band's own with one band).
+pub(crate) fn resolve_materials(
+    doc: &Doc,
+    file: &SceneFile,
+    wavelengths_nm: &[f64],
+) -> Result<BTreeMap<String, ResolvedMaterial>> {
+    let mut out: BTreeMap<String, ResolvedMaterial> = BTreeMap::new();
+    for &w in wavelengths_nm {
+        for (name, m) in resolve_at(doc, file, w)? {
+            let band = [m.reflectance, m.back_reflectance, m.transmittance];
+            out.entry(name).or_insert(m).bands.push(band);
+        }
+    }
+    for m in out.values_mut() {
+        let max = |i: usize| m.bands.iter().map(|b| b[i]).fold(0.0, f64::max);
+        (m.reflectance, m.back_reflectance, m.transmittance) = (max(0), max(1), max(2));
+    }
+    Ok(out)
 }
 
 fn value_at(doc: &Doc, key: &str, s: &Spectral, wavelength_nm: f64) -> Result<f64> {
@@ -163,7 +186,7 @@ fn value_at(doc: &Doc, key: &str, s: &Spectral, wavelength_nm: f64) -> Result<f6
 }
 
 /// Resolves every material at `wavelength_nm`, with located errors.
-pub(crate) fn resolve_materials(
+fn resolve_at(
     doc: &Doc,
     file: &SceneFile,
     wavelength_nm: f64,
@@ -216,6 +239,7 @@ pub(crate) fn resolve_materials(
                 reflectance: r,
                 back_reflectance: rb,
                 transmittance: t,
+                bands: Vec::new(),
             },
         );
     }

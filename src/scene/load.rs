@@ -115,11 +115,11 @@ fn check_material(
 /// Reads a scene file and builds its scene: the objects checked against the file, every
 /// distinct mesh loaded once, materials given to each slot, instances placed, the top level
 /// built.
-pub(crate) fn load(path: &Path, wavelength_nm: f64) -> Result<Scene> {
+pub(crate) fn load(path: &Path, wavelengths_nm: &[f64]) -> Result<Scene> {
     let doc = Doc::read(path)?;
     let mut files = vec![path.to_path_buf()];
     let file: SceneFile = doc.parse()?;
-    let materials = resolve_materials(&doc, &file, wavelength_nm)?;
+    let materials = resolve_materials(&doc, &file, wavelengths_nm)?;
     if file.objects.is_empty() {
         return Err(doc.error("objects", "the scene has no objects"));
     }
@@ -374,6 +374,7 @@ fn assign_surfaces(
                         reflectance: m.reflectance,
                         back_reflectance: m.back_reflectance,
                         transmittance: m.transmittance,
+                        bands: m.bands.clone(),
                         class,
                     });
                     (surfaces.len() - 1) as u32

@@ -81,6 +81,10 @@ pub struct Surface {
     pub reflectance: f64,
     pub back_reflectance: f64,
     pub transmittance: f64,
+    /// (ρ, ρ_b, τ) in each band of the campaign; the three values above are the largest of
+    /// each over the bands, with which paths are sampled (the band's own with one band). With
+    /// several bands ρ + τ may then exceed 1: it is a sampling weight, not a material.
+    pub bands: Vec<[f64; 3]>,
     pub class: SurfaceClass,
 }
 
@@ -249,7 +253,12 @@ impl Scene {
     /// Loads a scene file (see ../shared/spec/campaign.md, "Scene") with materials resolved at
     /// `wavelength_nm`.
     pub fn load(path: &Path, wavelength_nm: f64) -> Result<Scene> {
-        load::load(path, wavelength_nm)
+        load::load(path, &[wavelength_nm])
+    }
+
+    /// [`Scene::load`] with materials resolved in each of several bands.
+    pub fn load_bands(path: &Path, wavelengths_nm: &[f64]) -> Result<Scene> {
+        load::load(path, wavelengths_nm)
     }
 
     /// Clips `origin + t dir`, 0 < t < t_max, to the scene box in f64 and moves it to f32.

@@ -38,6 +38,20 @@ impl Atmosphere {
         Ok(Atmosphere { layers })
     }
 
+    /// The atmosphere whose optical depths are this one's less `reference`'s, layer by layer
+    /// (same scale heights): optical depth is linear in τ, so its transmittance is this one's
+    /// over the reference's, without the 0/0 of two vanishing transmittances.
+    pub fn relative_to(&self, reference: &Atmosphere) -> Atmosphere {
+        Atmosphere {
+            layers: self
+                .layers
+                .iter()
+                .zip(&reference.layers)
+                .map(|(&(k, t), &(_, r))| (k, t - r))
+                .collect(),
+        }
+    }
+
     /// Optical depth of the straight segment from `a` to `b`.
     pub fn optical_depth(&self, a: DVec3, b: DVec3) -> f64 {
         let length = (b - a).length();

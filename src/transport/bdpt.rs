@@ -1,6 +1,7 @@
 //! One bidirectional sample: a light and a receiver sub-path, joined in every way, each
 //! strategy weighted by [`mis_weight`](super::mis_weight) and tallied by time and order.
 
+use super::bands::{BandVec, ONES};
 use super::bsdf::{bsdf, sample_bsdf};
 use super::mis::{link, mis_weight};
 use super::tally::Accum;
@@ -28,6 +29,10 @@ pub(super) struct Buffers {
     light: Vec<Vertex>,
     cam: Vec<Vertex>,
     scratch: Vec<f64>,
+    /// With several bands, each vertex's factor per band (`light_r[i]` of `light[i]`: what
+    /// turns its β into each band's).
+    light_r: Vec<BandVec>,
+    cam_r: Vec<BandVec>,
 }
 
 /// Transmittance of the segment from vertex `a` to the point `b`: 1 in vacuum; the sun's
@@ -72,11 +77,13 @@ pub(super) fn survives(surfaces: usize, beta: &mut f64, a: f64, rng: &mut Rng) -
 
 /// Extends a sub-path whose last vertex emits along `dir` with throughput `beta`, up to
 /// `cap` vertices. On a light sub-path (`light`), a segment that crosses the aperture before
-/// any facet is the strategy t = 0 and is scored on the way.
+/// any facet is the strategy t = 0 and is scored on the way. With several bands, `ratios`
+/// (one per vertex, starting with the end point's) gains each new vertex's band factors.
 #[allow(clippy::too_many_arguments)]
 pub(super) fn walk(
     setup: &PulseSetup,
     path: &mut Vec<Vertex>,
+    ratios: &mut Vec<BandVec>,
     mut dir: DVec3,
     mut beta: f64,
     cap: usize,
@@ -87,6 +94,8 @@ pub(super) fn walk(
 ) {
     let scene = setup.scene;
     let recv = &setup.receiver;
+    // the band factors of the sub-path so far, the last vertex's scattering included
+    let mut run = ONES;
     while path.len() < cap {
         let last = *path.last().expect("a sub-path starts at its end point");
         let surfaces = path.len() - 1;
@@ -106,7 +115,17 @@ pub(super) fn walk(
                     path.push(q);
                     link(setup, path);
                     let w = mis_weight(setup, path, &[], scratch);
-                    if path[0].kind == VertexKind::Sun {
+                    let sun = path[0].kind == VertexKind::Sun;
+                    if let Some(bands) = setup.bands {
+                        let mut r = run;
+                        bands.segment(&mut r, &last, q.p);
+                        if sun {
+                            acc.add_solar_bands(q.beta * w, &r);
+                        } else {
+                            let class = class_of(setup, &path[1]);
+                            acc.add_bands(q.len, q.beta * w, surfaces, class, &r);
+                        }
+                    } else if sun {
                         acc.add_solar(q.beta * w);
                     } else {
                         acc.add(q.len, q.beta * w, surfaces, class_of(setup, &path[1]));
@@ -119,6 +138,10 @@ pub(super) fn walk(
         beta *= segment_transmittance(setup, &last, hit.position);
         path.push(surface_vertex(&hit, beta, last.len + hit.t));
         link(setup, path);
+        if let Some(bands) = setup.bands {
+            bands.segment(&mut run, &last, hit.position);
+            ratios.push(run);
+        }
         if path.len() >= cap {
             break;
         }
@@ -126,6 +149,9 @@ pub(super) fn walk(
         let Some((next, a)) = sample_bsdf(surf, hit.normal, -dir, rng) else {
             break;
         };
+        if let Some(bands) = setup.bands {
+            bands.scatter(&mut run, hit.surface, hit.normal, -dir, next);
+        }
         beta *= a;
         if !survives(surfaces + 1, &mut beta, a, rng) {
             break;
@@ -201,6 +227,10 @@ fn light_subpath(setup: &PulseSetup, rng: &mut Rng, acc: &mut Accum, b: &mut Buf
     let (s_cap, _) = setup.caps();
     let laser = &setup.laser;
     b.light.clear();
+    b.light_r.clear();
+    if setup.bands.is_some() {
+        b.light_r.push(ONES);
+    }
     let q_sun = setup.sun.map_or(0.0, |s| s.probability);
     let sun = setup.sun.filter(|_| rng.uniform() < q_sun);
     if let Some(sun) = sun {
@@ -212,6 +242,7 @@ fn light_subpath(setup: &PulseSetup, rng: &mut Rng, acc: &mut Accum, b: &mut Buf
             walk(
                 setup,
                 &mut b.light,
+                &mut b.light_r,
                 sun.dir,
                 beta,
                 s_cap,
@@ -234,6 +265,7 @@ fn light_subpath(setup: &PulseSetup, rng: &mut Rng, acc: &mut Accum, b: &mut Buf
             walk(
                 setup,
                 &mut b.light,
+                &mut b.light_r,
                 dir,
                 laser.energy / q_laser,
                 s_cap,
@@ -252,7 +284,11 @@ fn receiver_subpath(setup: &PulseSetup, rng: &mut Rng, acc: &mut Accum, b: &mut 
     let (_, t_cap) = setup.caps();
     let recv = &setup.receiver;
     b.cam.clear();
+    b.cam_r.clear();
     if t_cap > 1 {
+        if setup.bands.is_some() {
+            b.cam_r.push(ONES);
+        }
         let q0 = recv.sample_point(rng.uniform(), rng.uniform());
         let (dir, w) = recv.sample_direction(rng.uniform(), rng.uniform());
         b.cam.push(Vertex::endpoint(
@@ -264,6 +300,7 @@ fn receiver_subpath(setup: &PulseSetup, rng: &mut Rng, acc: &mut Accum, b: &mut 
         walk(
             setup,
             &mut b.cam,
+            &mut b.cam_r,
             dir,
             recv.area * w,
             t_cap,
@@ -294,7 +331,12 @@ fn connect_to_lights(setup: &PulseSetup, acc: &mut Accum, b: &mut Buffers) {
             acc.tally.queries += 1;
             if !scene.occluded(laser_end.p, y.p, FacetId::NONE, y.facet) {
                 let w = mis_weight(setup, &laser_light, cam, &mut b.scratch);
-                acc.add(length, c * w, t - 1, class_of(setup, y));
+                if let Some(bands) = setup.bands {
+                    let r = bands.connection(setup, &laser_light, cam, (&ONES, &b.cam_r[t - 1]));
+                    acc.add_bands(length, c * w, t - 1, class_of(setup, y), &r);
+                } else {
+                    acc.add(length, c * w, t - 1, class_of(setup, y));
+                }
             }
         }
         if let Some(sun) = setup.sun {
@@ -309,7 +351,12 @@ fn connect_to_lights(setup: &PulseSetup, acc: &mut Accum, b: &mut Buffers) {
                 acc.tally.queries += 1;
                 if !scene.occluded_towards(y.p, -sun.dir, y.facet) {
                     let w = mis_weight(setup, &sun_light, cam, &mut b.scratch);
-                    acc.add_solar(c * w);
+                    if let Some(bands) = setup.bands {
+                        let r = bands.connection(setup, &sun_light, cam, (&ONES, &b.cam_r[t - 1]));
+                        acc.add_solar_bands(c * w, &r);
+                    } else {
+                        acc.add_solar(c * w);
+                    }
                 }
             }
         }
@@ -357,7 +404,15 @@ fn connect_subpaths(
                 continue;
             }
             let w = mis_weight(setup, light, cam, &mut b.scratch);
-            if is_sun {
+            if let Some(bands) = setup.bands {
+                let cr = if t == 1 { &ONES } else { &b.cam_r[t - 1] };
+                let r = bands.connection(setup, light, cam, (&b.light_r[s - 1], cr));
+                if is_sun {
+                    acc.add_solar_bands(c * w, &r);
+                } else {
+                    acc.add_bands(length, c * w, order, class_of(setup, &light[1]), &r);
+                }
+            } else if is_sun {
                 acc.add_solar(c * w);
             } else {
                 acc.add(length, c * w, order, class_of(setup, &light[1]));

@@ -28,6 +28,7 @@
 //! light sub-path to the laser (s = 1). So the three methods cannot drift apart.
 
 pub mod atmosphere;
+pub mod bands;
 mod bdpt;
 mod bsdf;
 mod mis;
@@ -70,6 +71,8 @@ pub struct PulseSetup<'a> {
     pub sun: Option<SunSource>,
     /// The atmosphere at the campaign's wavelength; `None` is vacuum and costs nothing.
     pub atmosphere: Option<&'a atmosphere::Atmosphere>,
+    /// Several bands in one pass; `None` for one band, which then costs nothing.
+    pub bands: Option<&'a bands::Bands>,
     pub max_order: u32,
     pub seed: u64,
     pub pulse_id: u64,
@@ -149,8 +152,27 @@ pub fn simulate_pulse(setup: &PulseSetup, rays: u64) -> Tally {
     simulate_pulse_in(setup, rays, &mut Scratch::default()).clone()
 }
 
-/// [`simulate_pulse`] in a worker's scratch: the tally returned lives there until its next
-/// pulse.
+/// [`simulate_pulse`] in every band of `setup`: one tally per band, the first band's first.
+pub fn simulate_pulse_bands(setup: &PulseSetup, rays: u64) -> Vec<Tally> {
+    let mut scratch = Scratch::default();
+    simulate_pulse_in(setup, rays, &mut scratch);
+    let bands = setup.bands.map_or(1, |b| b.count);
+    (0..bands).map(|b| scratch.band(b).clone()).collect()
+}
+
+impl Scratch {
+    /// Band `b`'s tally of the last pulse simulated in this scratch (0: the first band, the
+    /// one [`simulate_pulse_in`] returns).
+    pub fn band(&self, b: usize) -> &Tally {
+        self.acc
+            .as_ref()
+            .expect("a pulse was simulated in this scratch")
+            .band(b)
+    }
+}
+
+/// [`simulate_pulse`] in a worker's scratch: the tally returned (the first band's) lives
+/// there until its next pulse, with the other bands' ([`Scratch::band`]).
 pub fn simulate_pulse_in<'s>(setup: &PulseSetup, rays: u64, scratch: &'s mut Scratch) -> &'s Tally {
     let chunks = rays.div_ceil(CHUNK_RAYS);
     let acc = scratch.acc.get_or_insert_with(|| Accum::new(setup));
@@ -168,16 +190,16 @@ pub fn simulate_pulse_in<'s>(setup: &PulseSetup, rays: u64, scratch: &'s mut Scr
         trace(0, acc, &mut scratch.bufs);
         return &acc.tally;
     }
-    let parts: Vec<Tally> = (0..chunks)
+    let parts: Vec<Accum> = (0..chunks)
         .into_par_iter()
         .map(|c| {
             let mut part = Accum::new(setup);
             trace(c, &mut part, &mut Buffers::default());
-            part.tally
+            part
         })
         .collect();
     for p in &parts {
-        acc.tally.merge(p);
+        acc.merge(p);
     }
     &acc.tally
 }

@@ -1,6 +1,7 @@
 //! What a pulse's rays add up to: energy per sub-bin and per order, with the sums of squares
 //! over whole rays that standard errors need.
 
+use super::bands::BandVec;
 use super::PulseSetup;
 
 /// Received laser energy of one pulse, by time and by scattering order, with the sums of
@@ -153,10 +154,19 @@ pub(super) struct Accum {
     touched_orders: Vec<u32>,
     touched_bins: Vec<u32>,
     ray_solar: f64,
+    /// The accumulators of bands 2, 3, … of a run of several bands (this one is band 1's).
+    pub(super) bands: Vec<Accum>,
 }
 
 impl Accum {
     pub(super) fn new(setup: &PulseSetup) -> Accum {
+        let mut a = Accum::one_band(setup);
+        let more = setup.bands.map_or(0, |b| b.count - 1);
+        a.bands = (0..more).map(|_| Accum::one_band(setup)).collect();
+        a
+    }
+
+    fn one_band(setup: &PulseSetup) -> Accum {
         Accum {
             tally: Tally::new(setup.gate.bins, setup.sub_bins, setup.max_order),
             t0: setup.gate.t0,
@@ -167,6 +177,47 @@ impl Accum {
             touched_orders: Vec::with_capacity(16),
             touched_bins: Vec::with_capacity(16),
             ray_solar: 0.0,
+            bands: Vec::new(),
+        }
+    }
+
+    /// The tally of band `b` (0: the first).
+    pub(super) fn band(&self, b: usize) -> &Tally {
+        if b == 0 {
+            &self.tally
+        } else {
+            &self.bands[b - 1].tally
+        }
+    }
+
+    /// Merges another pulse chunk's accumulators, band by band.
+    pub(super) fn merge(&mut self, o: &Accum) {
+        self.tally.merge(&o.tally);
+        for (a, b) in self.bands.iter_mut().zip(&o.bands) {
+            a.tally.merge(&b.tally);
+        }
+    }
+
+    /// [`Accum::add`] in every band, band b's energy being `energy × r[b]`.
+    pub(super) fn add_bands(
+        &mut self,
+        length: f64,
+        energy: f64,
+        order: usize,
+        class: usize,
+        r: &BandVec,
+    ) {
+        self.add(length, energy * r[0], order, class);
+        for (a, f) in self.bands.iter_mut().zip(&r[1..]) {
+            a.add(length, energy * f, order, class);
+        }
+    }
+
+    /// [`Accum::add_solar`] in every band.
+    pub(super) fn add_solar_bands(&mut self, power: f64, r: &BandVec) {
+        self.add_solar(power * r[0]);
+        for (a, f) in self.bands.iter_mut().zip(&r[1..]) {
+            a.add_solar(power * f);
         }
     }
 
@@ -174,6 +225,18 @@ impl Accum {
     /// memory kept. The per-bin sums are zero outside the last pulse's lit span, so only
     /// that span is cleared before they are sized for the new gate.
     pub(super) fn reset(&mut self, setup: &PulseSetup) {
+        let more = setup.bands.map_or(0, |b| b.count - 1);
+        if self.bands.len() != more {
+            self.bands = (0..more).map(|_| Accum::one_band(setup)).collect();
+        }
+        for a in &mut self.bands {
+            a.reset_band(setup);
+        }
+        self.reset_band(setup);
+    }
+
+    /// [`Accum::reset`] of this band's sums alone.
+    fn reset_band(&mut self, setup: &PulseSetup) {
         let (bins, sub_bins) = (setup.gate.bins, setup.sub_bins);
         let zero = |v: &mut Vec<f64>, n: usize| {
             v.clear();
@@ -245,6 +308,9 @@ impl Accum {
     }
 
     pub(super) fn end_ray(&mut self) {
+        for a in &mut self.bands {
+            a.end_ray();
+        }
         let mut total = 0.0;
         for &k in &self.touched_orders {
             let x = std::mem::take(&mut self.ray_order[k as usize]);

@@ -37,6 +37,7 @@ fn setup<'a>(scene: &'a Scene, method: Method, heuristic: MisHeuristic) -> Pulse
         heuristic,
         sun: None,
         atmosphere: None,
+        bands: None,
         max_order: 12,
         seed: 1,
         pulse_id: 0,

@@ -1,5 +1,5 @@
 //! Waveform part files of a run folder (outputs.md): `waveforms/part-NNNNN.parquet`, one row
-//! per pulse.
+//! per pulse, or per pulse and band with several bands (a `wavelength_nm` column then).
 
 use super::Waveform;
 use crate::error::{Error, Result};
@@ -42,114 +42,123 @@ pub fn checksum_path(part: &Path) -> std::path::PathBuf {
 
 /// The waveforms as the table a part file holds.
 pub fn waveform_batch(w: &[Waveform]) -> arrow_array::RecordBatch {
-    batch_nullable(
-        vec![
+    let mut columns: Vec<(&str, arrow_array::ArrayRef)> = vec![
+        (
+            "pulse_id",
+            Arc::new(UInt64Array::from_iter_values(w.iter().map(|r| r.pulse_id))),
+        ),
+        (
+            "t0_ns",
+            Arc::new(Float64Array::from_iter_values(w.iter().map(|r| r.t0_ns))),
+        ),
+        (
+            "bin_ns",
+            Arc::new(Float32Array::from_iter_values(w.iter().map(|r| r.bin_ns))),
+        ),
+        (
+            "laser_photons",
+            list_f32(w.iter().map(|r| r.laser_photons.as_slice())),
+        ),
+        (
+            "impulse_energy_j",
+            list_f32(w.iter().map(|r| r.impulse_energy_j.as_slice())),
+        ),
+        (
+            "impulse_energy_se_j",
+            list_f32(w.iter().map(|r| r.impulse_energy_se_j.as_slice())),
+        ),
+        (
+            "ground_energy_j",
+            list_f32(w.iter().map(|r| r.class_energy_j[0].as_slice())),
+        ),
+        (
+            "vegetation_energy_j",
+            list_f32(w.iter().map(|r| r.class_energy_j[1].as_slice())),
+        ),
+        (
+            "building_energy_j",
+            list_f32(w.iter().map(|r| r.class_energy_j[2].as_slice())),
+        ),
+        (
+            "other_energy_j",
+            list_f32(w.iter().map(|r| r.class_energy_j[3].as_slice())),
+        ),
+        (
+            "received_energy_j",
+            Arc::new(Float64Array::from_iter_values(
+                w.iter().map(|r| r.received_energy_j),
+            )),
+        ),
+        (
+            "outside_gate_energy_j",
+            Arc::new(Float64Array::from_iter_values(
+                w.iter().map(|r| r.outside_gate_energy_j),
+            )),
+        ),
+        (
+            "order_energy_j",
+            list_f64(w.iter().map(|r| r.order_energy_j.as_slice())),
+        ),
+        (
+            "order_energy_se_j",
+            list_f64(w.iter().map(|r| r.order_energy_se_j.as_slice())),
+        ),
+        (
+            "received_energy_se_j",
+            Arc::new(Float64Array::from_iter_values(
+                w.iter().map(|r| r.received_energy_se_j),
+            )),
+        ),
+        (
+            "solar_photons_per_bin",
+            Arc::new(Float32Array::from_iter_values(
+                w.iter().map(|r| r.solar_photons_per_bin),
+            )),
+        ),
+        (
+            "solar_power_w",
+            Arc::new(Float64Array::from_iter_values(
+                w.iter().map(|r| r.solar_power_w),
+            )),
+        ),
+        (
+            "solar_power_se_w",
+            Arc::new(Float64Array::from_iter_values(
+                w.iter().map(|r| r.solar_power_se_w),
+            )),
+        ),
+        // null without a sun, and without laser energy in the gate: no meaning, not NaN
+        (
+            "brf_fov_solar",
+            f32_or_null(w.iter().map(|r| r.brf_fov_solar)),
+        ),
+        (
+            "brf_footprint_laser",
+            f32_or_null(w.iter().map(|r| r.brf_footprint_laser)),
+        ),
+        (
+            "rays",
+            Arc::new(UInt32Array::from_iter_values(w.iter().map(|r| r.rays))),
+        ),
+        (
+            "paths_per_ray",
+            Arc::new(Float32Array::from_iter_values(
+                w.iter().map(|r| r.paths_per_ray),
+            )),
+        ),
+    ];
+    // a run of several bands: one row per pulse and band, the band beside the pulse id
+    if w.iter().any(|r| r.wavelength_nm.is_some()) {
+        let nm = w.iter().map(|r| r.wavelength_nm.unwrap_or(f64::NAN));
+        columns.insert(
+            1,
             (
-                "pulse_id",
-                Arc::new(UInt64Array::from_iter_values(w.iter().map(|r| r.pulse_id))),
+                "wavelength_nm",
+                Arc::new(Float64Array::from_iter_values(nm)),
             ),
-            (
-                "t0_ns",
-                Arc::new(Float64Array::from_iter_values(w.iter().map(|r| r.t0_ns))),
-            ),
-            (
-                "bin_ns",
-                Arc::new(Float32Array::from_iter_values(w.iter().map(|r| r.bin_ns))),
-            ),
-            (
-                "laser_photons",
-                list_f32(w.iter().map(|r| r.laser_photons.as_slice())),
-            ),
-            (
-                "impulse_energy_j",
-                list_f32(w.iter().map(|r| r.impulse_energy_j.as_slice())),
-            ),
-            (
-                "impulse_energy_se_j",
-                list_f32(w.iter().map(|r| r.impulse_energy_se_j.as_slice())),
-            ),
-            (
-                "ground_energy_j",
-                list_f32(w.iter().map(|r| r.class_energy_j[0].as_slice())),
-            ),
-            (
-                "vegetation_energy_j",
-                list_f32(w.iter().map(|r| r.class_energy_j[1].as_slice())),
-            ),
-            (
-                "building_energy_j",
-                list_f32(w.iter().map(|r| r.class_energy_j[2].as_slice())),
-            ),
-            (
-                "other_energy_j",
-                list_f32(w.iter().map(|r| r.class_energy_j[3].as_slice())),
-            ),
-            (
-                "received_energy_j",
-                Arc::new(Float64Array::from_iter_values(
-                    w.iter().map(|r| r.received_energy_j),
-                )),
-            ),
-            (
-                "outside_gate_energy_j",
-                Arc::new(Float64Array::from_iter_values(
-                    w.iter().map(|r| r.outside_gate_energy_j),
-                )),
-            ),
-            (
-                "order_energy_j",
-                list_f64(w.iter().map(|r| r.order_energy_j.as_slice())),
-            ),
-            (
-                "order_energy_se_j",
-                list_f64(w.iter().map(|r| r.order_energy_se_j.as_slice())),
-            ),
-            (
-                "received_energy_se_j",
-                Arc::new(Float64Array::from_iter_values(
-                    w.iter().map(|r| r.received_energy_se_j),
-                )),
-            ),
-            (
-                "solar_photons_per_bin",
-                Arc::new(Float32Array::from_iter_values(
-                    w.iter().map(|r| r.solar_photons_per_bin),
-                )),
-            ),
-            (
-                "solar_power_w",
-                Arc::new(Float64Array::from_iter_values(
-                    w.iter().map(|r| r.solar_power_w),
-                )),
-            ),
-            (
-                "solar_power_se_w",
-                Arc::new(Float64Array::from_iter_values(
-                    w.iter().map(|r| r.solar_power_se_w),
-                )),
-            ),
-            // null without a sun, and without laser energy in the gate: no meaning, not NaN
-            (
-                "brf_fov_solar",
-                f32_or_null(w.iter().map(|r| r.brf_fov_solar)),
-            ),
-            (
-                "brf_footprint_laser",
-                f32_or_null(w.iter().map(|r| r.brf_footprint_laser)),
-            ),
-            (
-                "rays",
-                Arc::new(UInt32Array::from_iter_values(w.iter().map(|r| r.rays))),
-            ),
-            (
-                "paths_per_ray",
-                Arc::new(Float32Array::from_iter_values(
-                    w.iter().map(|r| r.paths_per_ray),
-                )),
-            ),
-        ],
-        &["brf_fov_solar", "brf_footprint_laser"],
-    )
+        );
+    }
+    batch_nullable(columns, &["brf_fov_solar", "brf_footprint_laser"])
 }
 
 /// Reads a waveform part back (used by tests and later stages).
@@ -246,6 +255,14 @@ pub fn read_waveforms(path: &Path) -> Result<Vec<Waveform>> {
         let ppr = typed("paths_per_ray", &f32t)?
             .as_primitive::<Float32Type>()
             .clone();
+        let bands = match b.column_by_name("wavelength_nm") {
+            Some(_) => Some(
+                typed("wavelength_nm", &f64t)?
+                    .as_primitive::<Float64Type>()
+                    .clone(),
+            ),
+            None => None,
+        };
         let f32s = |l: &arrow_array::ListArray, i: usize| {
             l.value(i).as_primitive::<Float32Type>().values().to_vec()
         };
@@ -286,6 +303,7 @@ pub fn read_waveforms(path: &Path) -> Result<Vec<Waveform>> {
                 ],
                 rays: rays.value(i),
                 paths_per_ray: ppr.value(i),
+                wavelength_nm: bands.as_ref().map(|a| a.value(i)),
             });
         }
     }
@@ -357,6 +375,7 @@ mod tests {
             class_energy_j: std::array::from_fn(|_| vec![0.0, 2.5e-16]),
             rays: 4,
             paths_per_ray: 1.0,
+            wavelength_nm: None,
         }
     }
 

@@ -45,6 +45,9 @@ pub struct Waveform {
     pub rays: u32,
     /// Paths that carried energy, per ray.
     pub paths_per_ray: f32,
+    /// The band of this row in a run of several bands (column `wavelength_nm`); `None` with
+    /// one band, whose files have no such column.
+    pub wavelength_nm: Option<f64>,
 }
 
 /// Sub-bins per bin so that a sub-bin is at most σ/4 wide (1 for an impulse pulse).
@@ -206,6 +209,7 @@ pub fn waveform(
         }),
         rays: tally.rays as u32,
         paths_per_ray: (tally.paths as f64 / n) as f32,
+        wavelength_nm: None,
     }
 }
 

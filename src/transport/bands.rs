@@ -1,0 +1,131 @@
+//! Several bands in one pass (campaign.md, `wavelength_nm: [..]`). A path's geometry does not
+//! depend on the wavelength, only its throughput does, so each path is sampled once and
+//! carries one factor per band:
+//!
+//!   β_b = β Π_vertices f_b / f  Π_segments T_b / T,
+//!
+//! where f is the BSDF the path was sampled and weighted with and T the transmittance of the
+//! first band's atmosphere. f takes, for reflection and for transmission separately, the
+//! largest of the bands' ρ and τ (ρ_max, τ_max): no band whose material scatters is left
+//! unsampled, every factor f_b / f = ρ_b / ρ_max (or ρ_back or τ, by the side the path takes)
+//! is at most 1, so no band's weight grows along a path, and paths are as long as the
+//! brightest band needs (a mean would cut the near-infrared band's multiple scattering short
+//! and weight its survivors up). T_b / T = exp(-(d_b - d_0)) with d the optical depth. The
+//! sampling densities are the same for every band, so every strategy's MIS weight is shared
+//! and each band's estimate stays unbiased; Russian roulette, decided on the sampled albedo
+//! ρ_max + τ_max (which may exceed 1: then no roulette), divides every band alike.
+
+use super::atmosphere::Atmosphere;
+use super::{PulseSetup, Vertex, VertexKind};
+use crate::campaign::spectral::MAX_BANDS;
+use crate::scene::Scene;
+use glam::DVec3;
+
+/// One factor per band (lanes past the campaign's bands are unused).
+pub type BandVec = [f64; MAX_BANDS];
+
+/// Every band's factor 1: the start of a sub-path (the laser's energy, the sun's irradiance
+/// and the receiver's importance are the same in every band).
+pub const ONES: BandVec = [1.0; MAX_BANDS];
+
+/// What turns a path sampled with the bands' mean into each band's throughput.
+#[derive(Clone, Debug)]
+pub struct Bands {
+    pub count: usize,
+    /// Per surface and band (index surface × count + band): ρ_b / ρ_max, ρ_back,b / ρ_back,max
+    /// and τ_b / τ_max (0 where the largest is 0: no path scatters that way).
+    surface: Vec<[f64; 3]>,
+    /// Per band, the atmosphere of transmittance T_b / T_0; empty in vacuum.
+    atmosphere: Vec<Atmosphere>,
+}
+
+impl Bands {
+    /// The factors of `scene`'s surfaces (loaded in every band, [`Scene::load_bands`]) and, with an atmosphere, of
+    /// its transmittance in each band (`per_band[b]`, the first being the one paths use).
+    pub fn new(scene: &Scene, per_band: &[Atmosphere]) -> Bands {
+        let count = scene.surfaces.first().map_or(1, |s| s.bands.len()).max(1);
+        let ratio = |x: f64, mean: f64| if mean > 0.0 { x / mean } else { 0.0 };
+        let surface = scene
+            .surfaces
+            .iter()
+            .flat_map(|s| {
+                s.bands.iter().map(|b| {
+                    [
+                        ratio(b[0], s.reflectance),
+                        ratio(b[1], s.back_reflectance),
+                        ratio(b[2], s.transmittance),
+                    ]
+                })
+            })
+            .collect();
+        let atmosphere = per_band
+            .iter()
+            .map(|a| a.relative_to(&per_band[0]))
+            .collect();
+        Bands {
+            count,
+            surface,
+            atmosphere,
+        }
+    }
+
+    /// Multiplies `r` by each band's f_b / f of the scattering at facet `surface` (normal `n`)
+    /// between the unit directions `a` and `b`, both pointing away from it (as
+    /// [`bsdf`](super::bsdf)).
+    #[inline]
+    pub fn scatter(&self, r: &mut BandVec, surface: u32, n: DVec3, a: DVec3, b: DVec3) {
+        let (ca, cb) = (n.dot(a), n.dot(b));
+        let event = if ca * cb > 0.0 {
+            usize::from(ca <= 0.0)
+        } else {
+            2
+        };
+        let row = &self.surface[surface as usize * self.count..][..self.count];
+        for (x, f) in r.iter_mut().zip(row) {
+            *x *= f[event];
+        }
+    }
+
+    /// Multiplies `r` by each band's T_b / T of the segment from vertex `a` to the point `b`
+    /// (as [`segment_transmittance`](super::bdpt::segment_transmittance)).
+    #[inline]
+    pub fn segment(&self, r: &mut BandVec, a: &Vertex, b: DVec3) {
+        for (x, atm) in r.iter_mut().zip(&self.atmosphere).skip(1) {
+            *x *= if a.kind == VertexKind::Sun {
+                atm.transmittance_to_top(b, -a.n)
+            } else {
+                atm.transmittance(a.p, b)
+            };
+        }
+    }
+
+    /// Each band's factor of the path light[..s] + cam[..t] joined by a connection: the
+    /// sub-paths' own factors, the scattering at both ends of the new segment and its
+    /// transmittance.
+    pub fn connection(
+        &self,
+        setup: &PulseSetup,
+        light: &[Vertex],
+        cam: &[Vertex],
+        (lr, cr): (&BandVec, &BandVec),
+    ) -> BandVec {
+        let (s, t) = (light.len(), cam.len());
+        let (x, y) = (&light[s - 1], &cam[t - 1]);
+        let mut r: BandVec = std::array::from_fn(|b| lr[b] * cr[b]);
+        let w = if s == 1 && x.kind == VertexKind::Sun {
+            setup.sun.map_or(DVec3::ZERO, |sun| sun.dir)
+        } else {
+            (y.p - x.p).normalize()
+        };
+        if s >= 2 {
+            let towards_prev = (light[s - 2].p - x.p).normalize();
+            self.scatter(&mut r, x.surface, x.n, towards_prev, w);
+        }
+        if t >= 2 {
+            let towards_prev = (cam[t - 2].p - y.p).normalize();
+            self.scatter(&mut r, y.surface, y.n, -w, towards_prev);
+        }
+        self.segment(&mut r, x, y.p);
+        r
+    }
+}

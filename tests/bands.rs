@@ -234,17 +234,10 @@ fn solar_signal_holds_in_every_band() {
 #[test]
 fn each_band_equals_a_run_of_its_own_wavelength() {
     let dir = tmp("bands_leaves");
-    let obj = random_leaves(
-        100_000,
-        0x2545F4914F6CDD1D,
-        [-6.0, -6.0, 5.0],
-        [6.0, 6.0, 8.0],
-    );
-    write(&dir, "leaves.obj", &obj);
-    let scene = write(
+    let scene = leaf_layer_of(
         &dir,
-        "canopy.yaml",
-        "name: canopy\nmaterials:\n  soil: { reflectance: { 532: 0.08, 1064: 0.3, 1550: 0.35 } }\n  leaf: { reflectance: { 532: 0.1, 1064: 0.4, 1550: 0.6 }, transmittance: { 532: 0.05, 1064: 0.55, 1550: 0.1 } }\nobjects:\n  - plane: { z: 0, extent: [[-20, -20], [20, 20]], material: soil }\n  - mesh: { file: leaves.obj, material: leaf }\n",
+        "{ reflectance: { 532: 0.08, 1064: 0.3, 1550: 0.35 } }",
+        "{ reflectance: { 532: 0.1, 1064: 0.4, 1550: 0.6 }, transmittance: { 532: 0.05, 1064: 0.55, 1550: 0.1 } }",
     );
     let inst = Inst {
         fp_mrad: 5.0,

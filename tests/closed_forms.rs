@@ -239,16 +239,7 @@ fn tilted_plane(name: &str, method: &str) {
     let h = 500.0;
     // a 60 m square through the origin, tilted by α about the x axis (normal (0, -sin α, cos α))
     let (s, c) = (alpha.sin(), alpha.cos());
-    let half = 30.0;
-    let v = |x: f64, y: f64| format!("v {x} {} {}\n", y * c, y * s);
-    let obj = format!(
-        "{}{}{}{}f 1 2 3\nf 1 3 4\n",
-        v(-half, -half),
-        v(half, -half),
-        v(half, half),
-        v(-half, half)
-    );
-    write(&dir, "tilted.obj", &obj);
+    write(&dir, "tilted.obj", &tilted_square_obj(30.0, alpha));
     let scene = write(
         &dir,
         "tilted.yaml",

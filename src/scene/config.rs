@@ -8,6 +8,7 @@ use serde::Deserialize;
 use std::collections::BTreeMap;
 use std::fmt;
 
+use super::rpv::Rpv;
 use super::SurfaceClass;
 
 #[derive(Debug, Deserialize)]
@@ -26,11 +27,25 @@ pub(crate) struct SceneFile {
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub(crate) struct MaterialSpec {
+    /// Lambertian reflectance, or RPV's amplitude ρ0 with `rpv`.
     pub reflectance: Spectral,
     #[serde(default)]
     pub back_reflectance: Option<Spectral>,
     #[serde(default)]
     pub transmittance: Option<Spectral>,
+    /// The RPV glossy reflectance (README, "Glossy surfaces: RPV") instead of Lambert's.
+    #[serde(default)]
+    pub rpv: Option<RpvSpec>,
+}
+
+/// RPV's shape parameters, each one number or a table by wavelength.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RpvSpec {
+    pub k: Spectral,
+    pub theta: Spectral,
+    #[serde(default)]
+    pub rho_c: Option<Spectral>,
 }
 
 /// One list item `kind: { ... }`. Deserialized by hand: serde_yaml 0.9 reads externally tagged
@@ -151,6 +166,10 @@ pub(crate) struct ResolvedMaterial {
     pub back_reflectance: f64,
     pub transmittance: f64,
     pub bands: Vec<[f64; 3]>,
+    /// RPV's shape paths are sampled and weighted with (that of the band of the largest ρ0),
+    /// and each band's; `None` and empty for a Lambertian material.
+    pub rpv: Option<Rpv>,
+    pub band_rpv: Vec<Rpv>,
 }
 
 /// Resolves every material at each of `wavelengths_nm`, with located errors; a material's
@@ -164,12 +183,24 @@ pub(crate) fn resolve_materials(
     for &w in wavelengths_nm {
         for (name, m) in resolve_at(doc, file, w)? {
             let band = [m.reflectance, m.back_reflectance, m.transmittance];
-            out.entry(name).or_insert(m).bands.push(band);
+            let rpv = m.rpv;
+            let entry = out.entry(name).or_insert(m);
+            entry.bands.push(band);
+            entry.band_rpv.extend(rpv);
         }
     }
     for m in out.values_mut() {
         let max = |i: usize| m.bands.iter().map(|b| b[i]).fold(0.0, f64::max);
         (m.reflectance, m.back_reflectance, m.transmittance) = (max(0), max(1), max(2));
+        // RPV's shape of the band of the largest amplitude (the first among equals)
+        let brightest = (0..m.bands.len()).fold(0, |best, b| {
+            if m.bands[b][0] > m.bands[best][0] {
+                b
+            } else {
+                best
+            }
+        });
+        m.rpv = m.band_rpv.get(brightest).copied();
     }
     Ok(out)
 }
@@ -183,6 +214,58 @@ fn value_at(doc: &Doc, key: &str, s: &Spectral, wavelength_nm: f64) -> Result<f6
         ));
     }
     Ok(v)
+}
+
+/// A material's RPV shape at `wavelength_nm`, checked: parameters in their ranges, no
+/// transmittance (an RPV surface is opaque), and a directional albedo of at most 1 from every
+/// incidence on both sides (else the surface would create energy).
+fn resolve_rpv(
+    doc: &Doc,
+    base: &str,
+    spec: &RpvSpec,
+    m: &MaterialSpec,
+    rho0: [f64; 2],
+    wavelength_nm: f64,
+) -> Result<Rpv> {
+    let key = format!("{base}.rpv");
+    if m.transmittance.is_some() {
+        return Err(doc.error(
+            &format!("{base}.transmittance"),
+            "an RPV surface is opaque: give it no transmittance (RPV is for soils, roofs, roads)",
+        ));
+    }
+    let value = |name: &str, s: &Spectral, lo: f64, hi: f64| -> Result<f64> {
+        let k = format!("{key}.{name}");
+        let v = s.at(wavelength_nm).map_err(|why| doc.error(&k, why))?;
+        if !(v.is_finite() && (lo..=hi).contains(&v)) {
+            return Err(doc.error(
+                &k,
+                format!("{v} at {wavelength_nm} nm is not within [{lo}, {hi}]"),
+            ));
+        }
+        Ok(v)
+    };
+    let rpv = Rpv {
+        k: value("k", &spec.k, 0.1, 3.0)?,
+        theta: value("theta", &spec.theta, -0.99, 0.99)?,
+        rho_c: match &spec.rho_c {
+            Some(s) => Some(value("rho_c", s, 0.0, 1.0)?),
+            None => None,
+        },
+    };
+    for (side, r) in ["front", "back"].into_iter().zip(rho0) {
+        let (albedo, deg) = rpv.max_albedo(r);
+        // the quadrature is good to about 1e-3 (README, "Glossy surfaces: RPV")
+        if albedo > 1.0 + 2e-3 {
+            return Err(doc.error(
+                &key,
+                format!(
+                    "with ρ0 = {r} ({side} side) at {wavelength_nm} nm these RPV parameters reflect {albedo:.3} of the light from {deg}° incidence: more than it receives; lower ρ0, or bring k nearer 1 and theta nearer 0"
+                ),
+            ));
+        }
+    }
+    Ok(rpv)
 }
 
 /// Resolves every material at `wavelength_nm`, with located errors.
@@ -233,6 +316,10 @@ fn resolve_at(
                 ));
             }
         }
+        let rpv = match &m.rpv {
+            Some(spec) => Some(resolve_rpv(doc, &base, spec, m, [r, rb], wavelength_nm)?),
+            None => None,
+        };
         out.insert(
             name.clone(),
             ResolvedMaterial {
@@ -240,6 +327,8 @@ fn resolve_at(
                 back_reflectance: rb,
                 transmittance: t,
                 bands: Vec::new(),
+                rpv,
+                band_rpv: Vec::new(),
             },
         );
     }

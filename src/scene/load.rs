@@ -375,6 +375,8 @@ fn assign_surfaces(
                         back_reflectance: m.back_reflectance,
                         transmittance: m.transmittance,
                         bands: m.bands.clone(),
+                        rpv: m.rpv,
+                        band_rpv: m.band_rpv.clone(),
                         class,
                     });
                     (surfaces.len() - 1) as u32

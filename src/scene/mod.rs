@@ -12,11 +12,13 @@ mod bvh;
 mod config;
 mod load;
 mod mesh;
+pub mod rpv;
 mod table;
 #[cfg(test)]
 mod tests;
 pub mod top_surface;
 
+pub use rpv::Rpv;
 pub use table::{parse_instances, InstanceRow};
 
 use crate::error::Result;
@@ -85,6 +87,12 @@ pub struct Surface {
     /// each over the bands, with which paths are sampled (the band's own with one band). With
     /// several bands ρ + τ may then exceed 1: it is a sampling weight, not a material.
     pub bands: Vec<[f64; 3]>,
+    /// RPV glossy reflection instead of Lambert's (`reflectance`, `back_reflectance` are then
+    /// its amplitudes ρ0; no transmittance): the shape paths are weighted with, that of the
+    /// band of the largest ρ0.
+    pub rpv: Option<Rpv>,
+    /// RPV's shape in each band (empty for a Lambertian surface).
+    pub band_rpv: Vec<Rpv>,
     pub class: SurfaceClass,
 }
 

@@ -18,7 +18,7 @@
 use super::atmosphere::Atmosphere;
 use super::{PulseSetup, Vertex, VertexKind};
 use crate::campaign::spectral::MAX_BANDS;
-use crate::scene::Scene;
+use crate::scene::{Rpv, Scene};
 use glam::DVec3;
 
 /// One factor per band (lanes past the campaign's bands are unused).
@@ -37,6 +37,15 @@ pub struct Bands {
     surface: Vec<[f64; 3]>,
     /// Per band, the atmosphere of transmittance T_b / T_0; empty in vacuum.
     atmosphere: Vec<Atmosphere>,
+    /// Per surface, for an RPV one: the shape and amplitudes (front, back) paths are weighted
+    /// with, then each band's. Its f_b / f depends on the directions, so it is evaluated.
+    rpv: Vec<Option<RpvBands>>,
+}
+
+#[derive(Clone, Debug)]
+struct RpvBands {
+    sampled: (Rpv, [f64; 2]),
+    bands: Vec<(Rpv, [f64; 2])>,
 }
 
 impl Bands {
@@ -62,10 +71,26 @@ impl Bands {
             .iter()
             .map(|a| a.relative_to(&per_band[0]))
             .collect();
+        let rpv = scene
+            .surfaces
+            .iter()
+            .map(|s| {
+                s.rpv.map(|shape| RpvBands {
+                    sampled: (shape, [s.reflectance, s.back_reflectance]),
+                    bands: s
+                        .band_rpv
+                        .iter()
+                        .zip(&s.bands)
+                        .map(|(r, b)| (*r, [b[0], b[1]]))
+                        .collect(),
+                })
+            })
+            .collect();
         Bands {
             count,
             surface,
             atmosphere,
+            rpv,
         }
     }
 
@@ -80,6 +105,18 @@ impl Bands {
         } else {
             2
         };
+        if let (Some(rpv), true) = (&self.rpv[surface as usize], event < 2) {
+            let brf = |(shape, rho): &(Rpv, [f64; 2])| shape.brf(rho[event], n, a, b);
+            let sampled = brf(&rpv.sampled);
+            for (x, band) in r.iter_mut().zip(&rpv.bands) {
+                *x *= if sampled > 0.0 {
+                    brf(band) / sampled
+                } else {
+                    0.0
+                };
+            }
+            return;
+        }
         let row = &self.surface[surface as usize * self.count..][..self.count];
         for (x, f) in r.iter_mut().zip(row) {
             *x *= f[event];

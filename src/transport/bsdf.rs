@@ -1,5 +1,9 @@
-//! Scattering at a facet (physics.md, "Surfaces"): Lambertian reflection and transmission,
-//! their density over directions, and sampling from it.
+//! Scattering at a facet (physics.md, "Surfaces"): Lambertian reflection and transmission or
+//! RPV glossy reflection ([`crate::scene::Rpv`]), their density over directions, and sampling
+//! from it. Directions are sampled the same way for both (cosine-shaped on the side chosen in
+//! proportion to ρ and τ), so an RPV surface changes a path's weight (and so its Russian
+//! roulette), never its densities: every strategy's MIS weight is as for a Lambertian surface of
+//! the same ρ0.
 
 use super::Rng;
 use crate::scene::Surface;
@@ -13,11 +17,15 @@ use std::f64::consts::{FRAC_1_PI, PI};
 pub fn bsdf(s: &Surface, n: DVec3, a: DVec3, b: DVec3) -> f64 {
     let (ca, cb) = (n.dot(a), n.dot(b));
     if ca * cb > 0.0 {
-        (if ca > 0.0 {
+        let rho = if ca > 0.0 {
             s.reflectance
         } else {
             s.back_reflectance
-        }) * FRAC_1_PI
+        };
+        match &s.rpv {
+            Some(rpv) => rpv.brf(rho, n, a, b) * FRAC_1_PI,
+            None => rho * FRAC_1_PI,
+        }
     } else if ca * cb < 0.0 {
         s.transmittance * FRAC_1_PI
     } else {
@@ -45,7 +53,8 @@ pub fn bsdf_pdf(s: &Surface, n: DVec3, w_prev: DVec3, w_next: DVec3) -> f64 {
 }
 
 /// Samples the next direction at a facet reached from `w_prev` (unit, pointing back along the
-/// path). Returns it with the throughput factor f |cos| / pdf, which is the albedo a.
+/// path). Returns it with the throughput factor f |cos| / pdf: the albedo a of a Lambertian
+/// facet, the reflectance factor ρ(w_prev, next) of an RPV one.
 #[inline]
 pub(super) fn sample_bsdf(
     s: &Surface,
@@ -73,5 +82,11 @@ pub(super) fn sample_bsdf(
     let phi = 2.0 * PI * u2;
     let d =
         Frame::from_axis(axis).to_world(r * phi.cos(), r * phi.sin(), (1.0 - u1).max(0.0).sqrt());
-    Some((d.normalize(), a))
+    let d = d.normalize();
+    match &s.rpv {
+        // f cos / (cos / π) with f = ρ(w_prev, d) / π; an RPV facet transmits nothing, so
+        // the side was the reflecting one
+        Some(rpv) => Some((d, rpv.brf(rho, side, w_prev, d))),
+        None => Some((d, a)),
+    }
 }

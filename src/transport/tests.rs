@@ -159,3 +159,65 @@ fn a_wrong_density_breaks_the_sum() {
     }
     assert!((sum - 1.0).abs() > 1e-6, "{sum}");
 }
+
+/// White furnace of the RPV facet: the mean of [`bsdf::sample_bsdf`]'s throughput factors from
+/// an incidence equals the albedo integral ∫ f cos dω (by quadrature) within 3 standard errors
+/// (the quadrature's own error, its change from half the cells, added in quadrature),
+/// for bowl- and bell-shaped, forward and backward parameter sets, from nadir to 80°, on both
+/// sides; and the factor is f cos / pdf of the direction drawn, with the density that
+/// [`bsdf_pdf`] gives.
+#[test]
+fn rpv_sampling_weights_integrate_to_the_albedo() {
+    use crate::scene::{Rpv, Surface, SurfaceClass};
+    let cases = [
+        (0.3, 0.7, -0.2, None),
+        (0.5, 1.3, 0.15, Some(0.2)),
+        (0.12, 0.95, -0.05, Some(0.9)),
+    ];
+    let mut rng = Rng::new(5, 0, 0);
+    for (rho0, k, theta, rho_c) in cases {
+        let shape = Rpv { k, theta, rho_c };
+        let s = Surface {
+            name: "rpv".into(),
+            reflectance: rho0,
+            back_reflectance: rho0,
+            transmittance: 0.0,
+            bands: vec![[rho0, rho0, 0.0]],
+            rpv: Some(shape),
+            band_rpv: vec![shape],
+            class: SurfaceClass::Ground,
+        };
+        for deg in [0.0f64, 35.0, 60.0, 80.0] {
+            let mu = deg.to_radians().cos();
+            let want = shape.albedo(rho0, mu, 800, 240);
+            let quadrature_error = (want - shape.albedo(rho0, mu, 400, 120)).abs();
+            for side in [1.0, -1.0] {
+                let n = DVec3::Z * side;
+                // w_prev on the side the normal points to, or on the other for the back
+                let w_prev = DVec3::new((1.0 - mu * mu).sqrt(), 0.0, mu * side);
+                let (mut sum, mut sq, count) = (0.0, 0.0, 400_000);
+                for i in 0..count {
+                    let (d, w) = bsdf::sample_bsdf(&s, n, w_prev, &mut rng).unwrap();
+                    sum += w;
+                    sq += w * w;
+                    if i < 100 {
+                        let f = bsdf(&s, n, w_prev, d) * n.dot(d).abs();
+                        let p = bsdf_pdf(&s, n, w_prev, d);
+                        assert!((f / p - w).abs() <= 1e-12 * w.max(1.0), "{f} / {p} != {w}");
+                    }
+                }
+                let mean = sum / count as f64;
+                let se = ((sq / count as f64 - mean * mean) / (count - 1) as f64).sqrt();
+                println!(
+                    "rpv ρ0 {rho0} k {k} Θ {theta} at {deg}° side {side}: {mean:.5} ± {se:.5}, quadrature {want:.5}"
+                );
+                let tolerance = 3.0 * se.hypot(quadrature_error);
+                assert!(
+                    (mean - want).abs() < tolerance,
+                    "{mean} vs {want} (se {se})"
+                );
+                assert!(se < 0.01 * want, "standard error too large to tell 1 %");
+            }
+        }
+    }
+}

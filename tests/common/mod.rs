@@ -521,6 +521,15 @@ pub fn random_leaves(n: usize, seed: u64, lo: [f64; 3], hi: [f64; 3]) -> String 
 }
 
 pub fn leaf_layer(dir: &std::path::Path) -> std::path::PathBuf {
+    leaf_layer_of(
+        dir,
+        "{ reflectance: { 1064: 0.3 } }",
+        "{ reflectance: { 1064: 0.45 }, transmittance: { 1064: 0.45 } }",
+    )
+}
+
+/// The leaf layer of [`leaf_layer`] with the soil and leaf materials given (YAML flow maps).
+pub fn leaf_layer_of(dir: &std::path::Path, soil: &str, leaf: &str) -> std::path::PathBuf {
     let obj = random_leaves(
         100_000,
         0x2545F4914F6CDD1D,
@@ -531,6 +540,20 @@ pub fn leaf_layer(dir: &std::path::Path) -> std::path::PathBuf {
     write(
         dir,
         "canopy.yaml",
-        "name: canopy\nmaterials:\n  soil: { reflectance: { 1064: 0.3 } }\n  leaf: { reflectance: { 1064: 0.45 }, transmittance: { 1064: 0.45 } }\nobjects:\n  - plane: { z: 0, extent: [[-20, -20], [20, 20]], material: soil }\n  - mesh: { file: leaves.obj, material: leaf }\n",
+        &format!("name: canopy\nmaterials:\n  soil: {soil}\n  leaf: {leaf}\nobjects:\n  - plane: {{ z: 0, extent: [[-20, -20], [20, 20]], material: soil }}\n  - mesh: {{ file: leaves.obj, material: leaf }}\n"),
+    )
+}
+
+/// OBJ text of a square of half-width `half` m through the origin, tilted by `alpha` (radians)
+/// about the x axis: normal (0, −sin α, cos α).
+pub fn tilted_square_obj(half: f64, alpha: f64) -> String {
+    let (s, c) = (alpha.sin(), alpha.cos());
+    let v = |x: f64, y: f64| format!("v {x} {} {}\n", y * c, y * s);
+    format!(
+        "{}{}{}{}f 1 2 3\nf 1 3 4\n",
+        v(-half, -half),
+        v(half, -half),
+        v(half, half),
+        v(-half, half)
     )
 }

@@ -2,6 +2,7 @@
 
 mod common;
 use common::*;
+use lidarsim::waveform::Waveform;
 
 /// Closed form 1: received energy within 1% and all of it in the bin of 2H/c.
 fn plane_case(name: &str, h: f64, inst: Inst, method: &str, rays: u64) {
@@ -233,17 +234,44 @@ fn tilted_plane_waveform_matches_quadrature() {
     tilted_plane("tilted_bdpt", "bdpt");
 }
 
+/// Closed form 2 in each of three bands traced at once: the waveform's shape and level per
+/// band, with that band's reflectance.
+#[test]
+fn tilted_plane_waveform_holds_in_every_band() {
+    tilted_plane_in(
+        "tilted_bands",
+        "bdpt",
+        &[(532.0, 0.12), (1064.0, 0.4), (1550.0, 0.33)],
+    );
+}
+
 fn tilted_plane(name: &str, method: &str) {
+    tilted_plane_in(name, method, &[(1064.0, 0.4)]);
+}
+
+/// The tilted plane of closed form 2 with reflectance `bands[k].1` at `bands[k].0` nm: one
+/// band as the campaign's `wavelength_nm`, several as a list traced in one pass.
+fn tilted_plane_in(name: &str, method: &str, bands: &[(f64, f64)]) {
     let dir = tmp(name);
     let alpha: f64 = 30f64.to_radians();
     let h = 500.0;
     // a 60 m square through the origin, tilted by α about the x axis (normal (0, -sin α, cos α))
-    let (s, c) = (alpha.sin(), alpha.cos());
     write(&dir, "tilted.obj", &tilted_square_obj(30.0, alpha));
+    let (reflectance, wavelengths) = match bands {
+        [(_, rho)] => (rho.to_string(), None),
+        _ => {
+            let table: Vec<String> = bands.iter().map(|(nm, r)| format!("{nm}: {r}")).collect();
+            let list: Vec<String> = bands.iter().map(|(nm, _)| nm.to_string()).collect();
+            (
+                format!("{{ {} }}", table.join(", ")),
+                Some(format!("wavelength_nm: [{}]\n", list.join(", "))),
+            )
+        }
+    };
     let scene = write(
         &dir,
         "tilted.yaml",
-        "name: tilted\nmaterials:\n  soil: { reflectance: 0.4 }\nobjects:\n  - mesh: { file: tilted.obj, material: soil }\n",
+        &format!("name: tilted\nmaterials:\n  soil: {{ reflectance: {reflectance} }}\nobjects:\n  - mesh: {{ file: tilted.obj, material: soil }}\n"),
     );
     let inst = Inst {
         fp_mrad: 5.0,
@@ -253,19 +281,31 @@ fn tilted_plane(name: &str, method: &str) {
         bin_ns: 1.0,
         ..Inst::default()
     };
-    let w = &run(
-        &dir,
-        &campaign(
-            &scene,
-            &inst,
-            [0.0, 0.0, h],
-            [0.0, 0.0, -1.0],
-            method,
-            300_000,
-            1,
-        ),
-        None,
-    )[0];
+    let mut text = campaign(
+        &scene,
+        &inst,
+        [0.0, 0.0, h],
+        [0.0, 0.0, -1.0],
+        method,
+        300_000,
+        1,
+    );
+    if let Some(list) = wavelengths {
+        text = text.replace("wavelength_nm: 1064\n", &list);
+    }
+    let rows = run(&dir, &text, None);
+    assert_eq!(rows.len(), bands.len());
+    for (w, &(nm, rho)) in rows.iter().zip(bands) {
+        if bands.len() > 1 {
+            assert_eq!(w.wavelength_nm, Some(nm));
+        }
+        check_tilted_plane(&format!("{name} {nm} nm"), w, &inst, h, alpha, rho);
+    }
+}
+
+/// The checks of closed form 2 on one waveform of the tilted plane of reflectance `rho`.
+fn check_tilted_plane(name: &str, w: &Waveform, inst: &Inst, h: f64, alpha: f64, rho: f64) {
+    let (s, c) = (alpha.sin(), alpha.cos());
 
     // Quadrature in tan-space: each emission direction u lands on the plane at range r(u);
     // it returns energy ∝ p(u) ρ/π cos θ_surface · A / r² (the receiver sees it along the
@@ -318,7 +358,7 @@ fn tilted_plane(name: &str, method: &str) {
     assert!(e < 0.03, "rRMSE {e}");
     // and the absolute level: ρ/π · A · Σ p cos/r² du² (same quadrature) within 1%
     let expect =
-        0.4 / std::f64::consts::PI * inst.area * inst.energy * reference.iter().sum::<f64>();
+        rho / std::f64::consts::PI * inst.area * inst.energy * reference.iter().sum::<f64>();
     let rel = (w.received_energy_j - expect) / expect;
     println!("{name}: energy rel {rel:+.4}");
     assert!(rel.abs() < 0.01);

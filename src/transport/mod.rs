@@ -152,14 +152,6 @@ pub fn simulate_pulse(setup: &PulseSetup, rays: u64) -> Tally {
     simulate_pulse_in(setup, rays, &mut Scratch::default()).clone()
 }
 
-/// [`simulate_pulse`] in every band of `setup`: one tally per band, the first band's first.
-pub fn simulate_pulse_bands(setup: &PulseSetup, rays: u64) -> Vec<Tally> {
-    let mut scratch = Scratch::default();
-    simulate_pulse_in(setup, rays, &mut scratch);
-    let bands = setup.bands.map_or(1, |b| b.count);
-    (0..bands).map(|b| scratch.band(b).clone()).collect()
-}
-
 impl Scratch {
     /// Band `b`'s tally of the last pulse simulated in this scratch (0: the first band, the
     /// one [`simulate_pulse_in`] returns).

@@ -269,18 +269,7 @@ fn bad_rpv_parameters_are_located_errors() {
         ),
     ] {
         rpv_plane(&dir, "plane.yaml", material);
-        let out = dir.join("out");
-        let (code, _, err) = lidarsim(&[
-            "run",
-            path.to_str().unwrap(),
-            "--out",
-            out.to_str().unwrap(),
-        ]);
-        println!("{material}: {err}");
-        assert_eq!(code, 1, "{material}: {err}");
-        assert!(err.contains(says), "{material}: {err}");
-        assert!(err.contains("plane.yaml:"), "{material}: {err}");
-        assert!(!err.contains("panicked"), "{material}: {err}");
+        assert_bad_input(&path, "plane.yaml", says);
     }
     // the check is RPV's own: sound parameters pass
     let ok = Rpv {

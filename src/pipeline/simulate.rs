@@ -203,7 +203,12 @@ impl<'a> Shared<'a> {
     fn setup(&self, p: &Pulse, method: Method) -> PulseSetup<'_> {
         let (c, scene) = (&self.loaded.campaign, self.scene);
         let inst = &c.instrument;
-        let near = scene.bounds_near(p.origin, p.direction);
+        let mut near = scene.bounds_near(p.origin, p.direction);
+        if let Some(w) = &scene.water {
+            // light is slower in the water column: the gate reaches as far as a path down to
+            // the bottom of the box takes, as if the box were deeper by (n - 1) × depth
+            near.0.z -= (w.n - 1.0) * (w.z - near.0.z).max(0.0);
+        }
         let gate = Gate::for_pulse(inst, p.origin, p.direction, near);
         let sun = self.sun.map(|s| {
             let s = if scene.is_repeated() {
@@ -324,8 +329,17 @@ pub fn choose_method(loaded: &Loaded, scene: &Scene, plan: &Plan) -> (Method, St
         .clamp(2, PILOT_RAYS);
     let with_sun = loaded.campaign.sun.is_some();
     let shared = Shared::new(loaded, scene);
-    let scores: Vec<(Method, f64)> = [Method::Bdpt, Method::Forward, Method::Backward]
-        .into_iter()
+    // backward tracing cannot find the paths a smooth water surface makes (laser, specular
+    // surface, bottom, specular surface, telescope: no connection reaches the laser through
+    // a specular vertex), so it is no candidate over water
+    let candidates: &[Method] = if scene.water.is_some() {
+        &[Method::Bdpt, Method::Forward]
+    } else {
+        &[Method::Bdpt, Method::Forward, Method::Backward]
+    };
+    let scores: Vec<(Method, f64)> = candidates
+        .iter()
+        .copied()
         .map(|m| {
             let tallies: Vec<_> = pulses
                 .par_iter()

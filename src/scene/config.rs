@@ -55,9 +55,25 @@ pub(crate) enum ObjectSpec {
     Plane(PlaneSpec),
     Mesh(MeshSpec),
     Heightfield(HeightfieldSpec),
+    Water(WaterSpec),
 }
 
-const KINDS: &[&str] = &["plane", "mesh", "heightfield"];
+const KINDS: &[&str] = &["plane", "mesh", "heightfield", "water"];
+
+/// A body of water (README, "Water"): its smooth surface, a horizontal rectangle at `z`, over
+/// a water column that fills everything below it within the rectangle, down to whatever the
+/// scene puts there (the seabed).
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct WaterSpec {
+    pub z: f64,
+    pub extent: [[f64; 2]; 2],
+    /// Beam attenuation coefficient of the water column, per metre, by wavelength.
+    pub attenuation_per_m: Spectral,
+    /// Default 1.33.
+    #[serde(default)]
+    pub refractive_index: Option<f64>,
+}
 
 impl<'de> Deserialize<'de> for ObjectSpec {
     fn deserialize<D: Deserializer<'de>>(d: D) -> std::result::Result<Self, D::Error> {
@@ -78,6 +94,7 @@ impl<'de> Deserialize<'de> for ObjectSpec {
                     "plane" => ObjectSpec::Plane(map.next_value()?),
                     "mesh" => ObjectSpec::Mesh(map.next_value()?),
                     "heightfield" => ObjectSpec::Heightfield(map.next_value()?),
+                    "water" => ObjectSpec::Water(map.next_value()?),
                     _ => return Err(de::Error::unknown_variant(&kind, KINDS)),
                 };
                 if let Some(extra) = map.next_key::<String>()? {
@@ -98,6 +115,7 @@ impl ObjectSpec {
             ObjectSpec::Plane(_) => "plane",
             ObjectSpec::Mesh(_) => "mesh",
             ObjectSpec::Heightfield(_) => "heightfield",
+            ObjectSpec::Water(_) => "water",
         }
     }
 }
@@ -170,6 +188,8 @@ pub(crate) struct ResolvedMaterial {
     /// and each band's; `None` and empty for a Lambertian material.
     pub rpv: Option<Rpv>,
     pub band_rpv: Vec<Rpv>,
+    /// The refractive index of a water surface (smooth: Fresnel reflection and refraction).
+    pub water: Option<f64>,
 }
 
 /// Resolves every material at each of `wavelengths_nm`, with located errors; a material's
@@ -329,6 +349,7 @@ fn resolve_at(
                 bands: Vec::new(),
                 rpv,
                 band_rpv: Vec::new(),
+                water: None,
             },
         );
     }

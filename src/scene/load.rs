@@ -14,11 +14,11 @@ use std::time::Duration;
 use super::bvh::Blas;
 use super::config::{
     resolve_materials, HeightfieldSpec, MeshSpec, ObjectSpec, PlaneSpec, ResolvedMaterial,
-    SceneFile,
+    SceneFile, WaterSpec,
 };
 use super::mesh;
 use super::table::{parse_grid, parse_instances, InstanceRow};
-use super::{Instance, Scene, Surface, SurfaceClass, MAX_COORDINATE_M};
+use super::{Instance, Scene, Surface, SurfaceClass, WaterBody, MAX_COORDINATE_M};
 
 /// Geometry to load once, shared by every object that names it.
 enum Source {
@@ -112,6 +112,70 @@ fn check_material(
     ))
 }
 
+/// A horizontal rectangle at `z` over `extent` (a plane's, the water's), finite and not empty.
+fn check_rectangle(doc: &Doc, key: &str, what: &str, z: f64, extent: [[f64; 2]; 2]) -> Result<()> {
+    let [a, b] = extent;
+    let finite = z.is_finite() && a.iter().chain(b.iter()).all(|v| v.is_finite());
+    if !finite || a[0] == b[0] || a[1] == b[1] {
+        return Err(doc.error(
+            &format!("{key}.extent"),
+            format!("the {what} must have a finite, non-empty extent [[x0, y0], [x1, y1]] with x0 ≠ x1 and y0 ≠ y1"),
+        ));
+    }
+    Ok(())
+}
+
+/// The name of the material of a water surface (no material of a scene file can clash with
+/// it: it is not a YAML plain key a user would write).
+const WATER_MATERIAL: &str = "(water surface)";
+
+/// The scene's body of water, checked: at most one, a finite non-empty rectangle, a refractive
+/// index above 1 and a non-negative attenuation in every band.
+fn water_body(doc: &Doc, file: &SceneFile, wavelengths_nm: &[f64]) -> Result<Option<WaterBody>> {
+    let mut body = None;
+    for (i, obj) in file.objects.iter().enumerate() {
+        let ObjectSpec::Water(w) = obj else { continue };
+        let key = format!("objects[{i}].water");
+        if body.is_some() {
+            return Err(doc.error(&key, "a scene holds one body of water at most"));
+        }
+        let [a, b] = w.extent;
+        check_rectangle(doc, &key, "water", w.z, w.extent)?;
+        let n = w.refractive_index.unwrap_or(1.33);
+        if !(n.is_finite() && n > 1.0 && n <= 3.0) {
+            return Err(doc.error(
+                &format!("{key}.refractive_index"),
+                format!("expected a refractive index above 1 and at most 3, found {n}"),
+            ));
+        }
+        let attenuation = wavelengths_nm
+            .iter()
+            .map(|&nm| {
+                let at = format!("{key}.attenuation_per_m");
+                let c = w
+                    .attenuation_per_m
+                    .at(nm)
+                    .map_err(|why| doc.error(&at, why))?;
+                if !(c.is_finite() && c >= 0.0) {
+                    return Err(doc.error(
+                        &at,
+                        format!("expected an attenuation ≥ 0 per metre at {nm} nm, found {c}"),
+                    ));
+                }
+                Ok(c)
+            })
+            .collect::<Result<Vec<f64>>>()?;
+        body = Some(WaterBody {
+            z: w.z,
+            lo: [a[0].min(b[0]), a[1].min(b[1])],
+            hi: [a[0].max(b[0]), a[1].max(b[1])],
+            n,
+            attenuation,
+        });
+    }
+    Ok(body)
+}
+
 /// Reads a scene file and builds its scene: the objects checked against the file, every
 /// distinct mesh loaded once, materials given to each slot, instances placed, the top level
 /// built.
@@ -119,7 +183,22 @@ pub(crate) fn load(path: &Path, wavelengths_nm: &[f64]) -> Result<Scene> {
     let doc = Doc::read(path)?;
     let mut files = vec![path.to_path_buf()];
     let file: SceneFile = doc.parse()?;
-    let materials = resolve_materials(&doc, &file, wavelengths_nm)?;
+    let mut materials = resolve_materials(&doc, &file, wavelengths_nm)?;
+    let water = water_body(&doc, &file, wavelengths_nm)?;
+    if let Some(w) = &water {
+        materials.insert(
+            WATER_MATERIAL.to_string(),
+            ResolvedMaterial {
+                reflectance: 0.0,
+                back_reflectance: 0.0,
+                transmittance: 0.0,
+                bands: vec![[0.0; 3]; wavelengths_nm.len()],
+                rpv: None,
+                band_rpv: Vec::new(),
+                water: Some(w.n),
+            },
+        );
+    }
     if file.objects.is_empty() {
         return Err(doc.error("objects", "the scene has no objects"));
     }
@@ -171,6 +250,7 @@ pub(crate) fn load(path: &Path, wavelengths_nm: &[f64]) -> Result<Scene> {
         clip_lo: top.clip_lo,
         clip_hi: top.clip_hi,
         instanced_triangles: top.instanced_triangles,
+        water,
         ray_log: None,
     })
 }
@@ -197,6 +277,7 @@ fn plan_objects(
             ObjectSpec::Plane(p) => objects.plane(key, p)?,
             ObjectSpec::Heightfield(h) => objects.heightfield(key, h)?,
             ObjectSpec::Mesh(m) => objects.mesh(key, m)?,
+            ObjectSpec::Water(w) => objects.water(key, w)?,
         });
     }
     Ok((objects.sources, plans))
@@ -218,19 +299,28 @@ impl Objects<'_> {
         let doc = self.doc;
         check_material(doc, &format!("{key}.material"), &p.material, self.materials)?;
         let [a, b] = p.extent;
-        let finite = p.z.is_finite() && a.iter().chain(b.iter()).all(|v| v.is_finite());
-        if !finite || a[0] == b[0] || a[1] == b[1] {
-            return Err(doc.error(
-                &format!("{key}.extent"),
-                "the plane must have a finite, non-empty extent [[x0, y0], [x1, y1]] with x0 ≠ x1 and y0 ≠ y1",
-            ));
-        }
+        check_rectangle(doc, &key, "plane", p.z, p.extent)?;
         self.sources.push(Source::Plane { z: p.z, a, b });
         Ok(ObjectPlan {
             key,
             source: self.sources.len() - 1,
             mapping: Mapping::One(p.material.clone()),
             class: p.class.map(Into::into),
+            is_mesh: false,
+            rows: None,
+            file: String::new(),
+        })
+    }
+
+    /// The water's surface: a plane of the water material ([`water_body`] checked the rest).
+    fn water(&mut self, key: String, w: &WaterSpec) -> Result<ObjectPlan> {
+        let [a, b] = w.extent;
+        self.sources.push(Source::Plane { z: w.z, a, b });
+        Ok(ObjectPlan {
+            key,
+            source: self.sources.len() - 1,
+            mapping: Mapping::One(WATER_MATERIAL.to_string()),
+            class: Some(SurfaceClass::Other),
             is_mesh: false,
             rows: None,
             file: String::new(),
@@ -377,6 +467,7 @@ fn assign_surfaces(
                         bands: m.bands.clone(),
                         rpv: m.rpv,
                         band_rpv: m.band_rpv.clone(),
+                        water: m.water,
                         class,
                     });
                     (surfaces.len() - 1) as u32

@@ -93,7 +93,34 @@ pub struct Surface {
     pub rpv: Option<Rpv>,
     /// RPV's shape in each band (empty for a Lambertian surface).
     pub band_rpv: Vec<Rpv>,
+    /// A smooth water surface of this refractive index (its front side, where its normal
+    /// points, is air): a specular Fresnel interface, no ρ or τ.
+    pub water: Option<f64>,
     pub class: SurfaceClass,
+}
+
+/// A body of water: its surface at `z` over the rectangle `lo..hi` (x, y), and the water
+/// column below it, of refractive index `n` and beam attenuation `attenuation[b]` per metre in
+/// band b (README, "Water").
+#[derive(Clone, Debug, PartialEq)]
+pub struct WaterBody {
+    pub z: f64,
+    pub lo: [f64; 2],
+    pub hi: [f64; 2],
+    pub n: f64,
+    pub attenuation: Vec<f64>,
+}
+
+impl WaterBody {
+    /// Whether the straight segment from `a` to `b` runs in the water column. A segment cannot
+    /// cross the surface (the surface stops it), so its midpoint tells.
+    #[inline]
+    pub fn holds(&self, a: glam::DVec3, b: glam::DVec3) -> bool {
+        let m = (a + b) * 0.5;
+        m.z < self.z
+            && (self.lo[0]..=self.hi[0]).contains(&m.x)
+            && (self.lo[1]..=self.hi[1]).contains(&m.y)
+    }
 }
 
 /// Farthest a coordinate of a scene may lie from its frame's origin, m (1000 km): the tracer
@@ -144,6 +171,8 @@ pub struct SceneStats {
 
 pub struct Scene {
     pub name: String,
+    /// The body of water, when the scene has one.
+    pub water: Option<WaterBody>,
     /// Every file the scene was read from: its YAML, meshes, instance tables, heightfields.
     pub files: Vec<std::path::PathBuf>,
     pub surfaces: Vec<Surface>,

@@ -18,7 +18,7 @@
 use super::atmosphere::Atmosphere;
 use super::{PulseSetup, Vertex, VertexKind};
 use crate::campaign::spectral::MAX_BANDS;
-use crate::scene::{Rpv, Scene};
+use crate::scene::{Rpv, Scene, WaterBody};
 use glam::DVec3;
 
 /// One factor per band (lanes past the campaign's bands are unused).
@@ -37,6 +37,8 @@ pub struct Bands {
     surface: Vec<[f64; 3]>,
     /// Per band, the atmosphere of transmittance T_b / T_0; empty in vacuum.
     atmosphere: Vec<Atmosphere>,
+    /// The water column and each band's attenuation less the first band's, per metre.
+    water: Option<(WaterBody, Vec<f64>)>,
     /// Per surface, for an RPV one: the shape and amplitudes (front, back) paths are weighted
     /// with, then each band's. Its f_b / f depends on the directions, so it is evaluated.
     rpv: Vec<Option<RpvBands>>,
@@ -59,6 +61,10 @@ impl Bands {
             .iter()
             .flat_map(|s| {
                 s.bands.iter().map(|b| {
+                    if s.water.is_some() {
+                        // Fresnel's laws at one refractive index for every band
+                        return [1.0; 3];
+                    }
                     [
                         ratio(b[0], s.reflectance),
                         ratio(b[1], s.back_reflectance),
@@ -86,11 +92,16 @@ impl Bands {
                 })
             })
             .collect();
+        let water = scene.water.as_ref().map(|w| {
+            let c0 = w.attenuation[0];
+            (w.clone(), w.attenuation.iter().map(|c| c - c0).collect())
+        });
         Bands {
             count,
             surface,
             atmosphere,
             rpv,
+            water,
         }
     }
 
@@ -127,6 +138,15 @@ impl Bands {
     /// (as [`segment_transmittance`](super::bdpt::segment_transmittance)).
     #[inline]
     pub fn segment(&self, r: &mut BandVec, a: &Vertex, b: DVec3) {
+        if let Some((w, extra)) = &self.water {
+            if w.holds(a.p, b) {
+                let len = (b - a.p).length();
+                for (x, c) in r.iter_mut().zip(extra).skip(1) {
+                    *x *= (-c * len).exp();
+                }
+                return;
+            }
+        }
         for (x, atm) in r.iter_mut().zip(&self.atmosphere).skip(1) {
             *x *= if a.kind == VertexKind::Sun {
                 atm.transmittance_to_top(b, -a.n)

@@ -39,10 +39,26 @@ pub(super) struct Buffers {
 /// vertex stands for the top of the atmosphere up-sun of `b`.
 #[inline]
 pub(super) fn segment_transmittance(setup: &PulseSetup, a: &Vertex, b: DVec3) -> f64 {
+    if let Some(w) = &setup.scene.water {
+        // in the water column, its attenuation and no air
+        if w.holds(a.p, b) {
+            return (-w.attenuation[0] * (b - a.p).length()).exp();
+        }
+    }
     match setup.atmosphere {
         None => 1.0,
         Some(atm) if a.kind == VertexKind::Sun => atm.transmittance_to_top(b, -a.n),
         Some(atm) => atm.transmittance(a.p, b),
+    }
+}
+
+/// The time a straight segment of geometric length `len` from `a` to `b` takes, as a length
+/// in vacuum: n × len in the water column, len elsewhere.
+#[inline]
+pub(super) fn optical_length(setup: &PulseSetup, a: DVec3, b: DVec3, len: f64) -> f64 {
+    match &setup.scene.water {
+        Some(w) if w.holds(a, b) => w.n * len,
+        _ => len,
     }
 }
 
@@ -57,6 +73,7 @@ pub(super) fn surface_vertex(hit: &crate::scene::Hit, beta: f64, len: f64) -> Ve
         len,
         pdf_fwd: 0.0,
         pdf_rev: 0.0,
+        delta: false,
     }
 }
 
@@ -111,7 +128,7 @@ pub(super) fn walk(
                         0.0,
                     );
                     q.beta = beta * segment_transmittance(setup, &last, q.p);
-                    q.len = last.len + tq;
+                    q.len = last.len + optical_length(setup, last.p, q.p, tq);
                     path.push(q);
                     link(setup, path);
                     let w = mis_weight(setup, path, &[], scratch);
@@ -136,7 +153,8 @@ pub(super) fn walk(
         }
         let Some(hit) = hit else { break };
         beta *= segment_transmittance(setup, &last, hit.position);
-        path.push(surface_vertex(&hit, beta, last.len + hit.t));
+        let len = last.len + optical_length(setup, last.p, hit.position, hit.t);
+        path.push(surface_vertex(&hit, beta, len));
         link(setup, path);
         if let Some(bands) = setup.bands {
             bands.segment(&mut run, &last, hit.position);
@@ -146,9 +164,12 @@ pub(super) fn walk(
             break;
         }
         let surf = &scene.surfaces[hit.surface as usize];
-        let Some((next, a)) = sample_bsdf(surf, hit.normal, -dir, rng) else {
+        let Some((next, a, delta)) = sample_bsdf(surf, hit.normal, -dir, light, rng) else {
             break;
         };
+        if let Some(v) = path.last_mut() {
+            v.delta = delta;
+        }
         if let Some(bands) = setup.bands {
             bands.scatter(&mut run, hit.surface, hit.normal, -dir, next);
         }
@@ -205,7 +226,7 @@ pub(super) fn contribution(
         bsdf(&surfaces[y.surface as usize], y.n, -w, towards_prev) * y.n.dot(w).abs()
     };
     let c = x.beta * f_x * f_y * y.beta / r2 * segment_transmittance(setup, x, y.p);
-    (c > 0.0).then_some((c, x.len + r + y.len))
+    (c > 0.0).then_some((c, x.len + optical_length(setup, x.p, y.p, r) + y.len))
 }
 
 /// One sample of the pulse: both sub-paths, then every way of joining them. The order of the

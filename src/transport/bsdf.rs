@@ -15,6 +15,10 @@ use std::f64::consts::{FRAC_1_PI, PI};
 /// from the surface): ρ/π on the side they share, τ/π through the facet.
 #[inline]
 pub fn bsdf(s: &Surface, n: DVec3, a: DVec3, b: DVec3) -> f64 {
+    if s.water.is_some() {
+        // a Dirac distribution: nothing for directions chosen elsewhere
+        return 0.0;
+    }
     let (ca, cb) = (n.dot(a), n.dot(b));
     if ca * cb > 0.0 {
         let rho = if ca > 0.0 {
@@ -37,6 +41,9 @@ pub fn bsdf(s: &Surface, n: DVec3, a: DVec3, b: DVec3) -> f64 {
 /// `w_prev`: reflection with probability ρ_side / a, transmission τ / a, each cosine-shaped.
 #[inline]
 pub fn bsdf_pdf(s: &Surface, n: DVec3, w_prev: DVec3, w_next: DVec3) -> f64 {
+    if s.water.is_some() {
+        return 0.0;
+    }
     let c = n.dot(w_prev);
     let rho = if c > 0.0 {
         s.reflectance
@@ -52,16 +59,67 @@ pub fn bsdf_pdf(s: &Surface, n: DVec3, w_prev: DVec3, w_next: DVec3) -> f64 {
     p / a * co.abs() * FRAC_1_PI
 }
 
+/// Unpolarised Fresnel reflectance of a smooth interface for light arriving at cosine
+/// `cos_i` (> 0) from the medium of index n_i into that of n_t, `eta` = n_t / n_i (1 beyond the
+/// critical angle: total internal reflection).
+pub fn fresnel(cos_i: f64, eta: f64) -> f64 {
+    let sin2_t = (1.0 - cos_i * cos_i).max(0.0) / (eta * eta);
+    if sin2_t >= 1.0 {
+        return 1.0;
+    }
+    let cos_t = (1.0 - sin2_t).sqrt();
+    let parallel = (eta * cos_i - cos_t) / (eta * cos_i + cos_t);
+    let perpendicular = (cos_i - eta * cos_t) / (cos_i + eta * cos_t);
+    0.5 * (parallel * parallel + perpendicular * perpendicular)
+}
+
+/// The smooth water surface of index `n_water` (air on the side of `n`): reflection with
+/// probability F, refraction otherwise, each direction a Dirac one. The throughput factor is
+/// 1, except refraction on a receiver sub-path, whose importance (like radiance) changes by
+/// (n_i / n_t)² into the other medium (pbrt's non-symmetric transmission, Veach 1997 ch. 5).
+fn sample_water(
+    n_water: f64,
+    n: DVec3,
+    w_prev: DVec3,
+    light: bool,
+    u: f64,
+) -> Option<(DVec3, f64)> {
+    let c = n.dot(w_prev);
+    if c == 0.0 {
+        return None;
+    }
+    // the path arrives from w_prev's side (index n_i) and may enter the other (n_t)
+    let (eta, side) = if c > 0.0 {
+        (n_water, n)
+    } else {
+        (1.0 / n_water, -n)
+    };
+    let cos_i = c.abs();
+    let f = fresnel(cos_i, eta);
+    if u < f {
+        return Some((2.0 * cos_i * side - w_prev, 1.0));
+    }
+    let cos_t = (1.0 - (1.0 - cos_i * cos_i) / (eta * eta)).max(0.0).sqrt();
+    let t = (-w_prev / eta + (cos_i / eta - cos_t) * side).normalize();
+    Some((t, if light { 1.0 } else { 1.0 / (eta * eta) }))
+}
+
 /// Samples the next direction at a facet reached from `w_prev` (unit, pointing back along the
-/// path). Returns it with the throughput factor f |cos| / pdf: the albedo a of a Lambertian
-/// facet, the reflectance factor ρ(w_prev, next) of an RPV one.
+/// path) on a light (`light`) or a receiver sub-path. Returns it with the throughput factor
+/// f |cos| / pdf (the albedo a of a Lambertian facet, the reflectance factor ρ(w_prev, next) of
+/// an RPV one) and whether the scattering was specular.
 #[inline]
 pub(super) fn sample_bsdf(
     s: &Surface,
     n: DVec3,
     w_prev: DVec3,
+    light: bool,
     rng: &mut Rng,
-) -> Option<(DVec3, f64)> {
+) -> Option<(DVec3, f64, bool)> {
+    if let Some(n_water) = s.water {
+        let (d, w) = sample_water(n_water, n, w_prev, light, rng.uniform())?;
+        return Some((d, w, true));
+    }
     let c = n.dot(w_prev);
     if c == 0.0 {
         return None;
@@ -86,7 +144,7 @@ pub(super) fn sample_bsdf(
     match &s.rpv {
         // f cos / (cos / π) with f = ρ(w_prev, d) / π; an RPV facet transmits nothing, so
         // the side was the reflecting one
-        Some(rpv) => Some((d, rpv.brf(rho, side, w_prev, d))),
-        None => Some((d, a)),
+        Some(rpv) => Some((d, rpv.brf(rho, side, w_prev, d), false)),
+        None => Some((d, a, false)),
     }
 }

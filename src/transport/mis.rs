@@ -125,6 +125,22 @@ pub fn mis_weight(
         pc[nv - 1] = 1.0 / setup.receiver.area;
         pc[nv - 2] = pdf_area(setup, None, x(nv - 1), x(nv - 2));
     }
+    // Specular vertices (pbrt-v4's MISWeight): a density sampled from one is a Dirac's, kept
+    // as 0, and read as 1 in the ratios; a strategy whose connection touches one has no
+    // density at all and is left out of the sum.
+    let any_delta = (0..nv).any(|k| x(k).delta);
+    if any_delta {
+        for k in 0..nv {
+            if pl[k] == 0.0 && k >= 1 && x(k - 1).delta {
+                pl[k] = 1.0;
+            }
+            if pc[k] == 0.0 && k + 1 < nv && x(k + 1).delta {
+                pc[k] = 1.0;
+            }
+        }
+    }
+    // strategy s' joins x_(s'-1) and x_(s'); s' = n (t = 0) joins nothing
+    let open = |sp: usize| !any_delta || sp >= nv || !(x(sp - 1).delta || x(sp).delta);
     let h = |r: f64| match setup.heuristic {
         MisHeuristic::Power => r * r,
         MisHeuristic::Balance => r,
@@ -139,7 +155,9 @@ pub fn mis_weight(
         if k == 1 {
             r *= q;
         }
-        sum += h(r);
+        if open(k + 1) {
+            sum += h(r);
+        }
     }
     r = 1.0;
     for k in (lo..s).rev() {
@@ -147,7 +165,9 @@ pub fn mis_weight(
         if k == 1 {
             r /= q;
         }
-        sum += h(r);
+        if open(k) {
+            sum += h(r);
+        }
     }
     if sum.is_finite() {
         1.0 / sum

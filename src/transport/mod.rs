@@ -119,6 +119,9 @@ pub struct Vertex {
     pub pdf_fwd: f64,
     /// Area density of this vertex if the other sub-path had sampled it.
     pub pdf_rev: f64,
+    /// A specular scattering (a smooth water surface): no strategy connects to it, and the
+    /// densities it makes are Dirac's (README, "Water").
+    pub delta: bool,
 }
 
 impl Vertex {
@@ -133,6 +136,7 @@ impl Vertex {
             len: 0.0,
             pdf_fwd,
             pdf_rev: 0.0,
+            delta: false,
         }
     }
 }

@@ -185,6 +185,7 @@ fn rpv_sampling_weights_integrate_to_the_albedo() {
             bands: vec![[rho0, rho0, 0.0]],
             rpv: Some(shape),
             band_rpv: vec![shape],
+            water: None,
             class: SurfaceClass::Ground,
         };
         for deg in [0.0f64, 35.0, 60.0, 80.0] {
@@ -197,7 +198,7 @@ fn rpv_sampling_weights_integrate_to_the_albedo() {
                 let w_prev = DVec3::new((1.0 - mu * mu).sqrt(), 0.0, mu * side);
                 let (mut sum, mut sq, count) = (0.0, 0.0, 400_000);
                 for i in 0..count {
-                    let (d, w) = bsdf::sample_bsdf(&s, n, w_prev, &mut rng).unwrap();
+                    let (d, w, _) = bsdf::sample_bsdf(&s, n, w_prev, true, &mut rng).unwrap();
                     sum += w;
                     sq += w * w;
                     if i < 100 {

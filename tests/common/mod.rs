@@ -117,6 +117,26 @@ pub fn lidarsim(args: &[&str]) -> (i32, String, String) {
     )
 }
 
+/// `lidarsim run CAMPAIGN --out DIR/out`, which must fail as bad input does: exit code 1, a
+/// message that says `says` and names the file `file` (with its line), no panic.
+pub fn assert_bad_input(campaign: &Path, file: &str, says: &str) {
+    let out = campaign.with_file_name("out");
+    let (code, _, err) = lidarsim(&[
+        "run",
+        campaign.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    println!("{says}: {err}");
+    assert_eq!(code, 1, "{err}");
+    assert!(err.contains(says), "expected \"{says}\" in: {err}");
+    assert!(
+        err.contains(&format!("{file}:")),
+        "expected {file}: in: {err}"
+    );
+    assert!(!err.contains("panicked"), "{err}");
+}
+
 /// `lidarsim run CAMPAIGN --out OUT [--threads N]`, which must succeed; returns its stderr.
 pub fn run_cli(campaign: &Path, out: &Path, threads: Option<usize>) -> String {
     let threads = threads.map(|n| n.to_string());

@@ -237,3 +237,99 @@ fn bad_water_is_a_located_error() {
         "objects[1].water: a scene holds one body of water",
     );
 }
+
+/// Two runs agree per order where both have energy: |a − b| < 3 combined SE, with SEs small
+/// enough to tell 10 %.
+fn agree(
+    name: &str,
+    a: &lidarsim::waveform::Waveform,
+    b: &lidarsim::waveform::Waveform,
+    orders: &[usize],
+) {
+    for &k in orders {
+        let (ea, eb) = (a.order_energy_j[k - 1], b.order_energy_j[k - 1]);
+        let se = a.order_energy_se_j[k - 1].hypot(b.order_energy_se_j[k - 1]);
+        let z = (ea - eb) / se;
+        println!(
+            "{name} order {k}: {ea:.5e} vs {eb:.5e}, z {z:+.2}, rel se {:.4}",
+            se / ea
+        );
+        assert!(
+            se < 0.033 * ea.max(eb),
+            "{name} order {k}: standard error too large"
+        );
+        assert!(z.abs() < 3.0, "{name} order {k}: z {z}");
+    }
+}
+
+fn rough_scene(
+    dir: &std::path::Path,
+    wind: f64,
+    attenuation: f64,
+    depth: f64,
+) -> std::path::PathBuf {
+    write(
+        dir,
+        "rough.yaml",
+        &format!(
+            "name: rough\nmaterials:\n  sand: {{ reflectance: {RHO_BOTTOM} }}\nobjects:\n  - water: {{ z: 0, extent: [[-50, -50], [50, 50]], attenuation_per_m: {attenuation}, wind_speed_m_s: {wind} }}\n  - plane: {{ z: {}, extent: [[-50, -50], [50, 50]], material: sand }}\n",
+            -depth
+        ),
+    )
+}
+
+/// A wind-roughened surface (Cox-Munk, 5 m/s: σ² = 0.003 + 0.00512 U) seen at nadir returns,
+/// from its facets that face the sensor, closed form 1 with the reflectance factor
+/// π f = F(0) / (4σ²) (Beckmann's D(n) = 1/(πσ²), no shadowing at nadir) within 2 %.
+#[test]
+fn rough_surface_returns_its_specular_facets() {
+    let dir = tmp("water_rough_nadir");
+    // a deep, dark column: no bottom return
+    let scene = rough_scene(&dir, 5.0, 50.0, 5.0);
+    let inst = Inst::default();
+    let h = 100.0;
+    let w = run(
+        &dir,
+        &campaign(
+            &scene,
+            &inst,
+            [0.0, 0.0, h],
+            [0.0, 0.0, -1.0],
+            "forward",
+            400_000,
+            3,
+        ),
+        None,
+    )
+    .remove(0);
+    let mss = 0.003 + 0.00512 * 5.0;
+    let rho = fresnel(1.0, 1.0, N) / (4.0 * mss);
+    let expect = plane_energy(&inst, rho, h);
+    let (got, se) = (w.order_energy_j[0], w.order_energy_se_j[0] / expect);
+    println!("rough surface: π f {rho:.5}, got {got:.5e}, expect {expect:.5e}, se {se:.4}");
+    assert!(3.0 * se < 0.02, "standard error {se} too large");
+    assert!((got / expect - 1.0).abs() < 0.02, "{}", got / expect);
+}
+
+/// Over a wind-roughened surface (8 m/s) and 1 m of water, forward and bdpt agree on the
+/// surface's return (order 1) and the bottom's (order 3) within 3 combined SE.
+#[test]
+fn forward_and_bdpt_agree_over_rough_water() {
+    let dir = tmp("water_rough_agree");
+    let scene = rough_scene(&dir, 8.0, 0.2, 1.0);
+    let inst = Inst {
+        fp_mrad: 5.0,
+        fov_mrad: 300.0,
+        area: 1.0,
+        energy: 0.001,
+        ..Inst::default()
+    };
+    let go = |m: &str, rays: u64| {
+        let sub = dir.join(m);
+        std::fs::create_dir_all(&sub).unwrap();
+        let text = campaign(&scene, &inst, [0.0, 0.0, 5.0], [0.0, 0.0, -1.0], m, rays, 5);
+        run(&sub, &text, None).remove(0)
+    };
+    let (f, b) = (go("forward", 2_000_000), go("bdpt", 1_000_000));
+    agree("rough water forward/bdpt", &f, &b, &[1, 3]);
+}

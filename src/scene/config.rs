@@ -73,6 +73,9 @@ pub(crate) struct WaterSpec {
     /// Default 1.33.
     #[serde(default)]
     pub refractive_index: Option<f64>,
+    /// Wind speed at 12.5 m, m/s: a surface roughened by Cox-Munk slopes; absent: smooth.
+    #[serde(default)]
+    pub wind_speed_m_s: Option<f64>,
 }
 
 impl<'de> Deserialize<'de> for ObjectSpec {
@@ -188,8 +191,8 @@ pub(crate) struct ResolvedMaterial {
     /// and each band's; `None` and empty for a Lambertian material.
     pub rpv: Option<Rpv>,
     pub band_rpv: Vec<Rpv>,
-    /// The refractive index of a water surface (smooth: Fresnel reflection and refraction).
-    pub water: Option<f64>,
+    /// A water surface.
+    pub water: Option<super::WaterInterface>,
 }
 
 /// Resolves every material at each of `wavelengths_nm`, with located errors; a material's

@@ -165,7 +165,19 @@ fn water_body(doc: &Doc, file: &SceneFile, wavelengths_nm: &[f64]) -> Result<Opt
                 Ok(c)
             })
             .collect::<Result<Vec<f64>>>()?;
+        let mss =
+            match w.wind_speed_m_s {
+                None => 0.0,
+                Some(u) if u.is_finite() && (0.0..=20.0).contains(&u) => 0.003 + 0.00512 * u,
+                Some(u) => return Err(doc.error(
+                    &format!("{key}.wind_speed_m_s"),
+                    format!(
+                        "expected a wind speed of 0 to 20 m/s (Cox and Munk's range), found {u}"
+                    ),
+                )),
+            };
         body = Some(WaterBody {
+            mss,
             z: w.z,
             lo: [a[0].min(b[0]), a[1].min(b[1])],
             hi: [a[0].max(b[0]), a[1].max(b[1])],
@@ -195,7 +207,7 @@ pub(crate) fn load(path: &Path, wavelengths_nm: &[f64]) -> Result<Scene> {
                 bands: vec![[0.0; 3]; wavelengths_nm.len()],
                 rpv: None,
                 band_rpv: Vec::new(),
-                water: Some(w.n),
+                water: Some(super::WaterInterface { n: w.n, mss: w.mss }),
             },
         );
     }

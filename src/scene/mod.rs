@@ -93,10 +93,19 @@ pub struct Surface {
     pub rpv: Option<Rpv>,
     /// RPV's shape in each band (empty for a Lambertian surface).
     pub band_rpv: Vec<Rpv>,
-    /// A smooth water surface of this refractive index (its front side, where its normal
-    /// points, is air): a specular Fresnel interface, no ρ or τ.
-    pub water: Option<f64>,
+    /// A water surface (its front side, where its normal points, is air): a Fresnel interface,
+    /// no ρ or τ.
+    pub water: Option<WaterInterface>,
     pub class: SurfaceClass,
+}
+
+/// The air-water interface: refractive index `n` and the mean square slope `mss` of its
+/// facets (Cox & Munk 1954, σ² = 0.003 + 0.00512 U for a wind of U m/s; 0: a smooth, specular
+/// surface).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct WaterInterface {
+    pub n: f64,
+    pub mss: f64,
 }
 
 /// A body of water: its surface at `z` over the rectangle `lo..hi` (x, y), and the water
@@ -104,6 +113,8 @@ pub struct Surface {
 /// band b (README, "Water").
 #[derive(Clone, Debug, PartialEq)]
 pub struct WaterBody {
+    /// Mean square slope of the surface's facets (0: smooth).
+    pub mss: f64,
     pub z: f64,
     pub lo: [f64; 2],
     pub hi: [f64; 2],

@@ -225,6 +225,13 @@ fn bad_water_is_a_located_error() {
         );
         assert_bad_input(&path, "water.yaml", says);
     }
+    // water in a repeated scene
+    write(
+        &dir,
+        "water.yaml",
+        &format!("name: w\nrepeat: true\nmaterials:\n  sand: {{ reflectance: 0.3 }}\nobjects:\n  - water: {{ z: 0, extent: [[-5, -5], [5, 5]], attenuation_per_m: 0.1 }}\n{bottom}"),
+    );
+    assert_bad_input(&path, "water.yaml", "repeated scene");
     // two bodies of water
     write(
         &dir,

@@ -139,6 +139,14 @@ fn water_body(doc: &Doc, file: &SceneFile, wavelengths_nm: &[f64]) -> Result<Opt
         if body.is_some() {
             return Err(doc.error(&key, "a scene holds one body of water at most"));
         }
+        if file.repeat {
+            // the water column is told by its rectangle, which a repeated landscape would
+            // have to repeat too
+            return Err(doc.error(
+                &key,
+                "water in a repeated scene (repeat: true) is not supported: give the water an extent covering the field of view instead",
+            ));
+        }
         let [a, b] = w.extent;
         check_rectangle(doc, &key, "water", w.z, w.extent)?;
         let n = w.refractive_index.unwrap_or(1.33);
@@ -165,17 +173,18 @@ fn water_body(doc: &Doc, file: &SceneFile, wavelengths_nm: &[f64]) -> Result<Opt
                 Ok(c)
             })
             .collect::<Result<Vec<f64>>>()?;
-        let mss =
-            match w.wind_speed_m_s {
-                None => 0.0,
-                Some(u) if u.is_finite() && (0.0..=20.0).contains(&u) => 0.003 + 0.00512 * u,
-                Some(u) => return Err(doc.error(
+        let mss = match w.wind_speed_m_s {
+            None => 0.0,
+            Some(u) if u.is_finite() && (0.0..=20.0).contains(&u) => 0.003 + 0.00512 * u,
+            Some(u) => {
+                return Err(doc.error(
                     &format!("{key}.wind_speed_m_s"),
                     format!(
                         "expected a wind speed of 0 to 20 m/s (Cox and Munk's range), found {u}"
                     ),
-                )),
-            };
+                ))
+            }
+        };
         body = Some(WaterBody {
             mss,
             z: w.z,

@@ -340,3 +340,32 @@ fn forward_and_bdpt_agree_over_rough_water() {
     let (f, b) = (go("forward", 2_000_000), go("bdpt", 1_000_000));
     agree("rough water forward/bdpt", &f, &b, &[1, 3]);
 }
+
+/// The bundled bathymetric campaign (pipelines/bathymetry.yaml over scenes/lake.yaml) runs,
+/// and its green bottom points lie at the apparent depth n × d of ranges c t / 2 (median ratio
+/// to the true depth within 1 % of n; the scan's slant moves it a little), with more bottom
+/// points in the green band than in the infrared, whose water absorbs.
+#[test]
+fn bundled_bathymetry_campaign_sees_the_bottom_in_green() {
+    let dir = tmp("water_bundled");
+    let out = dir.join("run");
+    run_cli(&repo().join("pipelines/bathymetry.yaml"), &out, None);
+    let points = lidarsim::products::las::read_las(&out.join("points.las")).unwrap();
+    let bottom = |nm: f32| -> Vec<f64> {
+        points
+            .iter()
+            .filter(|p| p.wavelength_nm == Some(nm) && p.z < -0.5)
+            .map(|p| p.z / -(1.0 + 4.0 * (p.x + 40.0) / 80.0))
+            .collect()
+    };
+    let (mut green, infrared) = (bottom(532.0), bottom(1064.0));
+    green.sort_by(f64::total_cmp);
+    let median = green[green.len() / 2];
+    println!(
+        "green bottom points {}, infrared {}, apparent / true depth (median) {median:.4}",
+        green.len(),
+        infrared.len()
+    );
+    assert!(green.len() > 1000 && green.len() > 2 * infrared.len());
+    assert!((median / N - 1.0).abs() < 0.01, "{median}");
+}

@@ -369,3 +369,47 @@ fn bundled_bathymetry_campaign_sees_the_bottom_in_green() {
     assert!(green.len() > 1000 && green.len() > 2 * infrared.len());
     assert!((median / N - 1.0).abs() < 0.01, "{median}");
 }
+
+/// Under a smooth surface, a V-shaped trench (two 30° slopes that face each other): paths
+/// that join a light vertex and a receiver vertex under water (the receiver's reached through
+/// the refracting surface, its importance scaled by (n_i/n_t)²) are bdpt's alone, light paths
+/// that cross the aperture are forward's: the two agree order by order within 3 combined SE.
+#[test]
+fn forward_and_bdpt_agree_in_a_trench_under_water() {
+    let dir = tmp("water_trench");
+    // faces from x = -2 (z = -1) down to x = 0 (z = -2.155) and up to x = 2 (z = -1)
+    let obj = "v -2 -4 -1\nv 0 -4 -2.155\nv 0 4 -2.155\nv -2 4 -1\nv 2 -4 -1\nv 2 4 -1\nf 1 2 3\nf 1 3 4\nf 2 5 6\nf 2 6 3\n";
+    write(&dir, "trench.obj", obj);
+    let scene = write(
+        &dir,
+        "trench.yaml",
+        "name: trench\nmaterials:\n  sand: { reflectance: 0.7 }\nobjects:\n  - water: { z: 0, extent: [[-50, -50], [50, 50]], attenuation_per_m: 0.1 }\n  - mesh: { file: trench.obj, material: sand }\n",
+    );
+    let inst = Inst {
+        fp_mrad: 60.0,
+        fov_mrad: 300.0,
+        area: 1.0,
+        energy: 0.001,
+        ..Inst::default()
+    };
+    let go = |m: &str, rays: u64| {
+        let sub = dir.join(m);
+        std::fs::create_dir_all(&sub).unwrap();
+        let text = campaign(
+            &scene,
+            &inst,
+            [-0.8, 0.0, 5.0],
+            [0.0, 0.0, -1.0],
+            m,
+            rays,
+            4,
+        );
+        run(&sub, &text, None).remove(0)
+    };
+    let (f, b) = (go("forward", 8_000_000), go("bdpt", 1_000_000));
+    assert!(
+        f.order_energy_j[3] > 0.02 * f.order_energy_j[2],
+        "order 4 must matter"
+    );
+    agree("trench under water forward/bdpt", &f, &b, &[1, 3, 4]);
+}

@@ -113,7 +113,10 @@ pub(super) fn walk(
     let recv = &setup.receiver;
     // the band factors of the sub-path so far, the last vertex's scattering included
     let mut run = ONES;
-    while path.len() < cap {
+    // a light sub-path that fills its cap samples on once more, for the aperture alone
+    // (t = 0), where a specular surface leaves that strategy the only one for the highest order
+    let crossing_after_cap = light && setup.crossing_after_cap();
+    while path.len() < cap + usize::from(crossing_after_cap) {
         let last = *path.last().expect("a sub-path starts at its end point");
         let surfaces = path.len() - 1;
         let hit = scene.intersect(last.p, dir, f64::INFINITY, last.facet);
@@ -151,6 +154,9 @@ pub(super) fn walk(
                 }
             }
         }
+        if path.len() >= cap {
+            break;
+        }
         let Some(hit) = hit else { break };
         beta *= segment_transmittance(setup, &last, hit.position);
         let len = last.len + optical_length(setup, last.p, hit.position, hit.t);
@@ -160,7 +166,7 @@ pub(super) fn walk(
             bands.segment(&mut run, &last, hit.position);
             ratios.push(run);
         }
-        if path.len() >= cap {
+        if path.len() >= cap && !crossing_after_cap {
             break;
         }
         let surf = &scene.surfaces[hit.surface as usize];

@@ -77,7 +77,12 @@ pub fn mis_weight(
     let nv = s + t;
     let (s_cap, t_cap) = setup.caps();
     let lo = nv.saturating_sub(t_cap).max(1);
-    let hi = nv.min(s_cap);
+    // t = 0 with a light sub-path one longer than its cap: see `crossing_after_cap`
+    let hi = if setup.crossing_after_cap() && nv == s_cap + 1 {
+        nv
+    } else {
+        nv.min(s_cap)
+    };
     if lo >= hi {
         return 1.0;
     }

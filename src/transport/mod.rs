@@ -79,6 +79,14 @@ pub struct PulseSetup<'a> {
 }
 
 impl PulseSetup<'_> {
+    /// Whether light sub-paths that reach their cap still look for the aperture (t = 0):
+    /// over a smooth water surface, whose specular vertices no strategy connects to, a path
+    /// of the highest order through it has no other strategy. Elsewhere it would cost a query
+    /// per path for a strategy the others already cover.
+    pub fn crossing_after_cap(&self) -> bool {
+        self.caps().0 > 1 && self.scene.water.as_ref().is_some_and(|w| w.mss == 0.0)
+    }
+
     /// Most vertices the light and the receiver sub-paths may have, end points included.
     pub fn caps(&self) -> (usize, usize) {
         let full = self.max_order as usize + 1;

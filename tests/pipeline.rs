@@ -217,18 +217,37 @@ fn sweep_runs_every_combination_with_one_scene_load() {
             );
         }
     }
-    // a higher platform: the same energy arrives later and weaker (∝ 1/H²)
+    // a higher platform: the same energy arrives later and weaker (∝ 1/H²), over the part's
+    // 1000 pulses, within 1 % (at 300 m the field of view clips the edge of the footprint
+    // by a few tenths of a percent)
     let w = |alt: &str| {
         lidarsim::waveform::file::read_waveforms(&out.join(format!(
             "altitude_m={alt}_fov_half_angle_mrad=1.0/waveforms/part-00000.parquet"
         )))
         .unwrap()
-        .remove(0)
     };
     let (a, b) = (w("300"), w("600"));
-    assert!(b.t0_ns > a.t0_ns + 1900.0);
-    let ratio = a.received_energy_j / b.received_energy_j;
-    assert!((ratio - 4.0).abs() < 0.2, "{ratio}");
+    assert!(b[0].t0_ns > a[0].t0_ns + 1900.0);
+    let mean = |v: &[lidarsim::waveform::Waveform]| {
+        let n = v.len() as f64;
+        let e = v.iter().map(|w| w.received_energy_j).sum::<f64>() / n;
+        let se = v
+            .iter()
+            .map(|w| w.received_energy_se_j.powi(2))
+            .sum::<f64>()
+            .sqrt()
+            / n;
+        (e, se)
+    };
+    let ((ea, sa), (eb, sb)) = (mean(&a), mean(&b));
+    let ratio = ea / eb;
+    let se = ratio * (sa / ea).hypot(sb / eb);
+    println!("energy ratio 300 m / 600 m: {ratio:.4} ± {se:.4}");
+    assert!(
+        3.0 * se < 0.01 * 4.0,
+        "standard error {se} too large for a 1% test"
+    );
+    assert!((ratio - 4.0).abs() < 0.04, "{ratio}");
 }
 
 #[test]

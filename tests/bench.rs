@@ -105,6 +105,19 @@ fn campaign_rows_are_measured_and_missing_data_is_skipped() {
     assert!(tr.inside_per_s > 0.0 && tr.bare_per_s > 0.0, "{tr:?}");
     let t = lidarsim::bench::traversal::table(&[tr]);
     assert!(t.contains("| mabel_plane | 8 |"), "{t}");
+    // the same campaign in three bands against one (the plane reflects alike in all three,
+    // so every band receives the same energy from the same paths)
+    let bands = bc::bands_row(&dir, "mabel_plane", &text, 1).unwrap();
+    assert_eq!((bands.pulses, bands.pairs), (20, 1));
+    assert!(bands.one_band_s > 0.0 && bands.three_bands_s > 0.0);
+    assert_eq!(bands.energy_j.len(), 3);
+    assert!(bands.energy_j[0] > 0.0, "{:?}", bands.energy_j);
+    assert!(
+        bands.energy_j.iter().all(|&e| e == bands.energy_j[0]),
+        "{:?}",
+        bands.energy_j
+    );
+    assert!(bc::bands_table(&[bands]).contains("| mabel_plane | 20 | 1 |"));
     // the same campaign on one thread, for the serial share: its own folder, a table row
     let sc = bc::scaling(&dir, &row, &text).unwrap();
     assert!(dir.join("mabel_plane_1thread/run/report.md").is_file());

@@ -22,6 +22,25 @@ pub(super) fn check(path: &std::path::Path) -> Result<()> {
     println!("campaign: {} ({})", c.name, path.display());
     println!("scene: {} ({})", scene.name, loaded.scene_path.display());
     println!("pulses: {}", plan.len());
+    if c.wavelength_nm.several() {
+        println!("bands: {} nm, traced in one pass", c.wavelength_nm);
+    }
+    if let Some(w) = &scene.water {
+        println!(
+            "water: surface at z = {} m over [{}, {}] .. [{}, {}], n = {}, {}",
+            w.z,
+            w.lo[0],
+            w.lo[1],
+            w.hi[0],
+            w.hi[1],
+            w.n,
+            if w.mss > 0.0 {
+                format!("rough (mean square slope {:.4})", w.mss)
+            } else {
+                "smooth".to_string()
+            }
+        );
+    }
     println!("rays per pulse: {}", c.simulation.rays_per_pulse);
     println!("instances: {}", s.instances);
     println!("distinct meshes: {}", s.distinct_meshes);
@@ -90,9 +109,11 @@ fn run_memory_bound(loaded: &crate::campaign::Loaded, scene: &Scene, plan: &plan
         )
         .bins as f64
     };
-    // a waveform: photons, impulse energy and its error, four classes, orders (f32 each)
+    // a waveform: photons, impulse energy and its error, four classes, orders (f32 each);
+    // one per pulse and band
     let waveform = bins * 4.0 * (3.0 + 4.0) + c.simulation.max_order as f64 * 16.0;
-    let part = pipeline::PART_PULSES as f64 * waveform;
+    let bands = c.wavelength_nm.all().len() as f64;
+    let part = pipeline::PART_PULSES as f64 * waveform * bands;
     let threads = rayon::current_num_threads() as f64;
     // a part in the making, the one queued, and the one being encoded (its table and bytes),
     // with a part's worth for the allocator's slack, and the Parquet writer's own buffers and

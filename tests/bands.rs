@@ -256,23 +256,7 @@ fn each_band_equals_a_run_of_its_own_wavelength() {
         60_000,
         3,
     );
-    for sub in ["all", "532", "1064", "1550"] {
-        std::fs::create_dir_all(dir.join(sub)).unwrap();
-    }
-    let rows = run(&dir.join("all"), &with_bands(&text, BANDS_YAML), None);
-    let all = rows_by_band(&rows, 0);
-    for (b, nm) in BANDS.iter().enumerate() {
-        let one = run(
-            &dir.join(format!("{nm}")),
-            &text.replace("wavelength_nm: 1064\n", &format!("wavelength_nm: {nm}\n")),
-            None,
-        )
-        .remove(0);
-        assert_eq!(one.wavelength_nm, None, "a single band has no band column");
-        let name = format!("{nm} nm");
-        compare_orders(&name, all[b], &one, 3);
-        compare_bins(&name, all[b], &one);
-    }
+    compare_bands_with_single_runs("leaves", &dir, &text, &BANDS, 3);
 }
 
 /// The output contract of several bands: waveform rows per pulse and band (in the campaign's

@@ -206,25 +206,7 @@ fn rpv_in_several_bands_equals_single_band_runs() {
         60_000,
         3,
     );
-    for sub in ["both", "532", "1064"] {
-        std::fs::create_dir_all(dir.join(sub)).unwrap();
-    }
-    let both = run(
-        &dir.join("both"),
-        &text.replace("wavelength_nm: 1064\n", "wavelength_nm: [532, 1064]\n"),
-        None,
-    );
-    for (b, nm) in [532, 1064].into_iter().enumerate() {
-        let one = run(
-            &dir.join(nm.to_string()),
-            &text.replace("wavelength_nm: 1064\n", &format!("wavelength_nm: {nm}\n")),
-            None,
-        )
-        .remove(0);
-        assert_eq!(both[b].wavelength_nm, Some(nm as f64));
-        compare_orders(&format!("rpv {nm} nm"), &both[b], &one, 3);
-        compare_bins(&format!("rpv {nm} nm"), &both[b], &one);
-    }
+    compare_bands_with_single_runs("rpv", &dir, &text, &[532.0, 1064.0], 3);
 }
 
 /// Bad RPV parameters end with exit code 1 and one message naming the file, line and key.

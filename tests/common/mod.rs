@@ -463,6 +463,41 @@ pub fn compare_orders(name: &str, a: &Waveform, b: &Waveform, orders: usize) {
     assert!(z.abs() < 3.0);
 }
 
+/// A campaign `text` of one pulse at 1064 nm traced in all of `bands` at once (in `dir/all`)
+/// and in each alone (in `dir/<nm>`): each band of the first run equals the run of its own
+/// wavelength per order (`orders`) and per bin within 3 combined SE ([`compare_orders`],
+/// [`compare_bins`]), rows in the list's order, the single runs without a band column.
+pub fn compare_bands_with_single_runs(
+    name: &str,
+    dir: &Path,
+    text: &str,
+    bands: &[f64],
+    orders: usize,
+) {
+    let list: Vec<String> = bands.iter().map(|nm| nm.to_string()).collect();
+    let with = |wavelengths: &str| {
+        assert!(text.contains("wavelength_nm: 1064\n"));
+        text.replace(
+            "wavelength_nm: 1064\n",
+            &format!("wavelength_nm: {wavelengths}\n"),
+        )
+    };
+    let all_dir = dir.join("all");
+    std::fs::create_dir_all(&all_dir).unwrap();
+    let all = run(&all_dir, &with(&format!("[{}]", list.join(", "))), None);
+    assert_eq!(all.len(), bands.len(), "one row per band");
+    for (row, &nm) in all.iter().zip(bands) {
+        assert_eq!(row.wavelength_nm, Some(nm));
+        let one_dir = dir.join(nm.to_string());
+        std::fs::create_dir_all(&one_dir).unwrap();
+        let one = run(&one_dir, &with(&nm.to_string()), None).remove(0);
+        assert_eq!(one.wavelength_nm, None, "a single band has no band column");
+        let label = format!("{name} {nm} nm");
+        compare_orders(&label, row, &one, orders);
+        compare_bins(&label, row, &one);
+    }
+}
+
 /// Per-bin agreement of the impulse waveforms over the bins that hold 99.9% of the energy.
 /// Each bin's z-score must stay within 3 (a bin beyond is reported; with many bins one in a
 /// few hundred may be, so at most 1% of them), and Σz² must stay under the 99.9% quantile of

@@ -3,11 +3,10 @@
 
 use super::Waveform;
 use crate::error::{Error, Result};
-use crate::parquet_io::{batch_nullable, f32_or_null, list_f32, list_f64, write_batch};
-use arrow_array::{Array, Float32Array, Float64Array, UInt32Array, UInt64Array};
+use crate::parquet_io::{Column, Table};
+use arrow_array::Array;
 use arrow_schema::DataType;
 use std::path::Path;
-use std::sync::Arc;
 
 /// Pulses per waveform part file.
 pub const PART_PULSES: usize = 1000;
@@ -22,11 +21,9 @@ pub fn part_name(k: usize) -> String {
     format!("waveforms/part-{k:05}.parquet")
 }
 
-/// Writes a waveform part. One statement per column of the output contract (README,
-/// "Outputs"), in the file's column order: the function is as long as the contract, and
-/// splitting it would scatter the contract over several places.
+/// Writes a waveform part.
 pub fn write_waveforms(path: &Path, w: &[Waveform], fingerprint: &str) -> Result<()> {
-    write_batch(path, waveform_batch(w))?;
+    waveform_table(w).write(path)?;
     // the part's checksum and the fingerprint of the simulation that made it beside it,
     // written after it: a part without them, whose bytes disagree, or made for other inputs
     // (another campaign, scene or version in the same folder) is no part (`part_is_whole`)
@@ -40,125 +37,59 @@ pub fn checksum_path(part: &Path) -> std::path::PathBuf {
     part.with_extension("fnv")
 }
 
-/// The waveforms as the table a part file holds.
-pub fn waveform_batch(w: &[Waveform]) -> arrow_array::RecordBatch {
-    let mut columns: Vec<(&str, arrow_array::ArrayRef)> = vec![
+/// The waveforms as the table a part file holds. One statement per column of the output
+/// contract (README, "Outputs"), in the file's column order: the function is as long as the
+/// contract, and splitting it would scatter the contract over several places.
+pub fn waveform_table(w: &[Waveform]) -> Table<'_> {
+    let list = |f: fn(&Waveform) -> &[f32]| Column::ListF32(w.iter().map(f).collect());
+    let f64s = |f: fn(&Waveform) -> f64| Column::F64(w.iter().map(f).collect());
+    let f32s = |f: fn(&Waveform) -> f32| Column::F32(w.iter().map(f).collect());
+    let mut columns = vec![
         (
             "pulse_id",
-            Arc::new(UInt64Array::from_iter_values(w.iter().map(|r| r.pulse_id))),
+            Column::U64(w.iter().map(|r| r.pulse_id).collect()),
         ),
-        (
-            "t0_ns",
-            Arc::new(Float64Array::from_iter_values(w.iter().map(|r| r.t0_ns))),
-        ),
-        (
-            "bin_ns",
-            Arc::new(Float32Array::from_iter_values(w.iter().map(|r| r.bin_ns))),
-        ),
-        (
-            "laser_photons",
-            list_f32(w.iter().map(|r| r.laser_photons.as_slice())),
-        ),
-        (
-            "impulse_energy_j",
-            list_f32(w.iter().map(|r| r.impulse_energy_j.as_slice())),
-        ),
-        (
-            "impulse_energy_se_j",
-            list_f32(w.iter().map(|r| r.impulse_energy_se_j.as_slice())),
-        ),
-        (
-            "ground_energy_j",
-            list_f32(w.iter().map(|r| r.class_energy_j[0].as_slice())),
-        ),
-        (
-            "vegetation_energy_j",
-            list_f32(w.iter().map(|r| r.class_energy_j[1].as_slice())),
-        ),
-        (
-            "building_energy_j",
-            list_f32(w.iter().map(|r| r.class_energy_j[2].as_slice())),
-        ),
-        (
-            "other_energy_j",
-            list_f32(w.iter().map(|r| r.class_energy_j[3].as_slice())),
-        ),
-        (
-            "received_energy_j",
-            Arc::new(Float64Array::from_iter_values(
-                w.iter().map(|r| r.received_energy_j),
-            )),
-        ),
-        (
-            "outside_gate_energy_j",
-            Arc::new(Float64Array::from_iter_values(
-                w.iter().map(|r| r.outside_gate_energy_j),
-            )),
-        ),
+        ("t0_ns", f64s(|r| r.t0_ns)),
+        ("bin_ns", f32s(|r| r.bin_ns)),
+        ("laser_photons", list(|r| &r.laser_photons)),
+        ("impulse_energy_j", list(|r| &r.impulse_energy_j)),
+        ("impulse_energy_se_j", list(|r| &r.impulse_energy_se_j)),
+        ("ground_energy_j", list(|r| &r.class_energy_j[0])),
+        ("vegetation_energy_j", list(|r| &r.class_energy_j[1])),
+        ("building_energy_j", list(|r| &r.class_energy_j[2])),
+        ("other_energy_j", list(|r| &r.class_energy_j[3])),
+        ("received_energy_j", f64s(|r| r.received_energy_j)),
+        ("outside_gate_energy_j", f64s(|r| r.outside_gate_energy_j)),
         (
             "order_energy_j",
-            list_f64(w.iter().map(|r| r.order_energy_j.as_slice())),
+            Column::ListF64(w.iter().map(|r| r.order_energy_j.as_slice()).collect()),
         ),
         (
             "order_energy_se_j",
-            list_f64(w.iter().map(|r| r.order_energy_se_j.as_slice())),
+            Column::ListF64(w.iter().map(|r| r.order_energy_se_j.as_slice()).collect()),
         ),
-        (
-            "received_energy_se_j",
-            Arc::new(Float64Array::from_iter_values(
-                w.iter().map(|r| r.received_energy_se_j),
-            )),
-        ),
-        (
-            "solar_photons_per_bin",
-            Arc::new(Float32Array::from_iter_values(
-                w.iter().map(|r| r.solar_photons_per_bin),
-            )),
-        ),
-        (
-            "solar_power_w",
-            Arc::new(Float64Array::from_iter_values(
-                w.iter().map(|r| r.solar_power_w),
-            )),
-        ),
-        (
-            "solar_power_se_w",
-            Arc::new(Float64Array::from_iter_values(
-                w.iter().map(|r| r.solar_power_se_w),
-            )),
-        ),
+        ("received_energy_se_j", f64s(|r| r.received_energy_se_j)),
+        ("solar_photons_per_bin", f32s(|r| r.solar_photons_per_bin)),
+        ("solar_power_w", f64s(|r| r.solar_power_w)),
+        ("solar_power_se_w", f64s(|r| r.solar_power_se_w)),
         // null without a sun, and without laser energy in the gate: no meaning, not NaN
         (
             "brf_fov_solar",
-            f32_or_null(w.iter().map(|r| r.brf_fov_solar)),
+            Column::F32OrNull(w.iter().map(|r| r.brf_fov_solar).collect()),
         ),
         (
             "brf_footprint_laser",
-            f32_or_null(w.iter().map(|r| r.brf_footprint_laser)),
+            Column::F32OrNull(w.iter().map(|r| r.brf_footprint_laser).collect()),
         ),
-        (
-            "rays",
-            Arc::new(UInt32Array::from_iter_values(w.iter().map(|r| r.rays))),
-        ),
-        (
-            "paths_per_ray",
-            Arc::new(Float32Array::from_iter_values(
-                w.iter().map(|r| r.paths_per_ray),
-            )),
-        ),
+        ("rays", Column::U32(w.iter().map(|r| r.rays).collect())),
+        ("paths_per_ray", f32s(|r| r.paths_per_ray)),
     ];
     // a run of several bands: one row per pulse and band, the band beside the pulse id
     if w.iter().any(|r| r.wavelength_nm.is_some()) {
         let nm = w.iter().map(|r| r.wavelength_nm.unwrap_or(f64::NAN));
-        columns.insert(
-            1,
-            (
-                "wavelength_nm",
-                Arc::new(Float64Array::from_iter_values(nm)),
-            ),
-        );
+        columns.insert(1, ("wavelength_nm", Column::F64(nm.collect())));
     }
-    batch_nullable(columns, &["brf_fov_solar", "brf_footprint_laser"])
+    Table { columns }
 }
 
 /// Reads a waveform part back (used by tests and later stages).

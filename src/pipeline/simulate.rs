@@ -3,7 +3,7 @@
 
 use super::PART_PULSES;
 use crate::campaign::{Loaded, Method};
-use crate::error::{Error, Result};
+use crate::error::Result;
 use crate::plan::{Plan, Pulse};
 use crate::progress::{log, progress};
 use crate::scene::Scene;
@@ -36,7 +36,7 @@ pub(super) fn simulate_parts(
 ) -> Result<(u64, usize, Option<i32>)> {
     let total: usize = todo.iter().map(|&k| part_range(k, plan.len()).len()).sum();
     let bar = progress(total as u64, "simulating");
-    let t = Instant::now();
+    let (t, cpu) = (Instant::now(), crate::progress::process_cpu_seconds());
     let mut rays = 0u64;
     let mut done_pulses = 0usize;
     let terminal = std::io::stderr().is_terminal();
@@ -44,65 +44,78 @@ pub(super) fn simulate_parts(
     let mut written = 0usize;
     let mut stopped = None;
     let bands = loaded.campaign.wavelength_nm.all().len();
-    std::thread::scope(|scope| -> Result<()> {
-        let (queue, finished) =
-            std::sync::mpsc::sync_channel::<(usize, Vec<Waveform>, Vec<f64>)>(1);
-        let writer = scope.spawn(move || -> Result<()> {
-            for (n, (k, waveforms, secs)) in finished.into_iter().enumerate() {
-                write_waveforms(&out.join(part_name(k)), &waveforms, fingerprint)?;
-                write_pulse_stats(
-                    &out.join(format!("waveforms/part-{k:05}.stats.csv")),
-                    waveforms.iter().step_by(bands),
-                    &secs,
-                )?;
-                drop(waveforms);
-                crate::progress::release_after_part(n);
-            }
-            Ok(())
-        });
-        for (i, &k) in todo.iter().enumerate() {
-            if let Some(signal) = crate::interrupt::requested() {
-                stopped = Some(signal);
-                break;
-            }
-            let pulses = plan.pulses(part_range(k, plan.len()));
-            let (waveforms, secs) = simulate(loaded, scene, &pulses, &bar);
-            rays += waveforms
-                .iter()
-                .step_by(bands)
-                .map(|w| w.rays as u64)
-                .sum::<u64>();
-            done_pulses += pulses.len();
-            let elapsed = t.elapsed().as_secs_f64();
-            let rate = done_pulses as f64 / elapsed;
-            // a log, not a terminal: a line per tenth of the work, or per minute if slower
-            let tenth = (i + 1) % todo.len().div_ceil(10).max(1) == 0;
-            if !terminal && (tenth || elapsed - last_log >= 60.0) && i + 1 < todo.len() {
-                last_log = elapsed;
-                log(&format!(
-                    "simulate: part {} ({}/{} parts) simulated, {:.0} pulses/s, {:.0} s left",
-                    k,
-                    i + 1,
-                    todo.len(),
-                    rate,
-                    (total - done_pulses) as f64 / rate
-                ));
-            }
-            if queue.send((k, waveforms, secs)).is_err() {
-                break; // the writer stopped on an error, which join returns below
-            }
-            written += 1;
+    // Part k is written while part k + 1 is simulated, as two halves of one rayon join: the
+    // same threads do both, so no core waits for a writer (a writer thread beside the workers
+    // left the cores idle whenever encoding was slower than simulating), and at most two
+    // parts are in memory.
+    let write = |(n, k, waveforms, secs): (usize, usize, Vec<Waveform>, Vec<f64>)| -> Result<()> {
+        write_waveforms(&out.join(part_name(k)), &waveforms, fingerprint)?;
+        write_pulse_stats(
+            &out.join(format!("waveforms/part-{k:05}.stats.csv")),
+            waveforms.iter().step_by(bands),
+            &secs,
+        )?;
+        drop(waveforms);
+        crate::progress::release_after_part(n);
+        Ok(())
+    };
+    let mut pending = None;
+    for (i, &k) in todo.iter().enumerate() {
+        if let Some(signal) = crate::interrupt::requested() {
+            stopped = Some(signal);
+            break;
         }
-        drop(queue);
-        writer
-            .join()
-            .unwrap_or_else(|_| Err(Error::msg("internal error: the part writer stopped")))
-    })?;
+        let pulses = plan.pulses(part_range(k, plan.len()));
+        let (written_before, (waveforms, secs)) = rayon::join(
+            || pending.take().map_or(Ok(()), write),
+            || simulate(loaded, scene, &pulses, &bar),
+        );
+        written_before?;
+        rays += waveforms
+            .iter()
+            .step_by(bands)
+            .map(|w| w.rays as u64)
+            .sum::<u64>();
+        done_pulses += pulses.len();
+        let elapsed = t.elapsed().as_secs_f64();
+        let rate = done_pulses as f64 / elapsed;
+        // a log, not a terminal: a line per tenth of the work, or per minute if slower
+        let tenth = (i + 1) % todo.len().div_ceil(10).max(1) == 0;
+        if !terminal && (tenth || elapsed - last_log >= 60.0) && i + 1 < todo.len() {
+            last_log = elapsed;
+            log(&format!(
+                "simulate: part {} ({}/{} parts) simulated, {:.0} pulses/s, {:.0} s left",
+                k,
+                i + 1,
+                todo.len(),
+                rate,
+                (total - done_pulses) as f64 / rate
+            ));
+        }
+        pending = Some((i, k, waveforms, secs));
+        written += 1;
+    }
+    // the last part simulated (or the one in hand when a signal came) is still written
+    if let Some(last) = pending {
+        write(last)?;
+    }
     bar.finish_and_clear();
     let secs = t.elapsed().as_secs_f64();
     if done_pulses > 0 {
+        // the share of the cores kept busy: what a serial step or a slow writer costs
+        let busy = cpu
+            .zip(crate::progress::process_cpu_seconds())
+            .map(|(a, b)| {
+                let threads = rayon::current_num_threads();
+                format!(
+                    ", CPU {:.0} % of {} %",
+                    100.0 * (b - a) / secs,
+                    100 * threads
+                )
+            })
+            .unwrap_or_default();
         log(&format!(
-            "simulated {done_pulses} pulses, {rays} rays in {secs:.2} s ({:.1} pulses/s, {:.3e} rays/s)",
+            "simulated {done_pulses} pulses, {rays} rays in {secs:.2} s ({:.1} pulses/s, {:.3e} rays/s{busy})",
             done_pulses as f64 / secs,
             rays as f64 / secs
         ));

@@ -277,29 +277,13 @@ impl Column<'_> {
                 col.typed::<FloatType>()
                     .write_batch(&present, Some(&def), None)?;
             }
-            // Parquet's writer cuts a list column into mini-batches of `batch` levels, each
-            // grown to the end of its last row, and checks the page size after each: rows of
-            // at least `batch` values are a mini-batch each, so they are written one at a time
-            // (no copy); shorter rows are concatenated first, to be cut where Arrow's writer
-            // would cut them
-            Column::ListF32(v) if v[rows.clone()].iter().all(|r| r.len() >= batch) => {
-                let w = col.typed::<FloatType>();
-                for r in &v[rows] {
-                    set_levels(std::iter::once(r.len()), &mut buf.def, &mut buf.rep);
-                    w.write_batch(r, Some(&buf.def), Some(&buf.rep))?;
-                }
-            }
             Column::ListF32(v) => {
                 let ListBuffers { f32, def, rep, .. } = buf;
-                list_levels(&v[rows], f32, def, rep);
-                col.typed::<FloatType>()
-                    .write_batch(f32, Some(def), Some(rep))?;
+                write_list(col.typed::<FloatType>(), &v[rows], batch, f32, def, rep)?;
             }
             Column::ListF64(v) => {
                 let ListBuffers { f64, def, rep, .. } = buf;
-                list_levels(&v[rows], f64, def, rep);
-                col.typed::<DoubleType>()
-                    .write_batch(f64, Some(def), Some(rep))?;
+                write_list(col.typed::<DoubleType>(), &v[rows], batch, f64, def, rep)?;
             }
         }
         Ok(())
@@ -315,18 +299,43 @@ struct ListBuffers {
     rep: Vec<i16>,
 }
 
-/// Concatenates `rows` into `values` and sets their levels ([`set_levels`]).
-fn list_levels<T: Copy>(
-    rows: &[&[T]],
-    values: &mut Vec<T>,
+/// Writes a list column's rows. Parquet's writer cuts the levels it is given into
+/// mini-batches of `batch` levels, each grown to the end of its last row, and checks the page
+/// size after each: the rows are handed over in exactly those mini-batches, a row that fills
+/// one alone straight from its slice (a waveform of 1024 bins or more), shorter rows
+/// concatenated into `values`, so that pages end where Arrow's writer ends them.
+fn write_list<T: parquet::data_type::DataType>(
+    w: &mut parquet::column::writer::ColumnWriterImpl<'_, T>,
+    rows: &[&[T::T]],
+    batch: usize,
+    values: &mut Vec<T::T>,
     def: &mut Vec<i16>,
     rep: &mut Vec<i16>,
-) {
-    values.clear();
-    for r in rows {
-        values.extend_from_slice(r);
+) -> parquet::errors::Result<()>
+where
+    T::T: Copy,
+{
+    let mut start = 0;
+    let mut levels = 0;
+    for (k, r) in rows.iter().enumerate() {
+        levels += r.len().max(1);
+        if levels < batch && k + 1 < rows.len() {
+            continue;
+        }
+        let group = &rows[start..=k];
+        set_levels(group.iter().map(|r| r.len()), def, rep);
+        if let [one] = group {
+            w.write_batch(one, Some(def), Some(rep))?;
+        } else {
+            values.clear();
+            for r in group {
+                values.extend_from_slice(r);
+            }
+            w.write_batch(values, Some(def), Some(rep))?;
+        }
+        (start, levels) = (k + 1, 0);
     }
-    set_levels(rows.iter().map(|r| r.len()), def, rep);
+    Ok(())
 }
 
 /// The levels of a required list of required items with rows of `lens` values: a row

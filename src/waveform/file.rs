@@ -96,15 +96,49 @@ pub fn waveform_table(w: &[Waveform]) -> Table<'_> {
 /// As long as the contract for the same reason as [`write_waveforms`]: every column is
 /// checked for its type, then read, in the file's order.
 pub fn read_waveforms(path: &Path) -> Result<Vec<Waveform>> {
+    read_waveforms_with(path, true)
+}
+
+/// The columns of a waveform's bins, in [`Waveform`]'s order: laser photons, impulse energy,
+/// its standard error, then the four classes' energies.
+const BIN_COLUMNS: [&str; 7] = [
+    "laser_photons",
+    "impulse_energy_j",
+    "impulse_energy_se_j",
+    "ground_energy_j",
+    "vegetation_energy_j",
+    "building_energy_j",
+    "other_energy_j",
+];
+
+/// [`read_waveforms`]; with `pages`, the bins of a file laid out as lidarsim writes it are read
+/// straight from its pages (`parquet_io::read_f32_lists`) and the other columns through
+/// Arrow's reader, which reads every column of any other file.
+fn read_waveforms_with(path: &Path, pages: bool) -> Result<Vec<Waveform>> {
     use arrow_array::cast::AsArray;
     use arrow_array::types::{Float32Type, Float64Type, UInt32Type, UInt64Type};
     use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
+    use parquet::arrow::ProjectionMask;
     let err = |e: &dyn std::fmt::Display| Error::data(path, format!("cannot read Parquet: {e}"));
     let file = std::fs::File::open(path).map_err(|e| err(&e))?;
-    let reader = ParquetRecordBatchReaderBuilder::try_new(file)
-        .map_err(|e| err(&e))?
-        .build()
+    let builder = ParquetRecordBatchReaderBuilder::try_new(file.try_clone().map_err(|e| err(&e))?)
         .map_err(|e| err(&e))?;
+    let schema = builder.parquet_schema();
+    let leaves: Option<Vec<usize>> = BIN_COLUMNS
+        .iter()
+        .map(|n| crate::parquet_io::f32_list_leaf(schema, n))
+        .collect::<Option<_>>()
+        .filter(|_| pages);
+    let (builder, mut bins) = match &leaves {
+        Some(leaves) => {
+            let rest = (0..schema.num_columns()).filter(|c| !leaves.contains(c));
+            let mask = ProjectionMask::leaves(schema, rest);
+            let bins = crate::parquet_io::read_f32_lists(&file, leaves).map_err(|e| err(&e))?;
+            (builder.with_projection(mask), Some(bins))
+        }
+        None => (builder, None),
+    };
+    let reader = builder.build().map_err(|e| err(&e))?;
     let mut out = Vec::new();
     for b in reader {
         let b = b.map_err(|e| err(&e))?;
@@ -142,11 +176,26 @@ pub fn read_waveforms(path: &Path) -> Result<Vec<Waveform>> {
         let bin = typed("bin_ns", &f32t)?
             .as_primitive::<Float32Type>()
             .clone();
-        let lp = typed("laser_photons", &f32t)?.as_list::<i32>().clone();
-        let ie = typed("impulse_energy_j", &f32t)?.as_list::<i32>().clone();
-        let ise = typed("impulse_energy_se_j", &f32t)?
-            .as_list::<i32>()
-            .clone();
+        // this batch's rows of each bin column, taken in row order
+        let mut rows: Vec<std::vec::IntoIter<Vec<f32>>> = Vec::with_capacity(BIN_COLUMNS.len());
+        for (c, name) in BIN_COLUMNS.iter().enumerate() {
+            rows.push(match &mut bins {
+                Some(bins) => {
+                    let n = b.num_rows().min(bins[c].len());
+                    bins[c].drain(..n).collect::<Vec<_>>().into_iter()
+                }
+                None => {
+                    let l = typed(name, &f32t)?.as_list::<i32>().clone();
+                    let f32s = |i| l.value(i).as_primitive::<Float32Type>().values().to_vec();
+                    (0..b.num_rows()).map(f32s).collect::<Vec<_>>().into_iter()
+                }
+            });
+        }
+        let mut next = |c: usize| -> Result<Vec<f32>> {
+            rows[c]
+                .next()
+                .ok_or_else(|| err(&format!("column {} has fewer rows", BIN_COLUMNS[c])))
+        };
         let rec = typed("received_energy_j", &f64t)?
             .as_primitive::<Float64Type>()
             .clone();
@@ -161,15 +210,6 @@ pub fn read_waveforms(path: &Path) -> Result<Vec<Waveform>> {
         let sol = typed("solar_photons_per_bin", &f32t)?
             .as_primitive::<Float32Type>()
             .clone();
-        let cls: Vec<arrow_array::ListArray> = [
-            "ground_energy_j",
-            "vegetation_energy_j",
-            "building_energy_j",
-            "other_energy_j",
-        ]
-        .iter()
-        .map(|n| typed(n, &f32t).map(|c| c.as_list::<i32>().clone()))
-        .collect::<Result<_>>()?;
         let spw = typed("solar_power_w", &f64t)?
             .as_primitive::<Float64Type>()
             .clone();
@@ -194,9 +234,6 @@ pub fn read_waveforms(path: &Path) -> Result<Vec<Waveform>> {
             ),
             None => None,
         };
-        let f32s = |l: &arrow_array::ListArray, i: usize| {
-            l.value(i).as_primitive::<Float32Type>().values().to_vec()
-        };
         let f64s = |l: &arrow_array::ListArray, i: usize| {
             l.value(i).as_primitive::<Float64Type>().values().to_vec()
         };
@@ -205,9 +242,9 @@ pub fn read_waveforms(path: &Path) -> Result<Vec<Waveform>> {
                 pulse_id: ids.value(i),
                 t0_ns: t0.value(i),
                 bin_ns: bin.value(i),
-                laser_photons: f32s(&lp, i),
-                impulse_energy_j: f32s(&ie, i),
-                impulse_energy_se_j: f32s(&ise, i),
+                laser_photons: next(0)?,
+                impulse_energy_j: next(1)?,
+                impulse_energy_se_j: next(2)?,
                 received_energy_j: rec.value(i),
                 outside_gate_energy_j: out_g.value(i),
                 order_energy_j: f64s(&oe, i),
@@ -226,12 +263,7 @@ pub fn read_waveforms(path: &Path) -> Result<Vec<Waveform>> {
                 } else {
                     bfl.value(i)
                 },
-                class_energy_j: [
-                    f32s(&cls[0], i),
-                    f32s(&cls[1], i),
-                    f32s(&cls[2], i),
-                    f32s(&cls[3], i),
-                ],
+                class_energy_j: [next(3)?, next(4)?, next(5)?, next(6)?],
                 rays: rays.value(i),
                 paths_per_ray: ppr.value(i),
                 wavelength_nm: bands.as_ref().map(|a| a.value(i)),
@@ -337,6 +369,82 @@ mod tests {
         let back = read_waveforms(&a).unwrap();
         assert!(back[0].brf_fov_solar.is_nan() && back[1].brf_footprint_laser.is_nan());
         assert_eq!(back[0].brf_footprint_laser, 0.3);
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    /// The bins read straight from the pages equal what Arrow's reader gives, row for row:
+    /// gates of different lengths (long rows, short rows, empty rows), over more rows than
+    /// one of Arrow's batches; and a file laid out otherwise (nullable items, as pyarrow
+    /// writes lists) is read through Arrow's reader to the same waveforms.
+    #[test]
+    fn bins_from_the_pages_equal_arrows_reading() {
+        let dir = std::env::temp_dir().join(format!("lidarsim-wfpages-{}", std::process::id()));
+        let path = dir.join("part.parquet");
+        let rows: Vec<Waveform> = (0..1100u64)
+            .map(|i| {
+                let len = [0, 1, 7, 1023, 1024, 1500][i as usize % 6];
+                let bins = |k: f32| (0..len).map(|b| k * (b as f32 + i as f32)).collect();
+                let mut w = waveform(i, f32::NAN, 0.5);
+                w.laser_photons = bins(1.0);
+                w.impulse_energy_j = bins(2.0);
+                w.impulse_energy_se_j = bins(3.0);
+                w.class_energy_j = std::array::from_fn(|c| bins(4.0 + c as f32));
+                w
+            })
+            .collect();
+        write_waveforms(&path, &rows, "fp").unwrap();
+        let text = |w: &[Waveform]| format!("{w:?}");
+        assert_eq!(
+            text(&read_waveforms_with(&path, true).unwrap()),
+            text(&rows)
+        );
+        assert_eq!(
+            text(&read_waveforms_with(&path, false).unwrap()),
+            text(&rows)
+        );
+        // nullable items: not the layout read from the pages
+        let mut batch = waveform_table(&rows[..50]).batch();
+        let fields: Vec<arrow_schema::Field> = batch
+            .schema()
+            .fields()
+            .iter()
+            .map(|f| match f.data_type() {
+                DataType::List(item) => {
+                    f.as_ref()
+                        .clone()
+                        .with_data_type(DataType::List(std::sync::Arc::new(
+                            item.as_ref().clone().with_nullable(true),
+                        )))
+                }
+                _ => f.as_ref().clone(),
+            })
+            .collect();
+        let columns: Vec<arrow_array::ArrayRef> = batch
+            .columns()
+            .iter()
+            .zip(&fields)
+            .map(|(c, f)| {
+                arrow_array::make_array(
+                    c.to_data()
+                        .into_builder()
+                        .data_type(f.data_type().clone())
+                        .build()
+                        .unwrap(),
+                )
+            })
+            .collect();
+        batch = arrow_array::RecordBatch::try_new(
+            std::sync::Arc::new(arrow_schema::Schema::new(fields)),
+            columns,
+        )
+        .unwrap();
+        let other = dir.join("other.parquet");
+        std::fs::write(
+            &other,
+            crate::parquet_io::encode(&batch, crate::parquet_io::props()).unwrap(),
+        )
+        .unwrap();
+        assert_eq!(text(&read_waveforms(&other).unwrap()), text(&rows[..50]));
         let _ = std::fs::remove_dir_all(&dir);
     }
 }

@@ -29,6 +29,8 @@ pub struct CampaignRow {
     pub run_pulses_per_s: f64,
     /// Simulate stage: process CPU time over wall time and threads (1 = every core busy).
     pub cpu_utilisation: Option<f64>,
+    /// Threads the run used.
+    pub threads: usize,
     /// Peak resident memory during the run, MB (None where the OS does not tell).
     pub peak_mb: Option<f64>,
     /// What the run measured: solar photons per bin, photons per shot, points per pulse.
@@ -369,6 +371,7 @@ fn run_row_on(
             .simulate_cpu_s
             .zip(summary.simulate_wall_s)
             .map(|(cpu, wall)| cpu / wall / threads.unwrap_or(rayon::current_num_threads()) as f64),
+        threads: threads.unwrap_or(rayon::current_num_threads()),
         peak_mb,
         result,
     })
@@ -529,7 +532,7 @@ pub fn scaling_table(rows: &[Scaling]) -> String {
 /// The markdown table of the campaign rows and the skipped ones.
 pub fn table(rows: &[CampaignRow], skipped: &[(String, String)]) -> String {
     let mut s = String::from(
-        "\n### Campaigns (paper sections 3.2-3.4 and an airborne survey), whole runs through the pipeline\n\nCPU is the simulate stage's process CPU time over its wall time and the threads.\n\n| campaign | what | pulses | rays/pulse | run s | simulate s | pulses/s simulate | pulses/s run | CPU | peak memory MB | result |\n| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | --- |\n",
+        "\n### Campaigns (paper sections 3.2-3.4 and an airborne survey), whole runs through the pipeline\n\nCPU is the simulate stage's process CPU time over its wall time, out of 100 % per thread.\n\n| campaign | what | pulses | rays/pulse | run s | simulate s | pulses/s simulate | pulses/s run | CPU | peak memory MB | result |\n| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | --- |\n",
     );
     for r in rows {
         let _ = writeln!(
@@ -543,8 +546,11 @@ pub fn table(rows: &[CampaignRow], skipped: &[(String, String)]) -> String {
             r.simulate_s,
             r.pulses_per_s,
             r.run_pulses_per_s,
-            r.cpu_utilisation
-                .map_or("–".to_string(), |u| format!("{:.0}%", 100.0 * u)),
+            r.cpu_utilisation.map_or("–".to_string(), |u| format!(
+                "{:.0} % of {} %",
+                100.0 * u * r.threads as f64,
+                100 * r.threads
+            )),
             r.peak_mb.map_or("–".to_string(), |m| format!("{m:.0}")),
             r.result
         );

@@ -10,7 +10,7 @@ impl Window<'_> {
     pub(super) fn fit(&self, mut params: Vec<Params>, floor: f64) -> Option<(Vec<Params>, f64)> {
         let np = 3 * params.len();
         let nb = self.y.len();
-        // Φ at the bin edges of the current parameters, from the model that was made with them
+        // the bin integrals of the current parameters, from the model that was made with them
         let mut edges = Vec::new();
         let mut m = self.model_keeping(&params, &mut edges);
         let mut dev = self.deviance(&m);
@@ -57,19 +57,19 @@ impl Window<'_> {
 
     /// ∂m_i/∂(centre, sigma, area) of every component over the bins it reaches (row-major,
     /// one row per bin): the model integrates each Gaussian over a bin, so the derivatives
-    /// are differences of the normal pdf and cdf at the bin's edges. `edges` holds Φ at those
-    /// edges, as the model at `params` computed them (see `Window::model_keeping`).
-    fn jacobian(&self, params: &[Params], edges: &[f64], jac: &mut [f64]) {
+    /// are differences of the normal pdf and cdf at the bin's edges. `masses` holds each
+    /// component's bin integrals (differences of Φ), as the model at `params` computed them
+    /// (see `Window::model_keeping`).
+    fn jacobian(&self, params: &[Params], masses: &[f64], jac: &mut [f64]) {
         let np = 3 * params.len();
         jac.iter_mut().for_each(|v| *v = 0.0);
         let mut at = 0;
         for (c, p) in params.iter().enumerate() {
             let (a, b) = self.reach(p);
             let s = p[1];
-            let cdf = &edges[at..at + b - a + 1];
-            at += b - a + 1;
+            let mass = &masses[at..at + b - a];
+            at += b - a;
             let mut zl = (self.offset + a as f64 - p[0]) / s;
-            let mut cl = cdf[0];
             let mut pl = pdf(zl);
             // φ from edge to edge, z rising by h = 1/σ: φ(z + h) = φ(z) e^(-z h) e^(-h²/2),
             // and e^(-z h) itself falls by e^(-h²) an edge, so three exponentials serve the
@@ -79,16 +79,15 @@ impl Window<'_> {
             let (half, full) = ((-0.5 * h * h).exp(), (-h * h).exp());
             let mut fall = (-zl * h).exp();
             let stepped = fall.is_finite();
-            for (i, &ch) in (a..b).zip(&cdf[1..]) {
+            for (i, &mi) in (a..b).zip(mass) {
                 let zh = (self.offset + (i + 1) as f64 - p[0]) / s;
                 let ph = if stepped { pl * fall * half } else { pdf(zh) };
                 fall *= full;
                 let row = &mut jac[i * np + 3 * c..i * np + 3 * c + 3];
                 row[0] = p[2] * (pl - ph) / s;
                 row[1] = p[2] * (pl * zl - ph * zh) / s;
-                row[2] = ch - cl;
+                row[2] = mi;
                 zl = zh;
-                cl = ch;
                 pl = ph;
             }
         }
@@ -130,8 +129,8 @@ impl Window<'_> {
     /// or when a step is too small to mean anything: then the fit has converged, and the
     /// step is not worth the model it would cost to try (most fits ended with such a step,
     /// often tried several times as float noise in the deviance rejected it).
-    /// `dmax` is the largest diagonal of `h`, `floor` the least sigma. `edges` takes Φ at the
-    /// bin edges of the step it returns.
+    /// `dmax` is the largest diagonal of `h`, `floor` the least sigma. `edges` takes the bin
+    /// integrals of the step it returns.
     fn damped_step(
         &self,
         params: &[Params],

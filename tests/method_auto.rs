@@ -94,3 +94,30 @@ fn auto_avoids_the_method_that_cannot_find_the_light() {
     println!("narrow view: {}", resolved.lines().next().unwrap());
     assert_ne!(chosen, "forward");
 }
+
+/// A campaign that names no method gets `auto`, and the pilot's pulses do not alias with the
+/// scan: here every eighth of the plan is a whole number of scan periods, so pulses taken at
+/// the start of each eighth all looked 15° off nadir, past the edge of a 20 m plane, and the
+/// pilot found no energy with any method (what it did before its pulses were drawn within
+/// each eighth).
+#[test]
+fn auto_is_the_default_and_its_pilot_sees_the_scene_whatever_the_scan() {
+    let dir = tmp("auto_default_als");
+    let scene = plane_scene(&dir, 0.3, 10.0);
+    let text = format!(
+        "name: alias\nscene: {}\nseed: 5\nwavelength_nm: 1064\ninstrument:\n  kind: discrete_return\n  pulse_energy_j: 0.0001\n  pulse_fwhm_ns: 3.0\n  footprint_half_angle_mrad: 0.25\n  fov_half_angle_mrad: 0.375\n  receiver_area_m2: 0.01\n  bin_ns: 0.5\nplatform:\n  kind: als\n  altitude_m: 100\n  speed_m_s: 20\n  prf_hz: 4000\n  lines: [ {{ start: [0, -3.2], end: [0, 3.2] }} ]\n  scanner: {{ pattern: oscillating, scan_angle_deg: [-15, 15], scan_frequency_hz: 50 }}\nsimulation: {{ rays_per_pulse: 4, max_order: 2 }}\n",
+        scene.display()
+    );
+    let camp = write(&dir, "campaign.yaml", &text);
+    let out = dir.join("run");
+    let err = run_cli(&camp, &out, Some(2));
+    assert!(err.contains("plan: 1280 pulses"), "{err}");
+    assert!(err.contains("simulation.method auto chose"), "{err}");
+    // a tenth of the campaign's 5120 rays per method: 128 pulses of 4 rays
+    assert!(err.contains("over 128 pilot pulses of 4 rays"), "{err}");
+    let resolved = std::fs::read_to_string(out.join("campaign.resolved.yaml")).unwrap();
+    assert!(
+        resolved.starts_with("# simulation.method auto chose"),
+        "{resolved}"
+    );
+}

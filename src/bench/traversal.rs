@@ -37,12 +37,19 @@ pub fn measure(name: &str, path: &Path, max_pulses: usize) -> Result<TraversalRo
     let pulses: Vec<_> = (0..n.min(all.len()))
         .map(|i| all[i * all.len() / n])
         .collect();
+    // the method the campaign's run would use (`auto`'s pick)
+    let chosen = crate::pipeline::with_method_chosen(
+        &loaded,
+        &scene,
+        &crate::plan::Plan::new(&loaded.campaign)?,
+    );
+    let loaded = chosen.as_ref().unwrap_or(&loaded);
     let hidden = ProgressBar::hidden();
     let t = Instant::now();
-    let _ = simulate(&loaded, &scene, &pulses, &hidden);
+    let _ = simulate(loaded, &scene, &pulses, &hidden);
     let inside_s = t.elapsed().as_secs_f64();
     scene.start_ray_log();
-    let _ = simulate(&loaded, &scene, &pulses, &hidden);
+    let _ = simulate(loaded, &scene, &pulses, &hidden);
     let log = scene.take_ray_log();
     let closest: Vec<LoggedRay> = log
         .iter()

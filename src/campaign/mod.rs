@@ -328,14 +328,15 @@ pub enum SunSelection {
 #[serde(rename_all = "snake_case")]
 pub enum Method {
     /// Bidirectional path tracing with every connection strategy.
-    #[default]
     Bdpt,
     /// Light paths from the laser, each vertex connected to the receiver.
     Forward,
     /// Receiver paths from the aperture, each vertex connected to the laser.
     Backward,
     /// One of the three, chosen per campaign by a pilot before the simulation (see
-    /// `pipeline::simulate::choose_method`).
+    /// `pipeline::simulate::choose_method`): the default, so a campaign that names no method
+    /// gets the cheapest for its scene and instrument.
+    #[default]
     Auto,
 }
 

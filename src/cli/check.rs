@@ -65,9 +65,18 @@ pub(super) fn check(path: &std::path::Path) -> Result<()> {
         }
     );
     println!("scene load: {load_s:.2} s");
-    let rate = pipeline::probe_rays_per_second(&loaded, &scene, &plan);
+    // the estimates are of the method the run will use
+    let chosen = pipeline::with_method_chosen(&loaded, &scene, &plan);
+    let loaded = match &chosen {
+        Some(c) => {
+            println!("method: {}", c.method_note.as_deref().unwrap_or_default());
+            c
+        }
+        None => &loaded,
+    };
+    let rate = pipeline::probe_rays_per_second(loaded, &scene, &plan);
     let total_rays = plan.len() as f64 * c.simulation.rays_per_pulse as f64;
-    let run_bytes = run_memory_bound(&loaded, &scene, &plan);
+    let run_bytes = run_memory_bound(loaded, &scene, &plan);
     // what this process holds now: the program, its threads and the scene
     let base = peak_rss_bytes().map_or(s.memory_bytes as f64, |b| b as f64);
     println!(

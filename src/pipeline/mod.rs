@@ -15,11 +15,11 @@ pub mod sweep;
 pub use manifest::StageRecord;
 use manifest::{fingerprint, forget_damaged, invalidate_after, record, save, Manifest};
 use simulate::{part_range, simulate_parts};
-pub use simulate::{probe_rays_per_second, simulate};
+pub use simulate::{probe_rays_per_second, simulate, with_method_chosen};
 use sweep::run_sweep;
 pub use sweep::RunTotals;
 
-use crate::campaign::{Campaign, Loaded, Method};
+use crate::campaign::{Campaign, Loaded};
 use crate::error::{Error, Result};
 use crate::fsutil::write_text_atomic;
 use crate::plan::{self, Plan};
@@ -379,26 +379,27 @@ fn run_single(
     }
 
     let scene = cache.get(&loaded.scene_path, loaded.campaign.wavelength_nm.all())?;
-    // `auto` resolved here, once the scene is known: the pilot is deterministic, so the
-    // fingerprints (of the campaign as written) stand for the method it picks
-    let chosen;
-    let loaded = if loaded.campaign.simulation.method == Method::Auto {
-        let t = Instant::now();
-        let (method, note) = simulate::choose_method(loaded, scene, &plan);
-        log(&format!(
-            "{note} (pilot {:.2} s)",
-            t.elapsed().as_secs_f64()
-        ));
-        let mut c = loaded.clone();
-        c.campaign.simulation.method = method;
-        c.method_note = Some(note);
-        write_text_atomic(&out.join("campaign.resolved.yaml"), &c.resolved_yaml())?;
-        chosen = c;
-        &chosen
-    } else {
-        loaded
+    // `auto` resolved here, once the scene is known. The pilot is deterministic, but another
+    // version of the program may pick otherwise: the method picked is part of the simulate
+    // fingerprint, so a resume never mixes parts of two methods
+    let t = Instant::now();
+    let chosen = simulate::with_method_chosen(loaded, scene, &plan);
+    let loaded = match &chosen {
+        Some(c) => {
+            let note = c.method_note.as_deref().unwrap_or_default();
+            log(&format!(
+                "{note} (pilot {:.2} s)",
+                t.elapsed().as_secs_f64()
+            ));
+            write_text_atomic(&out.join("campaign.resolved.yaml"), &c.resolved_yaml())?;
+            c
+        }
+        None => loaded,
     };
-    let fp_sim = simulate_fingerprint(&fp_plan, scene)?;
+    let picked = chosen
+        .as_ref()
+        .map(|c| simulate::method_name(c.campaign.simulation.method));
+    let fp_sim = simulate_fingerprint(&fp_plan, scene, picked)?;
     if run.done(Stage::Simulate, &fp_sim) {
         if let Some(bad) = first_broken_part(out, plan.len(), bands_of(loaded), &fp_sim) {
             // the manifest says done, the files disagree: the files win
@@ -527,7 +528,7 @@ fn plan_stage(run: &mut RunFolder, c: &Campaign, fp: &str) -> Result<Plan> {
 }
 
 /// The simulate stage's fingerprint: the plan's and every scene file's bytes.
-fn simulate_fingerprint(fp_plan: &str, scene: &Scene) -> Result<String> {
+fn simulate_fingerprint(fp_plan: &str, scene: &Scene, picked: Option<&str>) -> Result<String> {
     let mut scene_bytes = Vec::new();
     for f in &scene.files {
         let bytes = std::fs::read(f).map_err(|e| Error::io(f, "cannot read", e))?;
@@ -535,6 +536,7 @@ fn simulate_fingerprint(fp_plan: &str, scene: &Scene) -> Result<String> {
     }
     let mut inputs: Vec<&[u8]> = vec![fp_plan.as_bytes()];
     inputs.extend(scene_bytes.iter().map(|b| b.as_slice()));
+    inputs.extend(picked.map(str::as_bytes));
     Ok(fingerprint(&inputs))
 }
 

@@ -311,10 +311,28 @@ pub fn simulate(
     (rows, secs)
 }
 
-/// Pulses and rays per pulse of the pilot of `simulation.method: auto`: one chunk of rays per
-/// pulse (so the pilot's draws are those of the run's first chunk), pulses spread over the plan.
-const PILOT_PULSES: usize = 8;
+/// The pilot of `simulation.method: auto`: at most one chunk of rays per pulse (so the pilot's
+/// draws are those of the run's first chunk), and pulses enough for [`PILOT_RAY_BUDGET`] rays
+/// per method, but no more than a tenth of the campaign's rays (so at most 30 % of a small
+/// campaign's cost over the three methods, under 1 % of a survey's), and at least one pulse:
+/// a few-ray campaign's score rests on hundreds of pulses, not on the 8 × 19 rays that left
+/// the town survey's pilot with no energy at all.
 const PILOT_RAYS: u64 = crate::transport::CHUNK_RAYS;
+const PILOT_RAY_BUDGET: u64 = 8 * PILOT_RAYS;
+
+/// The pilot's pulses: one from each of `n` equal strata of the plan, at an offset hashed from
+/// the seed and the stratum. A fixed offset would alias with the scan: the town survey's
+/// strata are whole scan periods, so their first pulses all looked off the scene at -15°.
+fn pilot_pulses(plan: &Plan, n: usize, seed: u64) -> Vec<Pulse> {
+    let len = plan.len() as u64;
+    (0..n as u64)
+        .map(|k| {
+            let (lo, hi) = (k * len / n as u64, (k + 1) * len / n as u64);
+            let h = crate::rng::splitmix64(seed ^ crate::rng::splitmix64(k ^ 0x7069_6c6f_7400));
+            plan.pulse(lo + h % (hi - lo).max(1))
+        })
+        .collect()
+}
 
 /// `simulation.method: auto`: the method whose estimate costs least for a given error on
 /// this campaign, and why. Each method traces the same pilot pulses; its score is the
@@ -322,24 +340,24 @@ const PILOT_RAYS: u64 = crate::transport::CHUNK_RAYS;
 /// a sun) times the scene queries per pulse it made: variance falls as 1/rays and queries grow
 /// with rays, so the product is the cost of a given error, counted in queries (the same on any
 /// machine and thread count, so the choice, and the run's bytes, are too). A method that
-/// finds no energy where another does scores infinity; ties go to bdpt, the default.
+/// finds no energy where another does scores infinity; ties go to bdpt.
 /// Returns the method and a note for the run log, the resolved campaign and report.md.
 pub fn choose_method(loaded: &Loaded, scene: &Scene, plan: &Plan) -> (Method, String) {
-    let n = plan.len().min(PILOT_PULSES);
+    let rays = loaded
+        .campaign
+        .simulation
+        .rays_per_pulse
+        .clamp(2, PILOT_RAYS);
+    let total = loaded.campaign.simulation.rays_per_pulse * plan.len() as u64;
+    let budget = PILOT_RAY_BUDGET.min(total / 10);
+    let n = (plan.len() as u64).min((budget / rays).max(1)) as usize;
     if n == 0 {
         return (
             Method::Bdpt,
             "simulation.method auto: no pulses to try, bdpt".into(),
         );
     }
-    let pulses: Vec<Pulse> = (0..n)
-        .map(|i| plan.pulse((i * plan.len() / n) as u64))
-        .collect();
-    let rays = loaded
-        .campaign
-        .simulation
-        .rays_per_pulse
-        .clamp(2, PILOT_RAYS);
+    let pulses = pilot_pulses(plan, n, loaded.campaign.seed);
     let with_sun = loaded.campaign.sun.is_some();
     let shared = Shared::new(loaded, scene);
     // backward tracing cannot find the paths a smooth water surface makes (laser, specular
@@ -403,6 +421,21 @@ pub fn choose_method(loaded: &Loaded, scene: &Scene, plan: &Plan) -> (Method, St
             ),
         ),
     }
+}
+
+/// The campaign as it runs when it asks for `simulation.method: auto`: the method its pilot
+/// picks written in, and the note saying why ([`choose_method`]); `None` for a campaign that
+/// names its method. Everything that simulates a campaign's pulses goes through this, so the
+/// transport never sees `auto`.
+pub fn with_method_chosen(loaded: &Loaded, scene: &Scene, plan: &Plan) -> Option<Loaded> {
+    if loaded.campaign.simulation.method != Method::Auto {
+        return None;
+    }
+    let (method, note) = choose_method(loaded, scene, plan);
+    let mut c = loaded.clone();
+    c.campaign.simulation.method = method;
+    c.method_note = Some(note);
+    Some(c)
 }
 
 /// A method as campaign files spell it.

@@ -32,17 +32,10 @@ pub struct TraversalRow {
 pub fn measure(name: &str, path: &Path, max_pulses: usize) -> Result<TraversalRow> {
     let loaded = crate::plan::read_campaign(path)?;
     let mut scene = Scene::load_bands(&loaded.scene_path, loaded.campaign.wavelength_nm.all())?;
-    let all = crate::plan::plan(&loaded.campaign)?;
-    let n = all.len().min(max_pulses).max(1);
-    let pulses: Vec<_> = (0..n.min(all.len()))
-        .map(|i| all[i * all.len() / n])
-        .collect();
+    let plan = crate::plan::Plan::new(&loaded.campaign)?;
+    let pulses = plan.spread(max_pulses, loaded.campaign.seed);
     // the method the campaign's run would use (`auto`'s pick)
-    let chosen = crate::pipeline::with_method_chosen(
-        &loaded,
-        &scene,
-        &crate::plan::Plan::new(&loaded.campaign)?,
-    );
+    let chosen = crate::pipeline::with_method_chosen(&loaded, &scene, &plan);
     let loaded = chosen.as_ref().unwrap_or(&loaded);
     let hidden = ProgressBar::hidden();
     let t = Instant::now();

@@ -320,20 +320,6 @@ pub fn simulate(
 const PILOT_RAYS: u64 = crate::transport::CHUNK_RAYS;
 const PILOT_RAY_BUDGET: u64 = 8 * PILOT_RAYS;
 
-/// The pilot's pulses: one from each of `n` equal strata of the plan, at an offset hashed from
-/// the seed and the stratum. A fixed offset would alias with the scan: the town survey's
-/// strata are whole scan periods, so their first pulses all looked off the scene at -15°.
-fn pilot_pulses(plan: &Plan, n: usize, seed: u64) -> Vec<Pulse> {
-    let len = plan.len() as u64;
-    (0..n as u64)
-        .map(|k| {
-            let (lo, hi) = (k * len / n as u64, (k + 1) * len / n as u64);
-            let h = crate::rng::splitmix64(seed ^ crate::rng::splitmix64(k ^ 0x7069_6c6f_7400));
-            plan.pulse(lo + h % (hi - lo).max(1))
-        })
-        .collect()
-}
-
 /// `simulation.method: auto`: the method whose estimate costs least for a given error on
 /// this campaign, and why. Each method traces the same pilot pulses; its score is the
 /// relative variance of the pilot's total laser energy (plus that of its solar power, with
@@ -357,7 +343,7 @@ pub fn choose_method(loaded: &Loaded, scene: &Scene, plan: &Plan) -> (Method, St
             "simulation.method auto: no pulses to try, bdpt".into(),
         );
     }
-    let pulses = pilot_pulses(plan, n, loaded.campaign.seed);
+    let pulses = plan.spread(n, loaded.campaign.seed);
     let with_sun = loaded.campaign.sun.is_some();
     let shared = Shared::new(loaded, scene);
     // backward tracing cannot find the paths a smooth water surface makes (laser, specular
@@ -451,10 +437,7 @@ pub fn method_name(m: Method) -> &'static str {
 /// Rays per second on this machine for this campaign, measured on up to 8 pulses spread
 /// over the plan with at most 1000 rays each: the basis of `lidarsim check`'s time estimate.
 pub fn probe_rays_per_second(loaded: &Loaded, scene: &Scene, plan: &Plan) -> f64 {
-    let n = plan.len().min(8);
-    let sample: Vec<Pulse> = (0..n)
-        .map(|i| plan.pulse((i * plan.len() / n) as u64))
-        .collect();
+    let sample = plan.spread(8, loaded.campaign.seed);
     let mut probe = loaded.clone();
     probe.campaign.simulation.rays_per_pulse = probe.campaign.simulation.rays_per_pulse.min(1000);
     let t = Instant::now();

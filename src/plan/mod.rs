@@ -185,6 +185,21 @@ impl Plan {
         }
     }
 
+    /// `n` pulses spread over the plan for a sample of it (a pilot, a probe): one from each of
+    /// `n` equal strata, at an offset hashed from `seed` and the stratum. Not the first of
+    /// each stratum: a fixed stride aliases with a scan whose period divides it (the town
+    /// survey's eighths are whole scan periods, so their first pulses all look 15° aside).
+    pub fn spread(&self, n: usize, seed: u64) -> Vec<Pulse> {
+        let n = (n as u64).min(self.len);
+        (0..n)
+            .map(|k| {
+                let (lo, hi) = (k * self.len / n, (k + 1) * self.len / n);
+                let h = crate::rng::splitmix64(seed ^ crate::rng::splitmix64(k ^ 0x7069_6c6f_7400));
+                self.pulse(lo + h % (hi - lo).max(1))
+            })
+            .collect()
+    }
+
     /// The pulses whose ids lie in `range` (clipped to the plan), in emission order.
     pub fn pulses(&self, range: std::ops::Range<usize>) -> Vec<Pulse> {
         let end = range.end.min(self.len());

@@ -166,6 +166,41 @@ fn als_oscillating_goes_back_and_forth() {
     assert!(close(p[99].origin, DVec3::new(0.0, 19.8, 50.0)));
 }
 
+/// A sample of a plan takes one pulse from each equal stratum, the same for the same seed,
+/// and does not alias with the scan: here every stratum is 2 whole scan periods of 20 pulses,
+/// so the first pulse of each would always be the scan's first angle.
+#[test]
+fn spread_takes_one_pulse_per_stratum_whatever_the_scan() {
+    let c = campaign(
+        "platform: { kind: als, altitude_m: 50, speed_m_s: 20, prf_hz: 100,
+  lines: [ { start: [0, 0], end: [0, 20] } ],
+  scanner: { pattern: oscillating, scan_angle_deg: [-15, 15], scan_frequency_hz: 5 } }
+",
+    );
+    let plan = Plan::new(&c).unwrap();
+    assert_eq!(plan.len(), 100);
+    let sample = plan.spread(5, 7);
+    let ids: Vec<u64> = sample.iter().map(|p| p.id).collect();
+    for (k, &id) in ids.iter().enumerate() {
+        assert!(
+            (20 * k as u64..20 * (k as u64 + 1)).contains(&id),
+            "{ids:?}"
+        );
+    }
+    let angles: std::collections::BTreeSet<i32> =
+        sample.iter().map(|p| p.scan_angle_deg as i32).collect();
+    assert!(angles.len() > 1, "{ids:?}");
+    assert_eq!(
+        ids,
+        plan.spread(5, 7).iter().map(|p| p.id).collect::<Vec<_>>()
+    );
+    assert_ne!(
+        ids,
+        plan.spread(5, 8).iter().map(|p| p.id).collect::<Vec<_>>()
+    );
+    assert_eq!(plan.spread(500, 7).len(), 100);
+}
+
 #[test]
 fn als_conic_turns_on_the_cone() {
     // Cone 20° = max(|−5|, |20|). δ = 360° · 2 / 8 = 90° → 4 pulses per turn: ahead, right,

@@ -350,8 +350,14 @@ pub(super) fn resolve(
     if !by_shape {
         return out;
     }
-    let mut one: Vec<Component> = Vec::with_capacity(out.len());
-    for c in out {
+    blend(out, y, noise)
+}
+
+/// Time-ordered components with each neighbour a detector cannot tell apart ([`apart`])
+/// merged into the one before it: the returns they make.
+pub(super) fn blend(comps: Vec<Component>, y: &[f64], noise: &Noise) -> Vec<Component> {
+    let mut one: Vec<Component> = Vec::with_capacity(comps.len());
+    for c in comps {
         match one.last_mut() {
             Some(l) if !apart(l, &c, y, noise) => *l = merged(&[*l, c]),
             _ => one.push(c),

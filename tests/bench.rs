@@ -103,6 +103,8 @@ fn campaign_rows_are_measured_and_missing_data_is_skipped() {
     assert_eq!(tr.pulses, 8);
     assert!(tr.closest > 0 && tr.any_hit > 0, "{tr:?}");
     assert!(tr.inside_per_s > 0.0 && tr.bare_per_s > 0.0, "{tr:?}");
+    // the tracing is part of the simulation: each thread traced for at most its wall time
+    assert!(tr.tracing_per_s >= tr.inside_per_s, "{tr:?}");
     let t = lidarsim::bench::traversal::table(&[tr]);
     assert!(t.contains("| mabel_plane | 8 |"), "{t}");
     // the same campaign in three bands against one (the plane reflects alike in all three,

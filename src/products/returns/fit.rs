@@ -5,7 +5,7 @@ use super::detect::{smooth, smoothing_sigma};
 use super::{
     blend, Component, Noise, Threshold, COLLAPSED_SIGMA, MAX_JOINT, MIN_DEVIANCE_GAIN, SIGMA_FLOOR,
 };
-use crate::waveform::normal_cdf;
+use crate::waveform::bin_masses_into;
 
 /// A Gaussian's parameters during the fit: centre, sigma (bins), area (photons).
 pub(super) type Params = [f64; 3];
@@ -355,49 +355,9 @@ fn add_gaussians_keeping(m: &mut [f64], offset: f64, params: &[Params], masses: 
     }
 }
 
-/// Gauss-Legendre nodes on [0, 1] and their weights, 4 points (exact to degree 7).
-const GAUSS_LEGENDRE_4: [(f64, f64); 4] = [
-    (0.069_431_844_202_973_71, 0.173_927_422_568_726_93),
-    (0.330_009_478_207_571_87, 0.326_072_577_431_273_07),
-    (0.669_990_521_792_428_1, 0.326_072_577_431_273_07),
-    (0.930_568_155_797_026_3, 0.173_927_422_568_726_93),
-];
-
-/// Widest bin, in sigmas, whose integral is taken by quadrature: 4-point Gauss-Legendre on
-/// half a sigma errs by under 1e-10 of the bin's value (its error term, h⁹ φ⁽⁸⁾ / 3.5e9).
-const QUADRATURE_MAX_BIN_SIGMAS: f64 = 0.5;
-
-/// The fraction of the unit Gaussian of centre p[0] and sigma p[1] (bins) in each bin
-/// [offset + i, offset + i + 1) for i in [a, b), appended to `out`. Where bins are narrower
-/// than [`QUADRATURE_MAX_BIN_SIGMAS`], by quadrature of φ, stepped from bin to bin as
-/// φ(z + h) = φ(z) e^(-z h) e^(-h²/2) (e^(-z h) falling by e^(-h²) a bin): a few exponentials
-/// per component instead of an erfc, itself an exponential and a rational function, per
-/// edge (together a third of a products stage); else as differences of Φ.
+/// [`bin_masses_into`] of the unit Gaussian of centre p[0] and sigma p[1] (bins).
 fn bin_masses(p: &Params, offset: f64, (a, b): (usize, usize), out: &mut Vec<f64>) {
-    let h = 1.0 / p[1];
-    if h > QUADRATURE_MAX_BIN_SIGMAS || !h.is_finite() {
-        let mut prev = normal_cdf((offset + a as f64 - p[0]) / p[1]);
-        for i in a..b {
-            let next = normal_cdf((offset + (i + 1) as f64 - p[0]) / p[1]);
-            out.push(next - prev);
-            prev = next;
-        }
-        return;
-    }
-    let start = out.len();
-    out.resize(start + (b - a), 0.0);
-    let (half, full) = ((-0.5 * h * h).exp(), (-h * h).exp());
-    let z0 = (offset + a as f64 - p[0]) / p[1];
-    for (x, w) in GAUSS_LEGENDRE_4 {
-        // span() keeps z0 above -8 - 2h, so e^(-z h) stays below e^5
-        let z = z0 + x * h;
-        let (mut phi, mut fall) = (pdf(z), (-z * h).exp());
-        for mass in &mut out[start..] {
-            *mass += w * h * phi;
-            phi *= fall * half;
-            fall *= full;
-        }
-    }
+    bin_masses_into(p[0], p[1], offset, (a, b), out);
 }
 
 /// Bins [a, b) of a window of `n` bins starting at bin `offset` that a component touches:
@@ -434,9 +394,7 @@ impl<'a> Window<'a> {
     }
 }
 
-pub(super) fn pdf(z: f64) -> f64 {
-    (-0.5 * z * z).exp() * (0.5 / std::f64::consts::PI).sqrt()
-}
+pub(super) use crate::waveform::normal_pdf as pdf;
 
 impl Window<'_> {
     /// Bins a component touches (see [`span`]).
@@ -480,6 +438,7 @@ impl Window<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::waveform::normal_cdf;
 
     /// Bin integrals by quadrature equal the differences of Φ to 1e-10 of the component
     /// wherever the quadrature is used (bins up to half a sigma), centred anywhere in a bin

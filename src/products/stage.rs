@@ -13,7 +13,7 @@ use crate::products::las::{write_las_chunks, Extent, Layout};
 use crate::products::mission::{Atl03, L1b};
 use crate::products::photons::{count_photons, photon_rows, photon_table, PhotonRow};
 use crate::products::points::{points_on_axis, Point, PointConfig};
-use crate::products::returns::{decompose, Component, Decomposition};
+use crate::products::returns::{decompose, place_on_summits, Component, Decomposition};
 use crate::products::spill::Spill;
 use crate::products::summary::{PhotonCounts, PointsSummary, ProductsSummary, WaveformTotals};
 use crate::progress::{log, progress};
@@ -80,7 +80,13 @@ fn class_of(w: &Waveform, centre: f64, sigma: f64) -> u8 {
 
 /// The decomposition of one waveform as the campaign asks for it: of the instrument's
 /// record (noise, detector response, digitiser) when it has one, else of the mean photons.
+/// The components as fitted (the figures draw them).
 fn components(loaded: &Loaded, w: &Waveform) -> Vec<Component> {
+    decomposed(loaded, w).0
+}
+
+/// [`components`], with the photons they were fitted to and the return's sigma in bins.
+fn decomposed(loaded: &Loaded, w: &Waveform) -> (Vec<Component>, Vec<f32>, f64) {
     let c = &loaded.campaign;
     let inst = &c.instrument;
     let hv = crate::photon_energy_j(band_of(loaded, w));
@@ -97,14 +103,16 @@ fn components(loaded: &Loaded, w: &Waveform) -> Vec<Component> {
     } else {
         (w.laser_photons.clone(), pulse_sigma_s(inst))
     };
-    decompose(
+    let sigma_bins = sigma_s / (inst.bin_ns * 1e-9);
+    let comps = decompose(
         &photons,
         &mc_se,
         inst.detection_threshold_photons,
         inst.max_returns as usize,
         Decomposition::Gaussian,
-        sigma_s / (inst.bin_ns * 1e-9),
-    )
+        sigma_bins,
+    );
+    (comps, photons, sigma_bins)
 }
 
 /// The wavelength of a waveform row, nm: its band's, or the campaign's.
@@ -139,7 +147,9 @@ pub fn discrete_returns(loaded: &Loaded, plan: &Plan, waveforms: &[Waveform]) ->
                 reference_range_m: reference_range,
             };
             let pulse = &plan.pulse(w.pulse_id);
-            let comps = components(loaded, w);
+            // the points where a detector puts the returns: wide ones at their summits
+            let (mut comps, photons, sigma_bins) = decomposed(loaded, w);
+            place_on_summits(&mut comps, &photons, sigma_bins);
             let classes: Vec<u8> = comps
                 .iter()
                 .map(|k| class_of(w, k.centre_bin, k.sigma_bins))

@@ -151,7 +151,7 @@ fn argmin(s: &[f64], a: usize, b: usize) -> usize {
 /// Vertex of the parabola through ln y of bins j-1, j, j+1 (exact for a sampled Gaussian);
 /// the plain parabola when a neighbour is empty. Returns (offset from the bin's middle,
 /// summit height).
-fn parabola(y: &[f64], j: usize) -> (f64, f64) {
+pub(super) fn parabola(y: &[f64], j: usize) -> (f64, f64) {
     let b = y[j];
     if j == 0 || j + 1 >= y.len() {
         return (0.0, b);

@@ -498,3 +498,52 @@ fn fine_gates_are_decomposed_on_coarser_bins_without_loss() {
     assert!(missed_coarse * 100 <= cases, "{missed_coarse} of {cases}");
     assert!(worst_c < 1e-3 && worst_s < 1e-3 && worst_a < 2e-3);
 }
+
+/// Four leaves 4 bins apart (1.6 pulse sigmas, 2.55 bins) with no dip between them, the second
+/// three times the weakest: fitted as one return over 1.5 times as wide as the pulse, whose
+/// centre lies between the leaves. The detector's point goes to the summit, next to the
+/// strongest leaf; a return as wide as the pulse keeps its fitted centre to the bit.
+#[test]
+fn a_wide_return_is_placed_at_its_summit_a_narrow_one_at_its_fit() {
+    let sigma = 2.55;
+    let leaves: Vec<Truth> = [(37.0, 1e5), (41.0, 3e5), (45.0, 2e5), (49.0, 1.5e5)]
+        .iter()
+        .map(|&(centre, area)| Truth {
+            centre,
+            sigma,
+            area,
+        })
+        .collect();
+    let y: Vec<f32> = mean_waveform(&leaves, 90)
+        .iter()
+        .map(|&v| v as f32)
+        .collect();
+    let mut c = decompose(&y, &[], 5.0, 4, Decomposition::Gaussian, sigma);
+    assert_eq!(c.len(), 1, "{c:?}");
+    assert!(c[0].sigma_bins > WIDE_SIGMAS * sigma, "{c:?}");
+    let fit = c[0].centre_bin;
+    place_on_summits(&mut c, &y, sigma);
+    let summit = (0..y.len()).fold(0, |m, k| if y[k] > y[m] { k } else { m });
+    assert!(
+        (c[0].centre_bin - (summit as f64 + 0.5)).abs() <= 0.5,
+        "{c:?}, summit bin {summit}"
+    );
+    assert!(
+        (c[0].centre_bin - 41.0).abs() < 1.0 && (fit - 41.0).abs() > 1.5,
+        "fit {fit}, placed {c:?}"
+    );
+
+    let one = Truth {
+        centre: 40.3,
+        sigma,
+        area: 3e5,
+    };
+    let y: Vec<f32> = mean_waveform(&[one], 90)
+        .iter()
+        .map(|&v| v as f32)
+        .collect();
+    let fitted = decompose(&y, &[], 5.0, 4, Decomposition::Gaussian, sigma);
+    let mut placed = fitted.clone();
+    place_on_summits(&mut placed, &y, sigma);
+    assert_eq!(placed, fitted);
+}

@@ -109,14 +109,19 @@ pub(super) fn fit_all(
     }
     let mut out = Vec::new();
     for g in fitted {
-        out.extend(g.into_iter().map(|p| Component {
-            centre_bin: p[0],
-            sigma_bins: p[1],
-            area_photons: p[2],
-            amplitude: p[2] / (p[1] * (2.0 * std::f64::consts::PI).sqrt()),
-        }));
+        out.extend(g.iter().map(component));
     }
     out
+}
+
+/// The return a fitted Gaussian makes.
+fn component(p: &Params) -> Component {
+    Component {
+        centre_bin: p[0],
+        sigma_bins: p[1],
+        area_photons: p[2],
+        amplitude: p[2] / (p[1] * (2.0 * std::f64::consts::PI).sqrt()),
+    }
 }
 
 /// What a group's fit is held to.
@@ -256,15 +261,7 @@ fn fit_group(
 
 /// The returns a detector would make of these components ([`blend`]).
 fn returns_made(params: &[Params], y: &[f64], noise: &Noise) -> usize {
-    let mut comps: Vec<Component> = params
-        .iter()
-        .map(|p| Component {
-            centre_bin: p[0],
-            sigma_bins: p[1],
-            area_photons: p[2],
-            amplitude: p[2] / (p[1] * (2.0 * std::f64::consts::PI).sqrt()),
-        })
-        .collect();
+    let mut comps: Vec<Component> = params.iter().map(component).collect();
     comps.sort_by(|a, b| a.centre_bin.total_cmp(&b.centre_bin));
     blend(comps, y, noise).len()
 }

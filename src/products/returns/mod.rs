@@ -67,6 +67,12 @@ const MIN_SIGNIFICANCE: f64 = 2.0;
 /// least certain and must not merge it away.
 const BLENDED_SIGMAS: f64 = 2.5;
 
+/// Bins kept on each side of a waveform's signal for its decomposition: this many pulse sigmas
+/// plus [`SPAN_MARGIN_BINS`], beyond the fit's windows (6 sigmas and 3 bins of its widest
+/// components) and the smoothing's reach.
+const SPAN_MARGIN_SIGMAS: f64 = 16.0;
+const SPAN_MARGIN_BINS: usize = 16;
+
 /// Returns at least this many times as wide as the pulse are placed at their summit, not at
 /// their fitted centre (see [`place_on_summits`]): 1.5 pulse sigmas hold a spread of ranges
 /// of √(1.5² - 1) ≈ 1.1 sigma besides the pulse's own, several leaves or a slanted surface.
@@ -136,16 +142,7 @@ pub fn decompose(
     if max_returns == 0 || photons.is_empty() {
         return Vec::new();
     }
-    let y: Vec<f64> = photons
-        .iter()
-        .map(|&v| {
-            if v.is_finite() && v > 0.0 {
-                v as f64
-            } else {
-                0.0
-            }
-        })
-        .collect();
+    let signal = |v: f32| v.is_finite() && v > 0.0;
     let hint = if pulse_sigma_bins.is_finite() && pulse_sigma_bins > 0.0 {
         pulse_sigma_bins
     } else {
@@ -156,7 +153,24 @@ pub fn decompose(
     } else {
         0.0
     };
+    let f = coarsening(hint);
+    // The bins around the signal only, on the coarse grid's boundaries: a gate of hundreds of
+    // bins holds a return or two, and the zeros far from them change nothing (the smoothing,
+    // the fit's windows and the residual search reach a few sigmas) but cost their passes.
+    let Some(first) = photons.iter().position(|&v| signal(v)) else {
+        return Vec::new();
+    };
+    let last = photons.iter().rposition(|&v| signal(v)).unwrap_or(first);
+    let margin = (SPAN_MARGIN_SIGMAS * hint).ceil() as usize + SPAN_MARGIN_BINS;
+    let lo = first.saturating_sub(margin) / f * f;
+    let hi = (last + 1 + margin).min(photons.len());
+    let y: Vec<f64> = photons[lo..hi]
+        .iter()
+        .map(|&v| if signal(v) { v as f64 } else { 0.0 })
+        .collect();
     let mc_se: Vec<f64> = mc_se_photons
+        .get(lo.min(mc_se_photons.len())..hi.min(mc_se_photons.len()))
+        .unwrap_or_default()
         .iter()
         .map(|&s| {
             if s.is_finite() {
@@ -166,13 +180,19 @@ pub fn decompose(
             }
         })
         .collect();
-    let f = coarsening(hint);
+    let shifted = |c: Component| Component {
+        centre_bin: c.centre_bin + lo as f64,
+        ..c
+    };
     if f == 1 {
         let threshold = Threshold {
             per_bin: threshold,
             area: threshold,
         };
-        return decompose_bins(&y, &mc_se, threshold, max_returns, method, hint);
+        return decompose_bins(&y, &mc_se, threshold, max_returns, method, hint)
+            .into_iter()
+            .map(shifted)
+            .collect();
     }
     // bin k of the coarse waveform is bins [f k, f k + f): its photons and (correlated, as
     // `Noise::mc_var` adds them) Monte Carlo errors are their sums
@@ -198,6 +218,7 @@ pub fn decompose(
         area_photons: c.area_photons,
         amplitude: c.amplitude / k,
     })
+    .map(shifted)
     .collect()
 }
 

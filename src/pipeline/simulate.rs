@@ -334,7 +334,7 @@ pub fn choose_method(loaded: &Loaded, scene: &Scene, plan: &Plan) -> (Method, St
         .simulation
         .rays_per_pulse
         .clamp(2, PILOT_RAYS);
-    let total = loaded.campaign.simulation.rays_per_pulse * plan.len() as u64;
+    let total = (loaded.campaign.simulation.rays_per_pulse).saturating_mul(plan.len() as u64);
     let budget = PILOT_RAY_BUDGET.min(total / 10);
     let n = (plan.len() as u64).min((budget / rays).max(1)) as usize;
     if n == 0 {

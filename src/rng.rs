@@ -55,6 +55,66 @@ impl Rng {
     }
 }
 
+/// The first dimensions of a pulse's ray samples: Owen-scrambled Sobol' points, in pairs
+/// (Burley 2020, "Practical Hash-based Owen Scrambling"). Sample `index` of a pulse is the
+/// same point however its rays are chunked or threaded; each pair has its own scramble and
+/// its own shuffle of the index, so the pairs are independent of each other, while within a
+/// pair any 2^k consecutive samples of the sequence fill every elementary interval of area
+/// 2^-k of the square once: the footprint, the aperture and the field of view are covered
+/// evenly by few rays, where independent draws leave gaps and clusters.
+#[derive(Clone, Copy, Debug)]
+pub struct Sobol2 {
+    seed: u64,
+}
+
+impl Sobol2 {
+    pub fn new(seed: u64, pulse_id: u64) -> Self {
+        Sobol2 {
+            seed: splitmix64(seed ^ splitmix64(pulse_id ^ 0x736f_626f_6c32_0000)),
+        }
+    }
+
+    /// Point `index` of pair `pair`, in [0, 1)². Indices past 2^32 repeat the sequence.
+    pub fn pair(&self, index: u64, pair: u32) -> [f64; 2] {
+        let h = splitmix64(
+            self.seed
+                ^ u64::from(pair)
+                    .wrapping_add(1)
+                    .wrapping_mul(0x9e37_79b9_7f4a_7c15),
+        );
+        let i = owen(index as u32, h as u32);
+        let x = owen(i.reverse_bits(), (h >> 32) as u32);
+        let y = owen(sobol_second(i), splitmix64(h) as u32);
+        let unit = |v: u32| f64::from(v) * (1.0 / 4_294_967_296.0);
+        [unit(x), unit(y)]
+    }
+}
+
+/// The second dimension of Sobol's sequence, most significant bit first (its generator matrix
+/// is Pascal's triangle mod 2).
+fn sobol_second(mut i: u32) -> u32 {
+    let (mut r, mut v) = (0u32, 1u32 << 31);
+    while i != 0 {
+        if i & 1 != 0 {
+            r ^= v;
+        }
+        i >>= 1;
+        v ^= v >> 1;
+    }
+    r
+}
+
+/// Nested uniform (Owen) scrambling of a fixed-point value by a hash of its bits from the
+/// most significant down (Laine-Karras permutation of the reversed bits).
+fn owen(x: u32, seed: u32) -> u32 {
+    let mut x = x.reverse_bits().wrapping_add(seed);
+    x ^= x.wrapping_mul(0x6c50_b47c);
+    x ^= x.wrapping_mul(0xb82f_1e52);
+    x ^= x.wrapping_mul(0xc7af_e638);
+    x ^= x.wrapping_mul(0x8d22_f6e6);
+    x.reverse_bits()
+}
+
 /// Photon counting's generator, one stream per (seed, pulse): SplitMix64.
 #[derive(Clone, Debug)]
 pub struct SplitMix64(u64);
@@ -179,6 +239,40 @@ pub fn stream(seed: u64, k: u64) -> Rand {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The first 2^k samples of every pair are a (0, k, 2)-net: each of the 2^k boxes of
+    /// any shape 2^-a × 2^-(k-a) holds one point; and pairs, pulses and seeds differ.
+    #[test]
+    fn sobol_pairs_stratify_the_square() {
+        let k = 6u32;
+        let n = 1usize << k;
+        for (seed, pulse, pair) in [
+            (1u64, 0u64, 0u32),
+            (1, 0, 1),
+            (7, 123_456, 2),
+            (u64::MAX, 9, 5),
+        ] {
+            let q = Sobol2::new(seed, pulse);
+            let pts: Vec<[f64; 2]> = (0..n as u64).map(|i| q.pair(i, pair)).collect();
+            assert!(pts.iter().all(|p| p.iter().all(|v| (0.0..1.0).contains(v))));
+            for a in 0..=k {
+                let (nx, ny) = (1usize << a, 1usize << (k - a));
+                let mut seen = vec![false; n];
+                for p in &pts {
+                    let cell = (p[0] * nx as f64) as usize * ny + (p[1] * ny as f64) as usize;
+                    assert!(
+                        !seen[cell],
+                        "{seed} {pulse} {pair}: two points in a {nx}x{ny} box"
+                    );
+                    seen[cell] = true;
+                }
+            }
+        }
+        let a = Sobol2::new(1, 0).pair(5, 0);
+        assert_ne!(a, Sobol2::new(1, 0).pair(5, 1));
+        assert_ne!(a, Sobol2::new(1, 1).pair(5, 0));
+        assert_ne!(a, Sobol2::new(2, 0).pair(5, 0));
+    }
 
     #[test]
     fn poisson_mean_and_variance() {

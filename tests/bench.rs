@@ -13,14 +13,23 @@ fn quick_bench_reports_falling_error() {
     assert!(text.contains(
         "| method | rays for rRMSE ≤ 5% | rRMSE | wall s | rays/s | effective paths/ray |"
     ));
-    assert!(text.contains("| footprint m | forward | backward | bdpt |"));
+    assert!(text.contains(
+        "| footprint m | forward | backward | bdpt | forward, sobol | backward, sobol | bdpt, sobol |"
+    ));
     assert!(text.contains("median R² by rays:"));
     assert!(
         text.lines().any(|l| l.starts_with("| 1 | ")),
         "no Table 2 row"
     );
     assert!(text.contains("| fixed | 0.500 |") && text.contains("| power | "));
-    for m in ["forward", "backward", "bdpt"] {
+    for m in [
+        "forward",
+        "backward",
+        "bdpt",
+        "forward, sobol",
+        "backward, sobol",
+        "bdpt, sobol",
+    ] {
         assert!(
             text.lines().any(|l| l.starts_with(&format!("| {m} |"))),
             "no row for {m}"
@@ -40,7 +49,7 @@ fn quick_bench_reports_falling_error() {
         })
         .collect();
     assert!(rows.len() >= 2);
-    for m in 0..3 {
+    for m in 0..6 {
         let col: Vec<f64> = rows
             .iter()
             .map(|r| r[m])

@@ -8,7 +8,7 @@
 pub mod campaigns;
 pub mod traversal;
 
-use crate::campaign::{Instrument, Method, MisHeuristic, SunSelection};
+use crate::campaign::{Instrument, Method, MisHeuristic, Sampler, SunSelection};
 use crate::error::{Error, Result};
 use crate::generate::{canopy, Canopy};
 use crate::scene::Scene;
@@ -99,6 +99,7 @@ impl BenchOptions {
 #[derive(Clone, Debug)]
 pub struct LadderRow {
     pub method: Method,
+    pub sampler: Sampler,
     /// Fewest rays reaching the target, or None if `max_rays` did not.
     pub rays: Option<u64>,
     pub rrmse: f64,
@@ -181,13 +182,14 @@ impl Bench<'_> {
         }
     }
 
-    fn run(&self, method: Method, rays: u64, seed: u64) -> (Waveform, f64) {
-        self.run_with_sun(method, rays, seed, None)
+    fn run(&self, method: Method, sampler: Sampler, rays: u64, seed: u64) -> (Waveform, f64) {
+        self.run_with_sun(method, sampler, rays, seed, None)
     }
 
     fn run_with_sun(
         &self,
         method: Method,
+        sampler: Sampler,
         rays: u64,
         seed: u64,
         sun: Option<SunSource>,
@@ -203,6 +205,7 @@ impl Bench<'_> {
             sub_bins: self.sub_bins,
             method,
             heuristic: MisHeuristic::Power,
+            sampler,
             sun,
             max_order: 100,
             seed,
@@ -254,13 +257,17 @@ pub fn run(opts: &BenchOptions) -> Result<String> {
         "lidarsim bench: reference waveform, bdpt, {} rays",
         opts.reference_rays
     );
-    let (reference, ref_secs) = b.run(Method::Bdpt, opts.reference_rays, 1_000_003);
+    let (reference, ref_secs) = b.run(
+        Method::Bdpt,
+        Sampler::Independent,
+        opts.reference_rays,
+        1_000_003,
+    );
     if reference.received_energy_j <= 0.0 {
         return Err(Error::msg("bench: the reference waveform is empty"));
     }
-    let rows: Vec<LadderRow> = [Method::Forward, Method::Backward, Method::Bdpt]
-        .into_iter()
-        .map(|m| ladder(&b, &reference, m, opts.seeds, opts.max_rays))
+    let rows: Vec<LadderRow> = ladder_columns()
+        .map(|(m, q)| ladder(&b, &reference, m, q, opts.seeds, opts.max_rays))
         .collect();
     let single_pulse_peak_mb = campaigns::peak_memory_mb();
     let mut text = provenance(opts);
@@ -285,11 +292,16 @@ pub fn run(opts: &BenchOptions) -> Result<String> {
                     "lidarsim bench: footprint {d} m: reference, {} rays",
                     opts.reference_rays
                 );
-                bd.run(Method::Bdpt, opts.reference_rays, 1_000_003).0
+                bd.run(
+                    Method::Bdpt,
+                    Sampler::Independent,
+                    opts.reference_rays,
+                    1_000_003,
+                )
+                .0
             };
-            let rows: Vec<LadderRow> = [Method::Forward, Method::Backward, Method::Bdpt]
-                .into_iter()
-                .map(|m| ladder(&bd, &reference, m, opts.seeds, opts.table2_max_rays))
+            let rows: Vec<LadderRow> = ladder_columns()
+                .map(|(m, q)| ladder(&bd, &reference, m, q, opts.seeds, opts.table2_max_rays))
                 .collect();
             t2.push((d, rows));
         }
@@ -442,8 +454,23 @@ fn sun_section(opts: &BenchOptions, b: &Bench, reference: &Waveform) -> String {
     let (mut off, mut on) = (Vec::new(), Vec::new());
     let mut photons = 0.0;
     for seed in 0..opts.seeds {
-        off.push(b.run_with_sun(Method::Bdpt, sun_rays, 40 + seed, None).1);
-        let (w, t) = b.run_with_sun(Method::Bdpt, sun_rays, 40 + seed, Some(fixed));
+        off.push(
+            b.run_with_sun(
+                Method::Bdpt,
+                Sampler::Independent,
+                sun_rays,
+                40 + seed,
+                None,
+            )
+            .1,
+        );
+        let (w, t) = b.run_with_sun(
+            Method::Bdpt,
+            Sampler::Independent,
+            sun_rays,
+            40 + seed,
+            Some(fixed),
+        );
         on.push(t);
         photons = w.solar_photons_per_bin as f64;
     }
@@ -505,8 +532,14 @@ fn campaigns_section(opts: &BenchOptions) -> Result<String> {
 /// Table 2 of the paper: rays (and wall seconds) each method needs for rRMSE ≤ 5% by
 /// footprint diameter.
 fn table2(rows: &[(f64, Vec<LadderRow>)], max_rays: u64) -> String {
-    let mut s = String::from(
-        "\n### Rays for rRMSE ≤ 5% by footprint diameter (paper Table 2)\n\n| footprint m | forward | backward | bdpt |\n| ---: | ---: | ---: | ---: |\n",
+    let names: Vec<String> = rows
+        .first()
+        .map(|(_, r)| r.iter().map(LadderRow::name).collect())
+        .unwrap_or_default();
+    let mut s = format!(
+        "\n### Rays for rRMSE ≤ 5% by footprint diameter (paper Table 2)\n\n| footprint m | {} |\n| ---: |{}\n",
+        names.join(" | "),
+        " ---: |".repeat(names.len())
     );
     for (d, r) in rows {
         let cells: Vec<String> = r
@@ -555,7 +588,13 @@ fn selection_row(
 ) -> SelectionRow {
     let (mut e, mut se, mut t) = (Vec::new(), Vec::new(), Vec::new());
     for seed in 0..seeds {
-        let (w, secs) = b.run_with_sun(Method::Bdpt, rays, 60 + seed, Some(sun));
+        let (w, secs) = b.run_with_sun(
+            Method::Bdpt,
+            Sampler::Independent,
+            rays,
+            60 + seed,
+            Some(sun),
+        );
         e.push(rrmse(&w.laser_photons, &reference.laser_photons));
         se.push(w.solar_power_se_w / w.solar_power_w);
         t.push(secs);
@@ -588,10 +627,37 @@ fn selection_table(rows: &[SelectionRow], rays: u64) -> String {
     s
 }
 
+impl LadderRow {
+    /// The method, and the sampler when it is not independent draws: "bdpt", "bdpt, sobol".
+    pub fn name(&self) -> String {
+        let method = format!("{:?}", self.method).to_lowercase();
+        match self.sampler {
+            Sampler::Independent => method,
+            Sampler::Sobol => format!("{method}, sobol"),
+        }
+    }
+}
+
+/// The ladders' columns: each method with independent draws, then with low-discrepancy first
+/// dimensions.
+fn ladder_columns() -> impl Iterator<Item = (Method, Sampler)> {
+    [Sampler::Independent, Sampler::Sobol]
+        .into_iter()
+        .flat_map(|q| [Method::Forward, Method::Backward, Method::Bdpt].map(|m| (m, q)))
+}
+
 /// The fewest rays on a 1-2-5 ladder from 100 whose median rRMSE over `seeds` reaches 5%.
-fn ladder(b: &Bench, reference: &Waveform, method: Method, seeds: u64, max_rays: u64) -> LadderRow {
+fn ladder(
+    b: &Bench,
+    reference: &Waveform,
+    method: Method,
+    sampler: Sampler,
+    seeds: u64,
+    max_rays: u64,
+) -> LadderRow {
     let mut row = LadderRow {
         method,
+        sampler,
         rays: None,
         rrmse: f64::NAN,
         seconds: f64::NAN,
@@ -608,7 +674,7 @@ fn ladder(b: &Bench, reference: &Waveform, method: Method, seeds: u64, max_rays:
         let mut paths = Vec::new();
         let mut r2 = Vec::new();
         for s in 0..seeds {
-            let (w, t) = b.run(method, rays, 17 + s);
+            let (w, t) = b.run(method, sampler, rays, 17 + s);
             errs.push(rrmse(&w.laser_photons, &reference.laser_photons));
             r2.push(r_squared(&w.laser_photons, &reference.laser_photons));
             secs.push(t);
@@ -616,7 +682,8 @@ fn ladder(b: &Bench, reference: &Waveform, method: Method, seeds: u64, max_rays:
         }
         let e = median(&mut errs);
         eprintln!(
-            "lidarsim bench: {method:?} {rays} rays: rRMSE {:.2}%",
+            "lidarsim bench: {} {rays} rays: rRMSE {:.2}%",
+            row.name(),
             100.0 * e
         );
         row.curve.push((rays, e));
@@ -678,7 +745,7 @@ fn report(
     );
     let _ = writeln!(s, "| --- | ---: | ---: | ---: | ---: | ---: |");
     for r in rows {
-        let name = format!("{:?}", r.method).to_lowercase();
+        let name = r.name();
         match r.rays {
             Some(n) => {
                 let _ = writeln!(
@@ -713,10 +780,7 @@ fn ladder_table(
     cell: impl Fn(f64) -> String,
 ) -> String {
     let mut s = format!("\n{title}:\n\n");
-    let names: Vec<String> = rows
-        .iter()
-        .map(|r| format!("{:?}", r.method).to_lowercase())
-        .collect();
+    let names: Vec<String> = rows.iter().map(LadderRow::name).collect();
     let _ = writeln!(s, "| rays | {} |", names.join(" | "));
     let _ = writeln!(s, "| ---: |{}", " ---: |".repeat(rows.len()));
     let mut all: Vec<u64> = rows

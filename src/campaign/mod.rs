@@ -349,6 +349,19 @@ pub enum MisHeuristic {
     Balance,
 }
 
+/// Where a ray sample's first dimensions come from (the light's start, the aperture point,
+/// the receiver's direction); every later dimension is independent either way.
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum Sampler {
+    /// Independent uniform draws from the ray's random stream.
+    #[default]
+    Independent,
+    /// Owen-scrambled Sobol' pairs indexed by the ray's index in its pulse (`rng::Sobol2`):
+    /// few rays cover the footprint, the aperture and the field of view evenly.
+    Sobol,
+}
+
 #[derive(Clone, Debug, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct Simulation {
@@ -360,6 +373,8 @@ pub struct Simulation {
     pub max_order: u32,
     #[serde(default)]
     pub mis: MisHeuristic,
+    #[serde(default)]
+    pub sampler: Sampler,
 }
 
 impl Default for Simulation {
@@ -369,6 +384,7 @@ impl Default for Simulation {
             rays_per_pulse: default_rays(),
             max_order: default_max_order(),
             mis: MisHeuristic::default(),
+            sampler: Sampler::default(),
         }
     }
 }

@@ -21,6 +21,13 @@ pub struct RunRow {
     pub points: Option<u64>,
     pub points_per_pulse: Option<f64>,
     pub pulse_density_m2: Option<f64>,
+    /// `simulation.rays_per_pulse` and `simulation.sampler` of the resolved campaign.
+    pub rays_per_pulse: Option<u64>,
+    pub sampler: Option<String>,
+    /// The points' distance to the nearest surface (`products.json`, `surface_distance`).
+    pub within_5cm: Option<f64>,
+    pub within_25cm: Option<f64>,
+    pub median_distance_m: Option<f64>,
     pub dsm_bias_m: Option<f64>,
     pub dsm_rmse_m: Option<f64>,
     pub dsm_coverage: Option<f64>,
@@ -58,6 +65,10 @@ pub fn read_row(dir: &Path) -> Result<RunRow> {
             .unwrap_or_default(),
         altitude_m: resolved["platform"]["altitude_m"].as_f64(),
         prf_hz: resolved["platform"]["prf_hz"].as_f64(),
+        rays_per_pulse: resolved["simulation"]["rays_per_pulse"].as_u64(),
+        sampler: resolved["simulation"]["sampler"]
+            .as_str()
+            .map(str::to_owned),
         run_time_s: manifest.stages.values().map(|s| s.wall_time_s).sum(),
         ..RunRow::default()
     };
@@ -67,6 +78,11 @@ pub fn read_row(dir: &Path) -> Result<RunRow> {
             row.points = Some(pts.points as u64);
             row.points_per_pulse = finite(pts.points_per_pulse);
             row.pulse_density_m2 = pts.pulse_density_per_m2.and_then(finite);
+            if let Some(d) = pts.surface_distance {
+                row.within_5cm = finite(d.within_5cm);
+                row.within_25cm = finite(d.within_25cm);
+                row.median_distance_m = finite(d.median_m);
+            }
         }
     }
     if let Some(d) = DsmReport::read(&dir.join("dsm/report.json")) {
@@ -85,16 +101,23 @@ fn cell(v: Option<f64>, digits: usize) -> String {
 
 pub fn markdown(rows: &[RunRow]) -> String {
     let mut s = String::from(
-        "| run | altitude m | PRF Hz | pulses | points/pulse | pulses/m² | DSM bias m | DSM RMSE m | coverage | run s |\n| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n",
+        "| run | altitude m | PRF Hz | rays | sampler | pulses | points/pulse | within 5 cm | within 25 cm | median distance mm | pulses/m² | DSM bias m | DSM RMSE m | coverage | run s |\n| --- | ---: | ---: | ---: | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n",
     );
+    let percent =
+        |v: Option<f64>| cell(v.map(|x| 100.0 * x), 2) + if v.is_some() { " %" } else { "" };
     for r in rows {
         s += &format!(
-            "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {:.1} |\n",
+            "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {:.1} |\n",
             r.run,
             cell(r.altitude_m, 0),
             cell(r.prf_hz, 0),
+            cell(r.rays_per_pulse.map(|n| n as f64), 0),
+            r.sampler.as_deref().unwrap_or("–"),
             r.pulses,
-            cell(r.points_per_pulse, 2),
+            cell(r.points_per_pulse, 3),
+            percent(r.within_5cm),
+            percent(r.within_25cm),
+            cell(r.median_distance_m.map(|m| 1e3 * m), 3),
             cell(r.pulse_density_m2, 1),
             cell(r.dsm_bias_m, 3),
             cell(r.dsm_rmse_m, 3),
@@ -120,6 +143,11 @@ pub fn write_csv(path: &Path, rows: &[RunRow]) -> Result<()> {
         "dsm_rmse_m",
         "dsm_coverage",
         "run_time_s",
+        "rays_per_pulse",
+        "sampler",
+        "within_5cm",
+        "within_25cm",
+        "median_distance_m",
     ];
     let table = rows.iter().map(|r| {
         vec![
@@ -134,6 +162,11 @@ pub fn write_csv(path: &Path, rows: &[RunRow]) -> Result<()> {
             o(r.dsm_rmse_m),
             o(r.dsm_coverage),
             r.run_time_s.to_string(),
+            r.rays_per_pulse.map(|n| n.to_string()).unwrap_or_default(),
+            r.sampler.clone().unwrap_or_default(),
+            o(r.within_5cm),
+            o(r.within_25cm),
+            o(r.median_distance_m),
         ]
     });
     crate::fsutil::write_csv_atomic(path, &header, table)

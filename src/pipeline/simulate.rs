@@ -244,6 +244,7 @@ impl<'a> Shared<'a> {
             sub_bins: waveform::sub_bins_per_bin(gate.dt, self.sigma),
             method,
             heuristic: c.simulation.mis,
+            sampler: c.simulation.sampler,
             sun,
             atmosphere: self.atmosphere.as_ref(),
             bands: self.bands.as_ref(),

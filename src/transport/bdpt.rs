@@ -6,6 +6,7 @@ use super::bsdf::{bsdf, sample_bsdf};
 use super::mis::{link, mis_weight};
 use super::tally::Accum;
 use super::{PulseSetup, Rng, Vertex, VertexKind, ROULETTE_AFTER};
+use crate::rng::Sobol2;
 use crate::scene::FacetId;
 use glam::DVec3;
 
@@ -235,11 +236,50 @@ pub(super) fn contribution(
     (c > 0.0).then_some((c, x.len + optical_length(setup, x.p, y.p, r) + y.len))
 }
 
+/// The first dimensions of a ray sample: where the light leaves its source (the laser's
+/// direction within its beam, hence the point of the footprint it lights; or the sun's disk),
+/// the receiver's aperture point and its direction within the field of view. With
+/// `sampler: sobol` they come from the pulse's low-discrepancy sequence ([`Sobol2`], sample
+/// index = ray index in the pulse); else from the ray's stream, drawn where they are used,
+/// so that independent sampling draws exactly as it did before the choice existed.
+pub(super) struct FirstDims(Option<(Sobol2, u64)>);
+
+impl FirstDims {
+    pub(super) fn of(sobol: Option<&Sobol2>, index: u64) -> FirstDims {
+        FirstDims(sobol.map(|q| (*q, index)))
+    }
+
+    fn pair(&self, pair: u32, rng: &mut Rng) -> [f64; 2] {
+        match self.0 {
+            Some((q, index)) => q.pair(index, pair),
+            None => [rng.uniform(), rng.uniform()],
+        }
+    }
+
+    fn light(&self, rng: &mut Rng) -> [f64; 2] {
+        self.pair(0, rng)
+    }
+
+    fn aperture(&self, rng: &mut Rng) -> [f64; 2] {
+        self.pair(1, rng)
+    }
+
+    fn direction(&self, rng: &mut Rng) -> [f64; 2] {
+        self.pair(2, rng)
+    }
+}
+
 /// One sample of the pulse: both sub-paths, then every way of joining them. The order of the
 /// random draws (light, receiver, aperture points of t = 1) is part of the output: keep it.
-pub(super) fn trace_ray(setup: &PulseSetup, rng: &mut Rng, acc: &mut Accum, b: &mut Buffers) {
-    let is_sun = light_subpath(setup, rng, acc, b);
-    receiver_subpath(setup, rng, acc, b);
+pub(super) fn trace_ray(
+    setup: &PulseSetup,
+    first: &FirstDims,
+    rng: &mut Rng,
+    acc: &mut Accum,
+    b: &mut Buffers,
+) {
+    let is_sun = light_subpath(setup, first, rng, acc, b);
+    receiver_subpath(setup, first, rng, acc, b);
     connect_to_lights(setup, acc, b);
     connect_subpaths(setup, rng, acc, b, is_sun);
 }
@@ -250,7 +290,13 @@ pub(super) fn trace_ray(setup: &PulseSetup, rng: &mut Rng, acc: &mut Accum, b: &
 /// contributions are divided by q, which the light end point keeps as its pdf_fwd for the MIS
 /// weights. A receiver vertex, by contrast, is connected to every light (s = 1 strategies need
 /// no choice), which keeps the laser's variance what it is without the sun.
-fn light_subpath(setup: &PulseSetup, rng: &mut Rng, acc: &mut Accum, b: &mut Buffers) -> bool {
+fn light_subpath(
+    setup: &PulseSetup,
+    first: &FirstDims,
+    rng: &mut Rng,
+    acc: &mut Accum,
+    b: &mut Buffers,
+) -> bool {
     let (s_cap, _) = setup.caps();
     let laser = &setup.laser;
     b.light.clear();
@@ -261,7 +307,8 @@ fn light_subpath(setup: &PulseSetup, rng: &mut Rng, acc: &mut Accum, b: &mut Buf
     let q_sun = setup.sun.map_or(0.0, |s| s.probability);
     let sun = setup.sun.filter(|_| rng.uniform() < q_sun);
     if let Some(sun) = sun {
-        let x0 = sun.sample_origin(rng.uniform(), rng.uniform());
+        let [u, v] = first.light(rng);
+        let x0 = sun.sample_origin(u, v);
         b.light
             .push(Vertex::endpoint(VertexKind::Sun, x0, sun.dir, q_sun));
         if s_cap > 1 {
@@ -288,7 +335,8 @@ fn light_subpath(setup: &PulseSetup, rng: &mut Rng, acc: &mut Accum, b: &mut Buf
             q_laser,
         ));
         if s_cap > 1 {
-            let (dir, _) = laser.sample(rng.uniform(), rng.uniform());
+            let [u, v] = first.light(rng);
+            let (dir, _) = laser.sample(u, v);
             walk(
                 setup,
                 &mut b.light,
@@ -307,7 +355,13 @@ fn light_subpath(setup: &PulseSetup, rng: &mut Rng, acc: &mut Accum, b: &mut Buf
 }
 
 /// The receiver sub-path into `b.cam` (empty when the method caps it at its aperture point).
-fn receiver_subpath(setup: &PulseSetup, rng: &mut Rng, acc: &mut Accum, b: &mut Buffers) {
+fn receiver_subpath(
+    setup: &PulseSetup,
+    first: &FirstDims,
+    rng: &mut Rng,
+    acc: &mut Accum,
+    b: &mut Buffers,
+) {
     let (_, t_cap) = setup.caps();
     let recv = &setup.receiver;
     b.cam.clear();
@@ -316,8 +370,10 @@ fn receiver_subpath(setup: &PulseSetup, rng: &mut Rng, acc: &mut Accum, b: &mut 
         if setup.bands.is_some() {
             b.cam_r.push(ONES);
         }
-        let q0 = recv.sample_point(rng.uniform(), rng.uniform());
-        let (dir, w) = recv.sample_direction(rng.uniform(), rng.uniform());
+        let [u, v] = first.aperture(rng);
+        let q0 = recv.sample_point(u, v);
+        let [u, v] = first.direction(rng);
+        let (dir, w) = recv.sample_direction(u, v);
         b.cam.push(Vertex::endpoint(
             VertexKind::Aperture,
             q0,

@@ -40,18 +40,31 @@ pub use bsdf::{bsdf, bsdf_pdf};
 pub use mis::{link, mis_weight};
 pub use tally::Tally;
 
-use bdpt::{trace_ray, Buffers};
+use bdpt::{trace_ray, Buffers, FirstDims};
 use tally::Accum;
 
-use crate::campaign::{Method, MisHeuristic};
-use crate::rng::Rng;
+use crate::campaign::{Method, MisHeuristic, Sampler};
+use crate::rng::{Rng, Sobol2};
 use crate::scene::{FacetId, Scene};
 use crate::sensor::{Gate, Laser, Receiver, SunSource};
 use glam::DVec3;
 use rayon::prelude::*;
 
-/// Rays per independent random stream and per unit of parallel work.
+/// Rays per independent random stream and per unit of parallel work, with independent draws.
 pub const CHUNK_RAYS: u64 = 2048;
+/// The same with `sampler: sobol`, whose first dimensions do not come from the stream: a
+/// single pulse of a few thousand rays (the GEDI ladder's 2000) is then split between the
+/// threads instead of being one serial task. Independent draws keep 2048, which keeps their
+/// files byte for byte what earlier versions wrote.
+pub const SOBOL_CHUNK_RAYS: u64 = 256;
+
+/// Rays per chunk of a pulse traced with `sampler`.
+pub fn chunk_rays(sampler: Sampler) -> u64 {
+    match sampler {
+        Sampler::Independent => CHUNK_RAYS,
+        Sampler::Sobol => SOBOL_CHUNK_RAYS,
+    }
+}
 /// Surface interactions before Russian roulette may stop a sub-path.
 const ROULETTE_AFTER: usize = 3;
 
@@ -67,6 +80,7 @@ pub struct PulseSetup<'a> {
     pub sub_bins: usize,
     pub method: Method,
     pub heuristic: MisHeuristic,
+    pub sampler: Sampler,
     /// The sun, when the campaign has one: its paths share the receiver sub-paths.
     pub sun: Option<SunSource>,
     /// The atmosphere at the campaign's wavelength; `None` is vacuum and costs nothing.
@@ -157,7 +171,7 @@ pub struct Scratch {
     bufs: Buffers,
 }
 
-/// Traces `rays` samples of one pulse, in chunks of [`CHUNK_RAYS`] run in parallel; each
+/// Traces `rays` samples of one pulse, in chunks of [`chunk_rays`] run in parallel; each
 /// chunk has its own random stream and the chunks are merged in order, so the result is the
 /// same whatever the number of threads.
 pub fn simulate_pulse(setup: &PulseSetup, rays: u64) -> Tally {
@@ -178,13 +192,16 @@ impl Scratch {
 /// [`simulate_pulse`] in a worker's scratch: the tally returned (the first band's) lives
 /// there until its next pulse, with the other bands' ([`Scratch::band`]).
 pub fn simulate_pulse_in<'s>(setup: &PulseSetup, rays: u64, scratch: &'s mut Scratch) -> &'s Tally {
-    let chunks = rays.div_ceil(CHUNK_RAYS);
+    let chunk = chunk_rays(setup.sampler);
+    let chunks = rays.div_ceil(chunk);
     let acc = scratch.acc.get_or_insert_with(|| Accum::new(setup));
     acc.reset(setup);
+    let sobol = (setup.sampler == Sampler::Sobol).then(|| Sobol2::new(setup.seed, setup.pulse_id));
     let trace = |c: u64, acc: &mut Accum, bufs: &mut Buffers| {
         let mut rng = Rng::new(setup.seed, setup.pulse_id, c);
-        for _ in 0..CHUNK_RAYS.min(rays - c * CHUNK_RAYS) {
-            trace_ray(setup, &mut rng, acc, bufs);
+        for k in 0..chunk.min(rays - c * chunk) {
+            let first = FirstDims::of(sobol.as_ref(), c * chunk + k);
+            trace_ray(setup, &first, &mut rng, acc, bufs);
             acc.end_ray();
         }
     };

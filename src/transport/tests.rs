@@ -35,6 +35,7 @@ fn setup<'a>(scene: &'a Scene, method: Method, heuristic: MisHeuristic) -> Pulse
         sub_bins: 1,
         method,
         heuristic,
+        sampler: crate::campaign::Sampler::Independent,
         sun: None,
         atmosphere: None,
         bands: None,

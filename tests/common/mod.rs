@@ -82,6 +82,15 @@ pub fn campaign(
     )
 }
 
+/// A campaign text from [`campaign`] with `simulation.sampler` set.
+pub fn with_sampler(campaign: &str, sampler: &str) -> String {
+    let head = campaign
+        .trim_end()
+        .strip_suffix(" }")
+        .expect("the campaign ends with its simulation map");
+    format!("{head}, sampler: {sampler} }}\n")
+}
+
 /// Runs a campaign text through the library pipeline into `dir/run`; returns that folder.
 pub fn run_campaign(dir: &Path, campaign_text: &str, threads: Option<usize>) -> PathBuf {
     let path = write(dir, "campaign.yaml", campaign_text);

@@ -325,6 +325,25 @@ fn bad_sweep_value_is_located_at_its_sweep_entry() {
         !out.join("pulse_energy_j=0.001").exists(),
         "a combination ran before the check"
     );
+    // `lidarsim check` finds it too, where it used to say ok
+    let (code, _out, err) = lidarsim(&["check", path.to_str().unwrap()]);
+    assert_one_message(
+        code,
+        &err,
+        &[&format!(
+            "campaign.yaml:{line}:3: sweep.instrument.pulse_energy_j: value -2"
+        )],
+    );
+    // and with good values it lists the runs and counts all their rays
+    let good = format!("{CAMPAIGN}sweep:\n  simulation.rays_per_pulse: [100, 300]\n");
+    let path = write(&dir, "campaign.yaml", &good);
+    let (code, out, err) = lidarsim(&["check", path.to_str().unwrap()]);
+    assert_eq!(code, 0, "{err}");
+    assert!(
+        out.contains("sweep: 2 runs (rays_per_pulse=100, rays_per_pulse=300)"),
+        "{out}"
+    );
+    assert!(out.contains("(4.000e2 rays at"), "{out}");
 }
 
 /// Coordinates beyond ±1000 km, an instance scale beyond 10^4 and heights beyond ±1000 km are

@@ -75,7 +75,19 @@ pub(super) fn check(path: &std::path::Path) -> Result<()> {
         None => &loaded,
     };
     let rate = pipeline::probe_rays_per_second(loaded, &scene, &plan);
-    let total_rays = plan.len() as f64 * c.simulation.rays_per_pulse as f64;
+    let mut total_rays = plan.len() as f64 * c.simulation.rays_per_pulse as f64;
+    // a sweep: every combination checked as the run would check it, its rays counted at the
+    // rate measured on the campaign as written
+    if let Some(sweep) = &c.sweep {
+        let runs = pipeline::sweep::sweep_runs(loaded, sweep)?;
+        total_rays = 0.0;
+        for (sub, _) in &runs {
+            let pulses = plan::Plan::new(&sub.campaign)?.len();
+            total_rays += pulses as f64 * sub.campaign.simulation.rays_per_pulse as f64;
+        }
+        let names: Vec<&str> = runs.iter().map(|(_, n)| n.as_str()).collect();
+        println!("sweep: {} runs ({})", runs.len(), names.join(", "));
+    }
     let run_bytes = run_memory_bound(loaded, &scene, &plan);
     // what this process holds now: the program, its threads and the scene
     let base = peak_rss_bytes().map_or(s.memory_bytes as f64, |b| b as f64);

@@ -20,6 +20,8 @@ pub(super) fn run_sweep(
     opts: &RunOptions,
 ) -> Result<RunSummary> {
     let (keys, combos) = combinations(loaded, sweep)?;
+    // every combination is checked before any runs: a bad value ends the run at once
+    let subs = sub_campaigns(loaded, &keys, &combos)?;
     let mut cache = SceneCache::default();
     let mut total = RunSummary {
         out: out.to_path_buf(),
@@ -33,11 +35,6 @@ pub(super) fn run_sweep(
     };
     let mut runs = Vec::new();
     let mut rows: Vec<(Vec<serde_yaml::Value>, RunTotals)> = Vec::new();
-    // every combination is checked before any runs: a bad value ends the run at once
-    let subs = combos
-        .iter()
-        .map(|combo| sub_campaign(loaded, &keys, combo))
-        .collect::<Result<Vec<_>>>()?;
     for (combo, (sub, name)) in combos.iter().zip(subs) {
         log(&format!("sweep: {name}"));
         let s = run_single(&sub, &out.join(&name), opts, &mut cache)?;
@@ -65,6 +62,27 @@ pub(super) fn run_sweep(
         &serde_json::to_string_pretty(&index).unwrap_or_default(),
     )?;
     Ok(total)
+}
+
+/// Every sub-run of a sweep, checked, with its sub-folder's name, in the order the run takes
+/// them (`lidarsim check` estimates them all).
+pub fn sweep_runs(
+    loaded: &Loaded,
+    sweep: &BTreeMap<String, Vec<serde_yaml::Value>>,
+) -> Result<Vec<(Loaded, String)>> {
+    let (keys, combos) = combinations(loaded, sweep)?;
+    sub_campaigns(loaded, &keys, &combos)
+}
+
+fn sub_campaigns(
+    loaded: &Loaded,
+    keys: &[&String],
+    combos: &[Vec<&serde_yaml::Value>],
+) -> Result<Vec<(Loaded, String)>> {
+    combos
+        .iter()
+        .map(|combo| sub_campaign(loaded, keys, combo))
+        .collect()
 }
 
 /// The swept keys in the order the file gives them, and every combination of their values

@@ -297,14 +297,25 @@ fn read_waveforms_with(path: &Path, pages: bool) -> Result<Vec<Waveform>> {
         let f64s = |l: &arrow_array::ListArray, i: usize| {
             l.value(i).as_primitive::<Float64Type>().values().to_vec()
         };
-        let first = typed("span_first_bin", &u32t)?
-            .as_primitive::<UInt32Type>()
-            .clone();
+        // parts written before the spans (0304098) hold the whole gate in every bin column
+        let first = match b.column_by_name("span_first_bin") {
+            Some(_) => Some(
+                typed("span_first_bin", &u32t)?
+                    .as_primitive::<UInt32Type>()
+                    .clone(),
+            ),
+            None => None,
+        };
         for i in 0..b.num_rows() {
             let laser_photons = next(0)?;
             let bins = laser_photons.len();
             let mut gate = |c: usize| -> Result<Vec<f32>> {
-                unspan(&next(c)?, first.value(i) as usize, bins).ok_or_else(|| {
+                unspan(
+                    &next(c)?,
+                    first.as_ref().map_or(0, |f| f.value(i) as usize),
+                    bins,
+                )
+                .ok_or_else(|| {
                     err(&format!(
                         "row {i} of column {} runs past the gate's {bins} bins",
                         BIN_COLUMNS[c]
@@ -502,6 +513,23 @@ mod tests {
                 .map(|a| (a, 1 + v.iter().rposition(|&x| x != 0.0).unwrap()));
             assert_eq!(nonzero_span(&v), naive, "{v:?}");
         }
+        // a part of the layout before the spans (no span_first_bin, every bin stored) reads
+        // back to the same waveforms
+        let mut table = waveform_table(&rows);
+        table.columns.retain(|(name, _)| *name != "span_first_bin");
+        for (name, c) in &mut table.columns {
+            let whole = |f: fn(&Waveform) -> &[f32]| Column::ListF32(rows.iter().map(f).collect());
+            match *name {
+                "impulse_energy_se_j" => *c = whole(|r| &r.impulse_energy_se_j),
+                "ground_energy_j" => *c = whole(|r| &r.class_energy_j[0]),
+                "vegetation_energy_j" => *c = whole(|r| &r.class_energy_j[1]),
+                "building_energy_j" => *c = whole(|r| &r.class_energy_j[2]),
+                "other_energy_j" => *c = whole(|r| &r.class_energy_j[3]),
+                _ => {}
+            }
+        }
+        table.write(&path).unwrap();
+        assert_eq!(text(&read_waveforms(&path).unwrap()), text(&rows));
         // a span that runs past its row's gate: laser photons shortened to 10 bins
         let mut table = waveform_table(&rows[4..5]);
         for (name, c) in &mut table.columns {

@@ -11,7 +11,7 @@ fn quick_bench_reports_falling_error() {
     let text = lidarsim::bench::run(&opts).unwrap();
     println!("{text}");
     assert!(text.contains(
-        "| method | rays for rRMSE ≤ 5% | rRMSE | wall s | rays/s | effective paths/ray |"
+        "| method | rays for rRMSE ≤ 5% | rRMSE | wall s | rays/s | threads busy | effective paths/ray |"
     ));
     assert!(text.contains(
         "| footprint m | forward | backward | bdpt | forward, sobol | backward, sobol | bdpt, sobol |"

@@ -741,16 +741,19 @@ fn report(
     );
     let _ = writeln!(
         s,
-        "| method | rays for rRMSE ≤ 5% | rRMSE | wall s | rays/s | effective paths/ray |"
+        "| method | rays for rRMSE ≤ 5% | rRMSE | wall s | rays/s | threads busy | effective paths/ray |"
     );
-    let _ = writeln!(s, "| --- | ---: | ---: | ---: | ---: | ---: |");
+    let _ = writeln!(s, "| --- | ---: | ---: | ---: | ---: | ---: | ---: |");
     for r in rows {
         let name = r.name();
         match r.rays {
             Some(n) => {
+                // a pulse's chunks are its parallel tasks: under two chunks, one thread works
+                let chunks = n.div_ceil(crate::transport::chunk_rays(r.sampler));
+                let busy = chunks.min(threads as u64);
                 let _ = writeln!(
                     s,
-                    "| {name} | {n} | {:.2}% | {:.3} | {:.3e} | {:.2} |",
+                    "| {name} | {n} | {:.2}% | {:.3} | {:.3e} | {busy} | {:.2} |",
                     100.0 * r.rrmse,
                     r.seconds,
                     r.rays_per_second,
@@ -758,7 +761,7 @@ fn report(
                 );
             }
             None => {
-                let _ = writeln!(s, "| {name} | > {} | | | | |", opts.max_rays);
+                let _ = writeln!(s, "| {name} | > {} | | | | | |", opts.max_rays);
             }
         }
     }

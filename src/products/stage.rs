@@ -68,9 +68,7 @@ fn class_of(w: &Waveform, centre: f64, sigma: f64) -> u8 {
     let mut best = (0.0f64, SurfaceClass::Other.las_code());
     for class in SurfaceClass::ALL {
         let code = class.las_code();
-        let e: f64 = w.class_energy_j[class.index()]
-            .get(lo..hi)
-            .map_or(0.0, |s| s.iter().map(|&x| x as f64).sum());
+        let e = w.class_energy_sum(class.index(), lo, hi);
         if e > best.0 {
             best = (e, code);
         }
@@ -90,10 +88,8 @@ fn decomposed(loaded: &Loaded, w: &Waveform) -> (Vec<Component>, Vec<f32>, f64) 
     let c = &loaded.campaign;
     let inst = &c.instrument;
     let hv = crate::photon_energy_j(band_of(loaded, w));
-    let mc_se: Vec<f32> = w
-        .impulse_energy_se_j
-        .iter()
-        .map(|&s| (s as f64 / hv) as f32)
+    let mc_se: Vec<f32> = (0..w.laser_photons.len())
+        .map(|b| (w.impulse_se(b) as f64 / hv) as f32)
         .collect();
     let band = c.wavelength_nm.index_of(w.wavelength_nm);
     let recorder = Recorder::new(inst, SplitMix64::band_seed(c.seed, band));

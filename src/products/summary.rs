@@ -156,6 +156,7 @@ mod tests {
             brf_fov_solar: fov,
             brf_footprint_laser: f32::NAN,
             class_energy_j: Default::default(),
+            span_first_bin: 0,
             rays: 2,
             paths_per_ray: 1.5,
             wavelength_nm: None,

@@ -42,14 +42,6 @@ pub fn checksum_path(part: &Path) -> std::path::PathBuf {
 /// contract, and splitting it would scatter the contract over several places.
 pub fn waveform_table(w: &[Waveform]) -> Table<'_> {
     let list = |f: fn(&Waveform) -> &[f32]| Column::ListF32(w.iter().map(f).collect());
-    let spans: Vec<(usize, usize)> = w.iter().map(detail_span).collect();
-    let spanned = |f: fn(&Waveform) -> &[f32]| {
-        let rows = w.iter().zip(&spans).map(|(r, &(a, b))| {
-            let c = f(r);
-            &c[a.min(c.len())..b.min(c.len())]
-        });
-        Column::ListF32(rows.collect())
-    };
     let f64s = |f: fn(&Waveform) -> f64| Column::F64(w.iter().map(f).collect());
     let f32s = |f: fn(&Waveform) -> f32| Column::F32(w.iter().map(f).collect());
     let mut columns = vec![
@@ -63,13 +55,13 @@ pub fn waveform_table(w: &[Waveform]) -> Table<'_> {
         ("impulse_energy_j", list(|r| &r.impulse_energy_j)),
         (
             "span_first_bin",
-            Column::U32(spans.iter().map(|&(a, _)| a as u32).collect()),
+            Column::U32(w.iter().map(|r| r.span_first_bin as u32).collect()),
         ),
-        ("impulse_energy_se_j", spanned(|r| &r.impulse_energy_se_j)),
-        ("ground_energy_j", spanned(|r| &r.class_energy_j[0])),
-        ("vegetation_energy_j", spanned(|r| &r.class_energy_j[1])),
-        ("building_energy_j", spanned(|r| &r.class_energy_j[2])),
-        ("other_energy_j", spanned(|r| &r.class_energy_j[3])),
+        ("impulse_energy_se_j", list(|r| &r.impulse_energy_se_j)),
+        ("ground_energy_j", list(|r| &r.class_energy_j[0])),
+        ("vegetation_energy_j", list(|r| &r.class_energy_j[1])),
+        ("building_energy_j", list(|r| &r.class_energy_j[2])),
+        ("other_energy_j", list(|r| &r.class_energy_j[3])),
         ("received_energy_j", f64s(|r| r.received_energy_j)),
         ("outside_gate_energy_j", f64s(|r| r.outside_gate_energy_j)),
         (
@@ -104,53 +96,6 @@ pub fn waveform_table(w: &[Waveform]) -> Table<'_> {
     Table { columns }
 }
 
-/// The bins [first, end) outside which a waveform's span-stored columns (the standard error of
-/// the impulse energy and the four classes' energies) are all zero; (0, 0) when they are zero
-/// everywhere. Those columns hold only these bins: on an airborne survey they are 96 % zeros,
-/// and writing and reading the zeros was a third of the products stage's CPU. The contract's
-/// own bin columns (`laser_photons`, `impulse_energy_j`) keep the whole gate.
-fn detail_span(r: &Waveform) -> (usize, usize) {
-    let mut span = (usize::MAX, 0);
-    for c in std::iter::once(&r.impulse_energy_se_j).chain(&r.class_energy_j) {
-        if let Some((a, b)) = nonzero_span(c) {
-            span = (span.0.min(a), span.1.max(b));
-        }
-    }
-    if span.0 < span.1 {
-        span
-    } else {
-        (0, 0)
-    }
-}
-
-/// The bins [first, end) from a slice's first non-zero value (-0 counts as zero) to its last.
-/// Blocks of 16 are tested whole, which the compiler vectorises: a value at a time was 3 % of
-/// a town survey's simulate stage.
-fn nonzero_span(c: &[f32]) -> Option<(usize, usize)> {
-    const BLOCK: usize = 16;
-    let zero = |v: &[f32]| v.iter().fold(0, |acc, x| acc | (x.to_bits() << 1)) == 0;
-    let nonzero = |x: &f32| x.to_bits() << 1 != 0;
-    let skip = c.chunks(BLOCK).take_while(|v| zero(v)).count() * BLOCK;
-    let first = skip + c.get(skip..)?.iter().position(nonzero)?;
-    let tail = c.rchunks(BLOCK).take_while(|v| zero(v)).count() * BLOCK;
-    let end = c.len() - tail;
-    let last = c[first..end].iter().rposition(nonzero)?;
-    Some((first, first + last + 1))
-}
-
-/// A span-stored row (see [`detail_span`]) laid back over the gate's `bins`; None when the
-/// span runs past them.
-fn unspan(span: &[f32], first: usize, bins: usize) -> Option<Vec<f32>> {
-    if first.checked_add(span.len())? > bins {
-        return None;
-    }
-    let mut v = Vec::with_capacity(bins);
-    v.resize(first, 0.0);
-    v.extend_from_slice(span);
-    v.resize(bins, 0.0);
-    Some(v)
-}
-
 /// Reads a waveform part back (used by tests and later stages).
 /// As long as the contract for the same reason as [`write_waveforms`]: every column is
 /// checked for its type, then read, in the file's order.
@@ -158,9 +103,9 @@ pub fn read_waveforms(path: &Path) -> Result<Vec<Waveform>> {
     read_waveforms_with(path, true)
 }
 
-/// The columns of a waveform's bins, in [`Waveform`]'s order: laser photons, impulse energy,
-/// then the span-stored ones ([`detail_span`]): its standard error and the four classes'
-/// energies.
+/// The columns of a waveform's bins, in [`Waveform`]'s order: laser photons, impulse energy
+/// (the whole gate), then those stored from `span_first_bin` on
+/// ([`Waveform::span_first_bin`]): its standard error and the four classes' energies.
 const BIN_COLUMNS: [&str; 7] = [
     "laser_photons",
     "impulse_energy_j",
@@ -309,18 +254,16 @@ fn read_waveforms_with(path: &Path, pages: bool) -> Result<Vec<Waveform>> {
         for i in 0..b.num_rows() {
             let laser_photons = next(0)?;
             let bins = laser_photons.len();
+            let span_first_bin = first.as_ref().map_or(0, |f| f.value(i) as usize);
             let mut gate = |c: usize| -> Result<Vec<f32>> {
-                unspan(
-                    &next(c)?,
-                    first.as_ref().map_or(0, |f| f.value(i) as usize),
-                    bins,
-                )
-                .ok_or_else(|| {
-                    err(&format!(
+                let v = next(c)?;
+                if span_first_bin.saturating_add(v.len()) > bins {
+                    return Err(err(&format!(
                         "row {i} of column {} runs past the gate's {bins} bins",
                         BIN_COLUMNS[c]
-                    ))
-                })
+                    )));
+                }
+                Ok(v)
             };
             let impulse_energy_se_j = gate(2)?;
             let class_energy_j = [gate(3)?, gate(4)?, gate(5)?, gate(6)?];
@@ -350,6 +293,7 @@ fn read_waveforms_with(path: &Path, pages: bool) -> Result<Vec<Waveform>> {
                     bfl.value(i)
                 },
                 class_energy_j,
+                span_first_bin,
                 rays: rays.value(i),
                 paths_per_ray: ppr.value(i),
                 wavelength_nm: bands.as_ref().map(|a| a.value(i)),
@@ -422,6 +366,7 @@ mod tests {
             brf_fov_solar: brf_fov,
             brf_footprint_laser: brf_footprint,
             class_energy_j: std::array::from_fn(|_| vec![0.0, 2.5e-16]),
+            span_first_bin: 0,
             rays: 4,
             paths_per_ray: 1.0,
             wavelength_nm: None,
@@ -458,11 +403,12 @@ mod tests {
         let _ = std::fs::remove_dir_all(&dir);
     }
 
-    /// The span-stored columns hold only the bins from the first non-zero value of any of
-    /// them to the last, and read back to the whole gate: spans at either end, in the
-    /// middle, one bin wide, and none; a span that runs past the gate is an error.
+    /// The columns stored from `span_first_bin` on read back as they were written: spans at
+    /// either end of the gate, in the middle, one bin wide, and none; a part of the layout
+    /// before the spans (no such column, every bin stored) reads back with the span at bin 0;
+    /// a span that runs past its gate is an error.
     #[test]
-    fn span_stored_columns_read_back_over_the_whole_gate() {
+    fn span_stored_columns_read_back() {
         let dir = std::env::temp_dir().join(format!("lidarsim-wfspan-{}", std::process::id()));
         let path = dir.join("part.parquet");
         let bins = 40;
@@ -478,58 +424,58 @@ mod tests {
         let rows: Vec<Waveform> = (0..spans.len())
             .map(|i| {
                 let (a, b) = spans[i];
-                let lit = |k: f32| -> Vec<f32> {
-                    let value =
-                        |j: usize| (j as f32 + k) * f32::from(u8::from((a..b).contains(&j)));
-                    (0..bins).map(value).collect()
-                };
+                let lit = |k: f32| -> Vec<f32> { (a..b).map(|j| j as f32 + k).collect() };
                 let mut w = waveform(i as u64, f32::NAN, 0.5);
                 w.laser_photons = vec![1.0; bins];
-                w.impulse_energy_j = lit(0.5);
+                w.impulse_energy_j = (0..bins).map(|j| j as f32).collect();
                 w.impulse_energy_se_j = lit(1.0);
-                // one class lit over the whole span, the others over a part of it or nowhere
-                w.class_energy_j = std::array::from_fn(|c| match c {
-                    0 => lit(2.0),
-                    1 if b > a + 1 => {
-                        let mut v = lit(3.0);
-                        v[a] = 0.0;
-                        v
-                    }
-                    _ => vec![0.0; bins],
-                });
-                assert_eq!(detail_span(&w), spans[i], "row {i}");
+                w.class_energy_j = std::array::from_fn(|c| lit(2.0 + c as f32));
+                w.span_first_bin = a;
                 w
             })
             .collect();
         write_waveforms(&path, &rows, "fp").unwrap();
         // as text: the rows' null BRF is NaN, unequal to itself
         let text = |w: &[Waveform]| format!("{w:?}");
-        assert_eq!(text(&read_waveforms(&path).unwrap()), text(&rows));
-        for c in 0..=70 {
-            let v: Vec<f32> = (0..c).map(|j| f32::from(u8::from(j % 23 == 19))).collect();
-            let naive = v
-                .iter()
-                .position(|&x| x != 0.0)
-                .map(|a| (a, 1 + v.iter().rposition(|&x| x != 0.0).unwrap()));
-            assert_eq!(nonzero_span(&v), naive, "{v:?}");
+        let back = read_waveforms(&path).unwrap();
+        assert_eq!(text(&back), text(&rows));
+        for (w, &(a, b)) in back.iter().zip(&spans) {
+            for j in 0..bins {
+                let inside = (a..b).contains(&j);
+                let want = if inside { j as f32 + 1.0 } else { 0.0 };
+                assert_eq!(w.impulse_se(j), want, "bin {j} of {a}..{b}");
+            }
+            let all: f64 = (a..b).map(|j| (j as f32 + 3.0) as f64).sum();
+            assert_eq!(w.class_energy_sum(1, 0, bins), all);
+            assert_eq!(w.class_energy_sum(1, 0, a), 0.0);
         }
-        // a part of the layout before the spans (no span_first_bin, every bin stored) reads
-        // back to the same waveforms
-        let mut table = waveform_table(&rows);
+        // the layout before the spans: no span_first_bin, every bin of every column stored
+        let dense: Vec<Waveform> = rows
+            .iter()
+            .map(|w| {
+                let mut d = w.clone();
+                let whole = |v: &[f32]| -> Vec<f32> {
+                    let mut g = vec![0.0; w.span_first_bin];
+                    g.extend_from_slice(v);
+                    g.resize(bins, 0.0);
+                    g
+                };
+                d.impulse_energy_se_j = whole(&w.impulse_energy_se_j);
+                d.class_energy_j = std::array::from_fn(|c| whole(&w.class_energy_j[c]));
+                d.span_first_bin = 0;
+                d
+            })
+            .collect();
+        let mut table = waveform_table(&dense);
         table.columns.retain(|(name, _)| *name != "span_first_bin");
-        for (name, c) in &mut table.columns {
-            let whole = |f: fn(&Waveform) -> &[f32]| Column::ListF32(rows.iter().map(f).collect());
-            match *name {
-                "impulse_energy_se_j" => *c = whole(|r| &r.impulse_energy_se_j),
-                "ground_energy_j" => *c = whole(|r| &r.class_energy_j[0]),
-                "vegetation_energy_j" => *c = whole(|r| &r.class_energy_j[1]),
-                "building_energy_j" => *c = whole(|r| &r.class_energy_j[2]),
-                "other_energy_j" => *c = whole(|r| &r.class_energy_j[3]),
-                _ => {}
+        table.write(&path).unwrap();
+        let back = read_waveforms(&path).unwrap();
+        assert_eq!(text(&back), text(&dense));
+        for (d, w) in back.iter().zip(&rows) {
+            for j in 0..bins {
+                assert_eq!(d.impulse_se(j), w.impulse_se(j));
             }
         }
-        table.write(&path).unwrap();
-        assert_eq!(text(&read_waveforms(&path).unwrap()), text(&rows));
         // a span that runs past its row's gate: laser photons shortened to 10 bins
         let mut table = waveform_table(&rows[4..5]);
         for (name, c) in &mut table.columns {

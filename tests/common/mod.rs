@@ -527,9 +527,7 @@ pub fn compare_bins(name: &str, a: &Waveform, b: &Waveform) {
     let mut chi2 = 0.0;
     let mut beyond = 0;
     for &i in &kept {
-        let se = ((a.impulse_energy_se_j[i] as f64).powi(2)
-            + (b.impulse_energy_se_j[i] as f64).powi(2))
-        .sqrt();
+        let se = ((a.impulse_se(i) as f64).powi(2) + (b.impulse_se(i) as f64).powi(2)).sqrt();
         let z = (a.impulse_energy_j[i] as f64 - b.impulse_energy_j[i] as f64) / se;
         chi2 += z * z;
         if z.abs() >= 3.0 {

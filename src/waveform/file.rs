@@ -231,26 +231,20 @@ fn read_waveforms_with(path: &Path, pages: bool) -> Result<Vec<Waveform>> {
         let ppr = typed("paths_per_ray", &f32t)?
             .as_primitive::<Float32Type>()
             .clone();
-        let bands = match b.column_by_name("wavelength_nm") {
-            Some(_) => Some(
-                typed("wavelength_nm", &f64t)?
-                    .as_primitive::<Float64Type>()
-                    .clone(),
-            ),
-            None => None,
+        // a column only some parts have, checked like the others where it is
+        let optional = |name: &str, want: &DataType| {
+            b.column_by_name(name)
+                .map(|_| typed(name, want))
+                .transpose()
         };
+        let bands =
+            optional("wavelength_nm", &f64t)?.map(|c| c.as_primitive::<Float64Type>().clone());
         let f64s = |l: &arrow_array::ListArray, i: usize| {
             l.value(i).as_primitive::<Float64Type>().values().to_vec()
         };
         // parts written before the spans (0304098) hold the whole gate in every bin column
-        let first = match b.column_by_name("span_first_bin") {
-            Some(_) => Some(
-                typed("span_first_bin", &u32t)?
-                    .as_primitive::<UInt32Type>()
-                    .clone(),
-            ),
-            None => None,
-        };
+        let first =
+            optional("span_first_bin", &u32t)?.map(|c| c.as_primitive::<UInt32Type>().clone());
         for i in 0..b.num_rows() {
             let laser_photons = next(0)?;
             let bins = laser_photons.len();

@@ -79,10 +79,15 @@ impl Pending {
     }
 
     /// Syncs the written file and renames it to its final name.
-    pub fn commit(mut self) -> Result<()> {
+    pub fn commit(self) -> Result<()> {
         if let Ok(f) = File::open(&self.tmp) {
             let _ = f.sync_all();
         }
+        self.rename()
+    }
+
+    /// Renames the file, synced by the caller, to its final name.
+    fn rename(mut self) -> Result<()> {
         std::fs::rename(&self.tmp, &self.path).map_err(|e| {
             Error::io(&self.path, "cannot move file into place", e).advise(WRITE_ADVICE)
         })?;
@@ -99,16 +104,134 @@ impl Drop for Pending {
     }
 }
 
+/// Commits pending files on a thread of its own, in the order they come. A sync waits for the
+/// disk, and a worker waiting there is a core idle: with the syncs of its parts on the
+/// workers, the town survey's plan and simulate stages took 6 % longer (alternating pairs
+/// against no sync at all).
+pub struct Committer {
+    send: Option<std::sync::mpsc::Sender<Vec<Pending>>>,
+    thread: std::sync::Mutex<Option<std::thread::JoinHandle<Result<()>>>>,
+}
+
+impl Default for Committer {
+    fn default() -> Committer {
+        let (send, received) = std::sync::mpsc::channel::<Vec<Pending>>();
+        // on an error the thread stops: the files still queued are dropped, which removes them
+        let thread = std::thread::spawn(move || -> Result<()> {
+            for batch in received {
+                sync_together(&batch);
+                for pending in batch {
+                    pending.rename()?;
+                }
+            }
+            Ok(())
+        });
+        Committer {
+            send: Some(send),
+            thread: std::sync::Mutex::new(Some(thread)),
+        }
+    }
+}
+
+impl Committer {
+    /// Queues `pending` to be synced and renamed after those queued before it; an error is
+    /// that of an earlier file the thread could not commit.
+    pub fn commit(&self, batch: Vec<Pending>) -> Result<()> {
+        match self.send.as_ref().map(|s| s.send(batch)) {
+            Some(Ok(())) => Ok(()),
+            _ => Err(self.stopped()),
+        }
+    }
+
+    /// Waits until every queued file is in place.
+    pub fn finish(mut self) -> Result<()> {
+        drop(self.send.take());
+        self.join()
+    }
+
+    fn join(&self) -> Result<()> {
+        let handle = self.thread.lock().ok().and_then(|mut t| t.take());
+        match handle.map(|h| h.join()) {
+            None | Some(Ok(Ok(()))) => Ok(()),
+            Some(Ok(Err(e))) => Err(e),
+            Some(Err(_)) => Err(Error::msg("the thread committing files panicked")),
+        }
+    }
+
+    /// The error that stopped the thread.
+    fn stopped(&self) -> Error {
+        match self.join() {
+            Err(e) => e,
+            Ok(()) => Error::msg("the thread committing files has stopped"),
+        }
+    }
+}
+
+/// Syncs the files of a batch with one flush of their file system: a sync of each would make
+/// a journal commit of each.
+fn sync_together(batch: &[Pending]) {
+    let Some(f) = batch.first().and_then(|p| File::open(&p.tmp).ok()) else {
+        return;
+    };
+    if batch.len() == 1 {
+        let _ = f.sync_all();
+        return;
+    }
+    use std::os::fd::AsRawFd;
+    // SAFETY: syncfs reads nothing but the descriptor, which `f` keeps open
+    if unsafe { libc::syncfs(f.as_raw_fd()) } != 0 {
+        for p in batch {
+            if let Ok(f) = File::open(&p.tmp) {
+                let _ = f.sync_all();
+            }
+        }
+    }
+}
+
+impl Drop for Committer {
+    /// Files queued before a failure elsewhere are still committed: they are whole.
+    fn drop(&mut self) {
+        drop(self.send.take());
+        let _ = self.join();
+    }
+}
+
 pub fn write_text_atomic(path: &Path, text: &str) -> Result<()> {
-    write_atomic(path, |mut f| {
-        f.write_all(text.as_bytes())
-            .map_err(|e| Error::io(path, "cannot write", e).advise(WRITE_ADVICE))
-    })
+    text_pending(path, text)?.commit()
+}
+
+/// `text` written under the temporary name of `path`, not yet committed.
+pub fn text_pending(path: &Path, text: &str) -> Result<Pending> {
+    let (pending, mut f) = Pending::create(path)?;
+    f.write_all(text.as_bytes())
+        .map_err(|e| Error::io(path, "cannot write", e).advise(WRITE_ADVICE))?;
+    Ok(pending)
 }
 
 /// Writes a CSV table (RFC 4180: a field with a comma, quote or line break is quoted) under
 /// a temporary name, then renames it: every CSV a user reads goes through here.
 pub fn write_csv_atomic<R, F>(path: &Path, header: &[&str], rows: R) -> Result<()>
+where
+    R: IntoIterator<Item = Vec<F>>,
+    F: AsRef<[u8]>,
+{
+    csv_pending(path, header, rows)?.commit()
+}
+
+/// [`write_csv_atomic`]'s table under its temporary name, not yet committed.
+pub fn csv_pending<R, F>(path: &Path, header: &[&str], rows: R) -> Result<Pending>
+where
+    R: IntoIterator<Item = Vec<F>>,
+    F: AsRef<[u8]>,
+{
+    let bytes = csv_bytes(path, header, rows)?;
+    let (pending, mut f) = Pending::create(path)?;
+    f.write_all(&bytes)
+        .map_err(|e| Error::io(path, "cannot write", e).advise(WRITE_ADVICE))?;
+    Ok(pending)
+}
+
+fn csv_bytes<R, F>(path: &Path, header: &[&str], rows: R) -> Result<Vec<u8>>
 where
     R: IntoIterator<Item = Vec<F>>,
     F: AsRef<[u8]>,
@@ -122,10 +245,7 @@ where
     let bytes = w
         .into_inner()
         .map_err(|e| Error::data(path, format!("cannot encode CSV: {e}")))?;
-    write_atomic(path, |mut f| {
-        f.write_all(&bytes)
-            .map_err(|e| Error::io(path, "cannot write", e).advise(WRITE_ADVICE))
-    })
+    Ok(bytes)
 }
 
 /// FNV-1a, 64 bits, over length-prefixed parts: a fingerprint that is stable across platforms
@@ -199,6 +319,57 @@ mod tests {
             assert_eq!(file_checksum(&path), Some(fingerprint(&[&bytes])), "{len}");
         }
         assert_eq!(file_checksum(&dir.join("missing")), None);
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    /// Batches reach their final names, whole, once `finish` returns; a file that cannot be
+    /// moved into place is an error of a later call, and the temporary files queued after it
+    /// are removed, never moved into place.
+    #[test]
+    fn the_committer_moves_batches_into_place_or_reports_why_not() {
+        let dir = std::env::temp_dir().join(format!("lidarsim_commit_{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let committer = Committer::default();
+        for k in 0..20 {
+            let a = text_pending(&dir.join(format!("{k}.txt")), &format!("part {k}")).unwrap();
+            let b = text_pending(&dir.join(format!("{k}.sum")), "sum").unwrap();
+            let batch = if k % 2 == 0 { vec![a, b] } else { vec![a] };
+            committer.commit(batch).unwrap();
+        }
+        committer.finish().unwrap();
+        for k in 0..20 {
+            let text = std::fs::read_to_string(dir.join(format!("{k}.txt"))).unwrap();
+            assert_eq!(text, format!("part {k}"));
+            assert_eq!(dir.join(format!("{k}.sum")).exists(), k % 2 == 0);
+        }
+        assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 30);
+
+        // a final name that is a folder cannot be renamed over
+        let committer = Committer::default();
+        std::fs::create_dir_all(dir.join("taken")).unwrap();
+        let bad = text_pending(&dir.join("taken"), "x").unwrap();
+        let bad_tmp = bad.tmp().to_path_buf();
+        committer.commit(vec![bad]).unwrap();
+        let mut failed = None;
+        for k in 0..200 {
+            let p = text_pending(&dir.join(format!("late{k}.txt")), "late").unwrap();
+            if let Err(e) = committer.commit(vec![p]) {
+                failed = Some(e);
+                break;
+            }
+        }
+        let e = match failed {
+            Some(e) => e,
+            None => committer.finish().unwrap_err(),
+        };
+        assert!(e.to_string().contains("taken"), "{e}");
+        let left: Vec<String> = std::fs::read_dir(&dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .filter(|n| n.contains(".tmp-") || n.starts_with("late"))
+            .collect();
+        assert!(!bad_tmp.exists());
+        assert!(left.is_empty(), "{left:?}");
         let _ = std::fs::remove_dir_all(&dir);
     }
 

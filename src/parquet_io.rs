@@ -418,10 +418,15 @@ impl Table<'_> {
     /// Writes the table as a Parquet file with lidarsim's encoding, under its temporary name
     /// until it is whole.
     pub fn write(&self, path: &Path) -> Result<()> {
+        self.write_pending(path)?.commit()
+    }
+
+    /// [`Table::write`] but for the commit, which is the caller's.
+    pub fn write_pending(&self, path: &Path) -> Result<Pending> {
         let (pending, file) = Pending::create(path)?;
         self.encode(file, props())
             .map_err(|e| parquet_error(path, e))?;
-        pending.commit()
+        Ok(pending)
     }
 
     fn batch_schema(&self) -> arrow_schema::SchemaRef {

@@ -585,7 +585,11 @@ fn simulate_stage(
         .filter(|&k| !whole(k))
         .collect();
     let (rays, done, stopped) = simulate_parts(loaded, scene, plan, &todo, out, fp)?;
-    let missing = (0..parts).filter(|&k| !whole(k)).count();
+    // the parts written just now are whole; the others are read again, as another shard may
+    // have written some meanwhile
+    let mut written_now = vec![false; parts];
+    todo[..done].iter().for_each(|&k| written_now[k] = true);
+    let missing = (0..parts).filter(|&k| !written_now[k] && !whole(k)).count();
     if missing == 0 {
         run.finish(Stage::Simulate, fp, part_files, t, None, "done")?;
     } else {

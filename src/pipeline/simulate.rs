@@ -4,6 +4,7 @@
 use super::PART_PULSES;
 use crate::campaign::{Loaded, Method};
 use crate::error::Result;
+use crate::fsutil::{Committer, Pending};
 use crate::plan::{Plan, Pulse};
 use crate::progress::{log, progress};
 use crate::scene::Scene;
@@ -11,7 +12,7 @@ use crate::sensor::{pulse_sigma_s, Gate, Laser, Receiver, SunSource};
 use crate::transport::atmosphere::Atmosphere;
 use crate::transport::bands::Bands;
 use crate::transport::{simulate_pulse, simulate_pulse_in, PulseSetup, Scratch};
-use crate::waveform::file::{part_name, write_waveforms};
+use crate::waveform::file::{part_name, waveforms_pending};
 use crate::waveform::{self, Radiometry, Waveform};
 use glam::DVec3;
 use indicatif::ProgressBar;
@@ -48,14 +49,17 @@ pub(super) fn simulate_parts(
     // same threads do both, so no core waits for a writer (a writer thread beside the workers
     // left the cores idle whenever encoding was slower than simulating), and at most two
     // parts are in memory.
+    // ... and synced and renamed into place on a thread of its own, which waits for the disk
+    let committer = Committer::default();
     let write = |(n, k, waveforms, secs): (usize, usize, Vec<Waveform>, Vec<f64>)| -> Result<()> {
-        write_waveforms(&out.join(part_name(k)), &waveforms, fingerprint)?;
-        write_pulse_stats(
+        let [part, sidecar] = waveforms_pending(&out.join(part_name(k)), &waveforms, fingerprint)?;
+        let stats = pulse_stats_pending(
             &out.join(format!("waveforms/part-{k:05}.stats.csv")),
             waveforms.iter().step_by(bands),
             &secs,
         )?;
         drop(waveforms);
+        committer.commit(vec![part, sidecar, stats])?;
         crate::progress::release_after_part(n);
         Ok(())
     };
@@ -99,6 +103,7 @@ pub(super) fn simulate_parts(
     if let Some(last) = pending {
         write(last)?;
     }
+    committer.finish()?;
     bar.finish_and_clear();
     let secs = t.elapsed().as_secs_f64();
     if done_pulses > 0 {
@@ -129,11 +134,11 @@ pub(super) fn part_range(k: usize, n: usize) -> std::ops::Range<usize> {
 
 /// Per-pulse counters beside the waveforms (of the first band): effective paths per ray and
 /// time per ray. Kept out of the waveform files, which must not depend on timing.
-pub(super) fn write_pulse_stats<'w>(
+pub(super) fn pulse_stats_pending<'w>(
     path: &Path,
     waveforms: impl Iterator<Item = &'w Waveform>,
     secs: &[f64],
-) -> Result<()> {
+) -> Result<Pending> {
     let rows = waveforms.zip(secs).map(|(w, s)| {
         vec![
             w.pulse_id.to_string(),
@@ -150,7 +155,7 @@ pub(super) fn write_pulse_stats<'w>(
         "seconds",
         "seconds_per_ray",
     ];
-    crate::fsutil::write_csv_atomic(path, &header, rows)
+    crate::fsutil::csv_pending(path, &header, rows)
 }
 
 /// In a repeated scene, the box of the landscape a pulse sees: the copy of the scene's box

@@ -3,6 +3,7 @@
 
 use super::Waveform;
 use crate::error::{Error, Result};
+use crate::fsutil::Pending;
 use crate::parquet_io::{Column, Table};
 use arrow_array::Array;
 use arrow_schema::DataType;
@@ -23,13 +24,22 @@ pub fn part_name(k: usize) -> String {
 
 /// Writes a waveform part.
 pub fn write_waveforms(path: &Path, w: &[Waveform], fingerprint: &str) -> Result<()> {
-    waveform_table(w).write(path)?;
-    // the part's checksum and the fingerprint of the simulation that made it beside it,
-    // written after it: a part without them, whose bytes disagree, or made for other inputs
-    // (another campaign, scene or version in the same folder) is no part (`part_is_whole`)
-    let sum = crate::fsutil::file_checksum(path)
+    waveforms_pending(path, w, fingerprint)?
+        .into_iter()
+        .try_for_each(Pending::commit)
+}
+
+/// [`write_waveforms`] but for the commits, which are the caller's, in the order given: the
+/// part, then its checksum and the fingerprint of the simulation that made it. A part without
+/// them, whose bytes disagree, or made for other inputs (another campaign, scene or version
+/// in the same folder) is no part (`part_is_whole`).
+pub fn waveforms_pending(path: &Path, w: &[Waveform], fingerprint: &str) -> Result<[Pending; 2]> {
+    let part = waveform_table(w).write_pending(path)?;
+    let sum = crate::fsutil::file_checksum(part.tmp())
         .ok_or_else(|| Error::data(path, "cannot read back the part just written"))?;
-    crate::fsutil::write_text_atomic(&checksum_path(path), &format!("{sum} {fingerprint}\n"))
+    let record = format!("{sum} {fingerprint}\n");
+    let sidecar = crate::fsutil::text_pending(&checksum_path(path), &record)?;
+    Ok([part, sidecar])
 }
 
 /// Where a part's checksum is kept: `part-NNNNN.parquet` → `part-NNNNN.fnv`.

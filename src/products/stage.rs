@@ -20,11 +20,12 @@ use crate::progress::{log, progress};
 use crate::rng::SplitMix64;
 use crate::scene::{Scene, SurfaceClass};
 use crate::sensor::pulse_sigma_s;
-use crate::waveform::file::{part_name, read_waveforms};
+use crate::waveform::file::{part_name, read_waveforms_but_impulse};
 use crate::waveform::record::Recorder;
 use crate::waveform::Waveform;
 use glam::DVec3;
 use rayon::prelude::*;
+use std::borrow::Cow;
 use std::path::Path;
 
 /// The mission-shaped files (campaign.md, "Files of the next wave").
@@ -64,7 +65,7 @@ pub fn wanted(loaded: &Loaded) -> Wanted {
 /// sigmas of its centre.
 fn class_of(w: &Waveform, centre: f64, sigma: f64) -> u8 {
     let lo = (centre - 2.0 * sigma).floor().max(0.0) as usize;
-    let hi = ((centre + 2.0 * sigma).ceil() as usize).min(w.impulse_energy_j.len());
+    let hi = ((centre + 2.0 * sigma).ceil() as usize).min(w.laser_photons.len());
     let mut best = (0.0f64, SurfaceClass::Other.las_code());
     for class in SurfaceClass::ALL {
         let code = class.las_code();
@@ -84,20 +85,29 @@ fn components(loaded: &Loaded, w: &Waveform) -> Vec<Component> {
 }
 
 /// [`components`], with the photons they were fitted to and the return's sigma in bins.
-fn decomposed(loaded: &Loaded, w: &Waveform) -> (Vec<Component>, Vec<f32>, f64) {
+fn decomposed<'w>(loaded: &Loaded, w: &'w Waveform) -> (Vec<Component>, Cow<'w, [f32]>, f64) {
     let c = &loaded.campaign;
     let inst = &c.instrument;
     let hv = crate::photon_energy_j(band_of(loaded, w));
-    let mc_se: Vec<f32> = (0..w.laser_photons.len())
-        .map(|b| (w.impulse_se(b) as f64 / hv) as f32)
-        .collect();
+    // zero outside the span of bins the light reached, as the waveform holds it
+    let mut mc_se = vec![0.0f32; w.laser_photons.len()];
+    let span = w.span_first_bin.min(mc_se.len())..mc_se.len();
+    for (m, &se) in mc_se[span].iter_mut().zip(&w.impulse_energy_se_j) {
+        *m = (se as f64 / hv) as f32;
+    }
     let band = c.wavelength_nm.index_of(w.wavelength_nm);
     let recorder = Recorder::new(inst, SplitMix64::band_seed(c.seed, band));
     let (photons, sigma_s) = if recorder.changes_returns() {
         let recorded = recorder.laser_photons(&recorder.record(w));
-        (recorded, recorder.return_sigma_s(pulse_sigma_s(inst)))
+        (
+            Cow::Owned(recorded),
+            recorder.return_sigma_s(pulse_sigma_s(inst)),
+        )
     } else {
-        (w.laser_photons.clone(), pulse_sigma_s(inst))
+        (
+            Cow::Borrowed(w.laser_photons.as_slice()),
+            pulse_sigma_s(inst),
+        )
     };
     let sigma_bins = sigma_s / (inst.bin_ns * 1e-9);
     let comps = decompose(
@@ -364,95 +374,96 @@ pub fn run(
     let bar = progress(plan.len() as u64, "products");
     let start = std::time::Instant::now();
     let every = parts.div_ceil(10).max(1);
-    // the next part is read and decoded on a thread of its own while this one is decomposed:
-    // reading is serial work the workers would otherwise wait for (a rendezvous: one part
-    // read ahead, no more)
-    std::thread::scope(|scope| -> Result<()> {
-        let (send, parts_read) = std::sync::mpsc::sync_channel::<Result<Vec<Waveform>>>(0);
-        scope.spawn(move || {
-            for k in 0..parts {
-                let part = read_waveforms(&out.join(part_name(k)));
-                let failed = part.is_err();
-                // a closed queue: the stage stopped on an error or a signal
-                if send.send(part).is_err() || failed {
-                    break;
+    // Part k + 1 is read and decoded while part k is decomposed, as two halves of one rayon
+    // join, as the simulate stage writes: the same threads do both, so no core waits for a
+    // reader (a reader thread beside the workers made the loop wait for it a tenth of its
+    // time on the town survey, whenever it lost its share of the cores to them)
+    let read = |k: usize| read_waveforms_but_impulse(&out.join(part_name(k)));
+    let mut next = (parts > 0).then(|| read(0));
+    for k in 0..parts {
+        if let Some(signal) = crate::interrupt::requested() {
+            return Err(Error::interrupted(
+                signal,
+                "the products stage stopped before writing anything; the waveforms are kept",
+            ));
+        }
+        crate::progress::release_after_part(k);
+        let Some(part) = next.take() else {
+            break;
+        };
+        let part = part?;
+        let (ahead, done) = rayon::join(
+            || (k + 1 < parts).then(|| read(k + 1)),
+            || -> Result<()> {
+                if part.iter().any(|w| w.pulse_id as usize >= plan.len()) {
+                    return Err(Error::msg(format!(
+                        "{}: waveforms of pulses that were not planned: run again without --resume",
+                        out.display()
+                    )));
                 }
-            }
-        });
-        for (k, part) in parts_read.into_iter().enumerate() {
-            if let Some(signal) = crate::interrupt::requested() {
-                return Err(Error::interrupted(
-                    signal,
-                    "the products stage stopped before writing anything; the waveforms are kept",
-                ));
-            }
-            crate::progress::release_after_part(k);
-            let part = part?;
-            if part.iter().any(|w| w.pulse_id as usize >= plan.len()) {
-                return Err(Error::msg(format!(
-                    "{}: waveforms of pulses that were not planned: run again without --resume",
-                    out.display()
-                )));
-            }
-            // with several bands, the rows of the first band (all rows with one) make the
-            // products of one band; points and photons are made in every band
-            let first: Vec<&Waveform> = part.iter().filter(|w| first_band(loaded, w)).collect();
-            let pulses_in_part = first.len();
-            seen += pulses_in_part;
-            for w in &first {
-                totals.add(w);
-            }
-            if let Some(pass) = &mut points {
-                let p = discrete_returns(loaded, plan, &part);
-                let of_first = |p: &Point| {
-                    p.wavelength_nm
-                        .is_none_or(|nm| nm == c.wavelength_nm.first() as f32)
-                };
-                if several {
-                    let first_points: Vec<Point> =
-                        p.iter().filter(|p| of_first(p)).cloned().collect();
-                    let first_rows: Vec<Waveform> = first.iter().map(|w| (*w).clone()).collect();
-                    examples.offer(&first_rows, &first_points);
-                    pass.tally_first_band(scene, plan, &first_points);
-                } else {
-                    examples.offer(&part, &p);
-                    pass.tally_first_band(scene, plan, &p);
+                // with several bands, the rows of the first band (all rows with one) make the
+                // products of one band; points and photons are made in every band
+                let first: Vec<&Waveform> = part.iter().filter(|w| first_band(loaded, w)).collect();
+                let pulses_in_part = first.len();
+                seen += pulses_in_part;
+                for w in &first {
+                    totals.add(w);
                 }
-                pass.add(&las_path, &p)?;
-            }
-            if want.photons {
-                let events = photon_events(loaded, plan, &part);
-                if let Some(a) = &mut atl03 {
-                    let first_events = events.iter().filter(|r| {
-                        r.wavelength_nm
-                            .is_none_or(|nm| nm == c.wavelength_nm.first())
-                    });
-                    let first_events: Vec<PhotonRow> = first_events.copied().collect();
-                    for rows in first_events.chunk_by(|a, b| a.pulse_id == b.pulse_id) {
-                        a.add(&plan.pulse(rows[0].pulse_id), rows)?;
+                if let Some(pass) = &mut points {
+                    let p = discrete_returns(loaded, plan, &part);
+                    let of_first = |p: &Point| {
+                        p.wavelength_nm
+                            .is_none_or(|nm| nm == c.wavelength_nm.first() as f32)
+                    };
+                    if several {
+                        let first_points: Vec<Point> =
+                            p.iter().filter(|p| of_first(p)).cloned().collect();
+                        let first_rows: Vec<Waveform> =
+                            first.iter().map(|w| (*w).clone()).collect();
+                        examples.offer(&first_rows, &first_points);
+                        pass.tally_first_band(scene, plan, &first_points);
+                    } else {
+                        examples.offer(&part, &p);
+                        pass.tally_first_band(scene, plan, &p);
+                    }
+                    pass.add(&las_path, &p)?;
+                }
+                if want.photons {
+                    let events = photon_events(loaded, plan, &part);
+                    if let Some(a) = &mut atl03 {
+                        let first_events = events.iter().filter(|r| {
+                            r.wavelength_nm
+                                .is_none_or(|nm| nm == c.wavelength_nm.first())
+                        });
+                        let first_events: Vec<PhotonRow> = first_events.copied().collect();
+                        for rows in first_events.chunk_by(|a, b| a.pulse_id == b.pulse_id) {
+                            a.add(&plan.pulse(rows[0].pulse_id), rows)?;
+                        }
+                    }
+                    photons.add(&photons_path, &events, several)?;
+                }
+                if let Some(l) = &mut l1b {
+                    let records: Vec<_> = first.par_iter().map(|w| recorder.record(w)).collect();
+                    for (w, r) in first.iter().zip(&records) {
+                        l.add(&plan.pulse(w.pulse_id), w, r)?;
                     }
                 }
-                photons.add(&photons_path, &events, several)?;
-            }
-            if let Some(l) = &mut l1b {
-                let records: Vec<_> = first.par_iter().map(|w| recorder.record(w)).collect();
-                for (w, r) in first.iter().zip(&records) {
-                    l.add(&plan.pulse(w.pulse_id), w, r)?;
+                bar.inc(pulses_in_part as u64);
+                if bar.is_hidden() && (k + 1) % every == 0 && k + 1 < parts {
+                    let rate = seen as f64 / start.elapsed().as_secs_f64().max(1e-9);
+                    log(&format!(
+                        "products: {}/{} parts, {rate:.0} pulses/s, {:.0} s left",
+                        k + 1,
+                        parts,
+                        (plan.len() - seen.min(plan.len())) as f64 / rate
+                    ));
                 }
-            }
-            bar.inc(pulses_in_part as u64);
-            if bar.is_hidden() && (k + 1) % every == 0 && k + 1 < parts {
-                let rate = seen as f64 / start.elapsed().as_secs_f64().max(1e-9);
-                log(&format!(
-                    "products: {}/{} parts, {rate:.0} pulses/s, {:.0} s left",
-                    k + 1,
-                    parts,
-                    (plan.len() - seen.min(plan.len())) as f64 / rate
-                ));
-            }
-        }
-        Ok(())
-    })?;
+                Ok(())
+            },
+        );
+        done?;
+        next = ahead;
+    }
     bar.finish_and_clear();
     if seen != plan.len() {
         return Err(Error::msg(format!(

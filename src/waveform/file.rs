@@ -110,7 +110,14 @@ pub fn waveform_table(w: &[Waveform]) -> Table<'_> {
 /// As long as the contract for the same reason as [`write_waveforms`]: every column is
 /// checked for its type, then read, in the file's order.
 pub fn read_waveforms(path: &Path) -> Result<Vec<Waveform>> {
-    read_waveforms_with(path, true)
+    read_waveforms_with(path, true, true)
+}
+
+/// [`read_waveforms`] but for the impulse energies, left empty: what the products stage reads,
+/// as it decomposes photons. The impulse energies are a column as long as the gate, like the
+/// photons: a third of the bins a part holds.
+pub fn read_waveforms_but_impulse(path: &Path) -> Result<Vec<Waveform>> {
+    read_waveforms_with(path, true, false)
 }
 
 /// The columns of a waveform's bins, in [`Waveform`]'s order: laser photons, impulse energy
@@ -129,7 +136,7 @@ const BIN_COLUMNS: [&str; 7] = [
 /// [`read_waveforms`]; with `pages`, the bins of a file laid out as lidarsim writes it are read
 /// straight from its pages (`parquet_io::read_f32_lists`) and the other columns through
 /// Arrow's reader, which reads every column of any other file.
-fn read_waveforms_with(path: &Path, pages: bool) -> Result<Vec<Waveform>> {
+fn read_waveforms_with(path: &Path, pages: bool, impulse: bool) -> Result<Vec<Waveform>> {
     use arrow_array::cast::AsArray;
     use arrow_array::types::{Float32Type, Float64Type, UInt32Type, UInt64Type};
     use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
@@ -148,7 +155,21 @@ fn read_waveforms_with(path: &Path, pages: bool) -> Result<Vec<Waveform>> {
         Some(leaves) => {
             let rest = (0..schema.num_columns()).filter(|c| !leaves.contains(c));
             let mask = ProjectionMask::leaves(schema, rest);
-            let bins = crate::parquet_io::read_f32_lists(&file, leaves).map_err(|e| err(&e))?;
+            // the impulse energies, when not wanted, read as no lists at all
+            let read: Vec<usize> = (0..leaves.len())
+                .filter(|&c| impulse || c != 1)
+                .map(|c| leaves[c])
+                .collect();
+            let mut lists = crate::parquet_io::read_f32_lists(&file, &read)
+                .map_err(|e| err(&e))?
+                .into_iter();
+            let rows = builder.metadata().file_metadata().num_rows().max(0) as usize;
+            let bins: Vec<Vec<Vec<f32>>> = (0..leaves.len())
+                .map(|c| match impulse || c != 1 {
+                    true => lists.next().unwrap_or_default(),
+                    false => vec![Vec::new(); rows],
+                })
+                .collect();
             (builder.with_projection(mask), Some(bins))
         }
         None => (builder, None),
@@ -443,6 +464,16 @@ mod tests {
         let text = |w: &[Waveform]| format!("{w:?}");
         let back = read_waveforms(&path).unwrap();
         assert_eq!(text(&back), text(&rows));
+        // the products' read: every column but the impulse energies, left empty
+        let without: Vec<Waveform> = rows
+            .iter()
+            .map(|w| Waveform {
+                impulse_energy_j: Vec::new(),
+                ..w.clone()
+            })
+            .collect();
+        let products = read_waveforms_but_impulse(&path).unwrap();
+        assert_eq!(text(&products), text(&without));
         for (w, &(a, b)) in back.iter().zip(&spans) {
             for j in 0..bins {
                 let inside = (a..b).contains(&j);
@@ -516,11 +547,11 @@ mod tests {
         write_waveforms(&path, &rows, "fp").unwrap();
         let text = |w: &[Waveform]| format!("{w:?}");
         assert_eq!(
-            text(&read_waveforms_with(&path, true).unwrap()),
+            text(&read_waveforms_with(&path, true, true).unwrap()),
             text(&rows)
         );
         assert_eq!(
-            text(&read_waveforms_with(&path, false).unwrap()),
+            text(&read_waveforms_with(&path, false, true).unwrap()),
             text(&rows)
         );
         // nullable items: not the layout read from the pages
@@ -601,11 +632,12 @@ mod tests {
                 }
             }
             std::fs::write(&bad, &data).unwrap();
-            for pages in [true, false] {
-                let read = std::panic::catch_unwind(|| read_waveforms_with(&bad, pages).is_ok());
+            for (pages, impulse) in [(true, true), (false, true), (true, false)] {
+                let read =
+                    std::panic::catch_unwind(|| read_waveforms_with(&bad, pages, impulse).is_ok());
                 assert!(
                     read.is_ok(),
-                    "case {case} (pages {pages}): the reader panicked"
+                    "case {case} (pages {pages}, impulse {impulse}): the reader panicked"
                 );
             }
         }

@@ -38,21 +38,24 @@ pub fn distances(scene: &Scene, points: &[Point], plan: &Plan) -> Vec<f64> {
         .par_iter()
         .map(|p| {
             let at = DVec3::new(p.x, p.y, p.z);
-            let reach = |d: DVec3| {
+            // the nearest surface in direction d if nearer than `best`: each ray reaches only
+            // as far as the nearest surface found so far, which is all the minimum needs and
+            // spares a short ray most of the tree
+            let nearer = |d: DVec3, best: f64| {
                 scene
-                    .intersect(at, d, REACH_M, FacetId::NONE)
-                    .map_or(REACH_M, |h| h.t)
+                    .intersect(at, d, best, FacetId::NONE)
+                    .map_or(best, |h| h.t)
             };
             let axis = if (p.pulse_id as usize) < plan.len() {
                 plan.pulse(p.pulse_id).direction
             } else {
                 DVec3::Z
             };
-            let along = reach(axis).min(reach(-axis));
+            let along = nearer(-axis, nearer(axis, REACH_M));
             if along <= 0.05 {
                 return along;
             }
-            dirs.iter().fold(along, |best, &d| best.min(reach(d)))
+            dirs.iter().fold(along, |best, &d| nearer(d, best))
         })
         .collect()
 }

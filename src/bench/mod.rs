@@ -503,7 +503,7 @@ fn campaigns_section(opts: &BenchOptions) -> Result<String> {
         match p {
             campaigns::Planned::Run { name, what, text } => {
                 eprintln!("lidarsim bench: campaign {name}");
-                let row = campaigns::run_row(&opts.dir, &name, &what, &text)?;
+                let row = campaigns::run_row_settled(&opts.dir, &name, &what, &text)?;
                 if name == "mabel_1064" {
                     eprintln!("lidarsim bench: campaign {name} in one band and in three");
                     bands.push(campaigns::bands_row(&opts.dir, &name, &text, 3)?);

@@ -104,10 +104,11 @@ impl Drop for Pending {
     }
 }
 
-/// Commits pending files on a thread of its own, in the order they come. A sync waits for the
-/// disk, and a worker waiting there is a core idle: with the syncs of its parts on the
-/// workers, the town survey's plan and simulate stages took 6 % longer (alternating pairs
-/// against no sync at all).
+/// Commits pending files on a thread of its own, in the order they come, each batch (with
+/// those queued meanwhile) synced by one flush of the file system. A sync waits for the disk,
+/// and a worker waiting there is a core idle: with three syncs per part on the workers, the
+/// town survey's plan and simulate stages took 6 % longer (alternating pairs against no sync
+/// at all).
 pub struct Committer {
     send: Option<std::sync::mpsc::Sender<Vec<Pending>>>,
     thread: std::sync::Mutex<Option<std::thread::JoinHandle<Result<()>>>>,
@@ -118,7 +119,12 @@ impl Default for Committer {
         let (send, received) = std::sync::mpsc::channel::<Vec<Pending>>();
         // on an error the thread stops: the files still queued are dropped, which removes them
         let thread = std::thread::spawn(move || -> Result<()> {
-            for batch in received {
+            for mut batch in received.iter() {
+                // the batches queued while the last sync waited for the disk go in this one:
+                // on a busy file system the syncs then keep pace with the parts
+                while let Ok(more) = received.try_recv() {
+                    batch.extend(more);
+                }
                 sync_together(&batch);
                 for pending in batch {
                     pending.rename()?;

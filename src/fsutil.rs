@@ -176,20 +176,20 @@ impl Committer {
 /// Syncs the files of a batch with one flush of their file system: a sync of each would make
 /// a journal commit of each.
 fn sync_together(batch: &[Pending]) {
-    let Some(f) = batch.first().and_then(|p| File::open(&p.tmp).ok()) else {
-        return;
-    };
-    if batch.len() == 1 {
-        let _ = f.sync_all();
-        return;
-    }
-    use std::os::fd::AsRawFd;
-    // SAFETY: syncfs reads nothing but the descriptor, which `f` keeps open
-    if unsafe { libc::syncfs(f.as_raw_fd()) } != 0 {
-        for p in batch {
-            if let Ok(f) = File::open(&p.tmp) {
-                let _ = f.sync_all();
+    #[cfg(target_os = "linux")]
+    if batch.len() > 1 {
+        use std::os::fd::AsRawFd;
+        if let Some(f) = batch.first().and_then(|p| File::open(&p.tmp).ok()) {
+            // SAFETY: syncfs reads nothing but the descriptor, which `f` keeps open
+            if unsafe { libc::syncfs(f.as_raw_fd()) } == 0 {
+                return;
             }
+        }
+    }
+    // one file, another system, or a flush that failed: each file on its own
+    for p in batch {
+        if let Ok(f) = File::open(&p.tmp) {
+            let _ = f.sync_all();
         }
     }
 }

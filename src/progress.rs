@@ -90,13 +90,17 @@ pub fn peak_rss_bytes() -> Option<u64> {
 /// to the nanosecond (/proc/self/stat counts 10 ms ticks: ±6 % on the bench's 0.16 s
 /// single-pulse stages), else /proc/self/stat's ticks; None where neither exists.
 pub fn process_cpu_seconds() -> Option<f64> {
-    let mut t = libc::timespec {
-        tv_sec: 0,
-        tv_nsec: 0,
-    };
-    // SAFETY: clock_gettime writes the one timespec it is given, which lives through the call
-    if unsafe { libc::clock_gettime(libc::CLOCK_PROCESS_CPUTIME_ID, &mut t) } == 0 {
-        return Some(t.tv_sec as f64 + t.tv_nsec as f64 * 1e-9);
+    #[cfg(unix)]
+    {
+        let mut t = libc::timespec {
+            tv_sec: 0,
+            tv_nsec: 0,
+        };
+        // SAFETY: clock_gettime writes the one timespec it is given, which lives through the
+        // call
+        if unsafe { libc::clock_gettime(libc::CLOCK_PROCESS_CPUTIME_ID, &mut t) } == 0 {
+            return Some(t.tv_sec as f64 + t.tv_nsec as f64 * 1e-9);
+        }
     }
     let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
     // the command name (field 2) may hold spaces: count fields after its closing parenthesis

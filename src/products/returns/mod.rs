@@ -142,7 +142,6 @@ pub fn decompose(
     if max_returns == 0 || photons.is_empty() {
         return Vec::new();
     }
-    let signal = |v: f32| v.is_finite() && v > 0.0;
     let hint = if pulse_sigma_bins.is_finite() && pulse_sigma_bins > 0.0 {
         pulse_sigma_bins
     } else {
@@ -157,10 +156,9 @@ pub fn decompose(
     // The bins around the signal only, on the coarse grid's boundaries: a gate of hundreds of
     // bins holds a return or two, and the zeros far from them change nothing (the smoothing,
     // the fit's windows and the residual search reach a few sigmas) but cost their passes.
-    let Some(first) = photons.iter().position(|&v| signal(v)) else {
+    let Some((first, last)) = signal_span(photons) else {
         return Vec::new();
     };
-    let last = photons.iter().rposition(|&v| signal(v)).unwrap_or(first);
     let margin = (SPAN_MARGIN_SIGMAS * hint).ceil() as usize + SPAN_MARGIN_BINS;
     let lo = first.saturating_sub(margin) / f * f;
     let hi = (last + 1 + margin).min(photons.len());
@@ -220,6 +218,52 @@ pub fn decompose(
     })
     .map(shifted)
     .collect()
+}
+
+/// Whether a bin holds signal: photons, finite and above zero.
+fn signal(v: f32) -> bool {
+    v.is_finite() && v > 0.0
+}
+
+/// Bins scanned at once by [`signal_span`].
+const SCAN_BLOCK: usize = 16;
+
+/// The first and last bins holding [`signal`], None if none does. Blocks of bins are passed
+/// over by a test of "any above zero" that vectorises, and only a block that passes is looked
+/// into bin by bin: the scan bin by bin from either end was three quarters of `decompose`'s
+/// own time on the forest's 3152-bin gates.
+fn signal_span(photons: &[f32]) -> Option<(usize, usize)> {
+    let any_above = |b: &[f32]| b.iter().fold(false, |a, &v| a | (v > 0.0));
+    let blocks = photons.chunks_exact(SCAN_BLOCK);
+    let tail = blocks.remainder();
+    let tail_at = photons.len() - tail.len();
+    let first = blocks
+        .enumerate()
+        .filter(|(_, b)| any_above(b))
+        .find_map(|(k, b)| {
+            b.iter()
+                .position(|&v| signal(v))
+                .map(|i| k * SCAN_BLOCK + i)
+        })
+        .or_else(|| tail.iter().position(|&v| signal(v)).map(|i| tail_at + i))?;
+    let last = tail
+        .iter()
+        .rposition(|&v| signal(v))
+        .map(|i| tail_at + i)
+        .or_else(|| {
+            let blocks = photons[..tail_at].chunks_exact(SCAN_BLOCK);
+            blocks
+                .enumerate()
+                .rev()
+                .filter(|(_, b)| any_above(b))
+                .find_map(|(k, b)| {
+                    b.iter()
+                        .rposition(|&v| signal(v))
+                        .map(|i| k * SCAN_BLOCK + i)
+                })
+        })
+        .unwrap_or(first);
+    Some((first, last))
 }
 
 /// [`decompose`] on bins as given (see [`coarsening`]).

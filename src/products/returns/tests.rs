@@ -547,3 +547,39 @@ fn a_wide_return_is_placed_at_its_summit_a_narrow_one_at_its_fit() {
     place_on_summits(&mut placed, &y, sigma);
     assert_eq!(placed, fitted);
 }
+
+/// The blockwise scan finds the same first and last bins of signal as a scan bin by bin, with
+/// zeros, negative values, NaN and infinities anywhere, on every length around the block's.
+#[test]
+fn signal_span_equals_the_scan_bin_by_bin() {
+    let mut rng = SplitMix64::new(11);
+    let naive = |v: &[f32]| {
+        let first = v.iter().position(|&x| signal(x))?;
+        Some((first, v.iter().rposition(|&x| signal(x)).unwrap_or(first)))
+    };
+    let odd = [
+        0.0,
+        -1.0,
+        -0.0,
+        f32::NAN,
+        f32::INFINITY,
+        f32::NEG_INFINITY,
+        1e-30,
+        3.0,
+    ];
+    for len in 0..80 {
+        for _ in 0..200 {
+            let dense = rng.uniform();
+            let v: Vec<f32> = (0..len)
+                .map(|_| {
+                    if rng.uniform() < dense * 0.3 {
+                        odd[(rng.uniform() * odd.len() as f64) as usize % odd.len()]
+                    } else {
+                        0.0
+                    }
+                })
+                .collect();
+            assert_eq!(signal_span(&v), naive(&v), "{v:?}");
+        }
+    }
+}

@@ -208,8 +208,12 @@ pub fn write_text_atomic(path: &Path, text: &str) -> Result<()> {
 
 /// `text` written under the temporary name of `path`, not yet committed.
 pub fn text_pending(path: &Path, text: &str) -> Result<Pending> {
+    bytes_pending(path, text.as_bytes())
+}
+
+fn bytes_pending(path: &Path, bytes: &[u8]) -> Result<Pending> {
     let (pending, mut f) = Pending::create(path)?;
-    f.write_all(text.as_bytes())
+    f.write_all(bytes)
         .map_err(|e| Error::io(path, "cannot write", e).advise(WRITE_ADVICE))?;
     Ok(pending)
 }
@@ -230,11 +234,7 @@ where
     R: IntoIterator<Item = Vec<F>>,
     F: AsRef<[u8]>,
 {
-    let bytes = csv_bytes(path, header, rows)?;
-    let (pending, mut f) = Pending::create(path)?;
-    f.write_all(&bytes)
-        .map_err(|e| Error::io(path, "cannot write", e).advise(WRITE_ADVICE))?;
-    Ok(pending)
+    bytes_pending(path, &csv_bytes(path, header, rows)?)
 }
 
 fn csv_bytes<R, F>(path: &Path, header: &[&str], rows: R) -> Result<Vec<u8>>

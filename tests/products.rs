@@ -274,10 +274,10 @@ fn a_plane_gives_one_return_at_any_incidence_at_few_rays() {
             ),
         );
     }
-    // 19 rays: the airborne survey of issue 11. With 2000 rays the views of 30° and steeper
-    // still split into 2-3 returns: the smeared pulse's flat top is fitted with Gaussians
-    // 2.5-3 of their widths apart, each significant at 10^5-10^6 photons (open in issue 11).
-    for rays in [19] {
+    // 19 rays: the airborne survey of issue 11. With 200 and 2000 rays the smeared pulse's
+    // flat top is fitted with Gaussians 2.5-3 of their widths apart, each significant at
+    // 10^5-10^6 photons, which one surface's waveform fits as well (one return).
+    for rays in [19, 200, 2000] {
         let text = format!(
             "name: t\nscene: {}\nseed: 9\nwavelength_nm: 1064\ninstrument:\n  kind: discrete_return\n  pulse_energy_j: 0.0001\n  pulse_fwhm_ns: 1.0\n  footprint_half_angle_mrad: 2.5\n  fov_half_angle_mrad: 3.0\n  receiver_area_m2: 0.01\n  bin_ns: 0.25\n  max_returns: 4\n  detection_threshold_photons: 5\nplatform:\n  kind: static\n  pulses:\n{pulses}simulation: {{ method: bdpt, rays_per_pulse: {rays}, max_order: 3 }}\n",
             scene.display(),

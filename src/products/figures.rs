@@ -371,6 +371,7 @@ mod tests {
             sigma_bins: 2.0,
             area_photons: 100.0,
             amplitude: 100.0 / (2.0 * (2.0 * std::f64::consts::PI).sqrt()),
+            one_surface: false,
         };
         let photons: Vec<f32> = (0..40)
             .map(|i| (c.amplitude * (-0.5 * ((i as f64 + 0.5 - 20.0) / 2.0).powi(2)).exp()) as f32)

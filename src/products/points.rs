@@ -174,6 +174,7 @@ mod tests {
             sigma_bins: 2.0,
             area_photons: q / cfg.photon_energy_j,
             amplitude: 0.0,
+            one_surface: false,
         };
         let canopy = Component {
             centre_bin: centre - 40.0,
@@ -218,6 +219,7 @@ mod tests {
             sigma_bins: 1.0,
             area_photons: 1.0,
             amplitude: 1.0,
+            one_surface: false,
         };
         let bright = Component {
             centre_bin: 10.0,

@@ -117,6 +117,7 @@ fn decomposed<'w>(loaded: &Loaded, w: &'w Waveform) -> (Vec<Component>, Cow<'w, 
         inst.max_returns as usize,
         Decomposition::Gaussian,
         sigma_bins,
+        Some(crate::sensor::footprint_edge_sigmas(inst)),
     );
     (comps, photons, sigma_bins)
 }

@@ -30,6 +30,15 @@ impl Frame {
     }
 }
 
+/// Where the footprint the receiver sees is cut, in sigmas of the beam's Gaussian (tan-space):
+/// at the beam's edge, sqrt(-2 ln η), or at the field of view's where that is narrower (a
+/// receiver offset, which shifts the field of view by milliradians at most, is left out).
+pub fn footprint_edge_sigmas(inst: &Instrument) -> f64 {
+    let tan_fp = (inst.footprint_half_angle_mrad * 1e-3).tan();
+    let tan_fov = (inst.fov_half_angle_mrad * 1e-3).tan();
+    (-2.0 * inst.edge_energy_fraction.ln()).sqrt() * (tan_fov / tan_fp).min(1.0)
+}
+
 /// Point laser with a Gaussian footprint in tan-space truncated at the edge fraction η.
 #[derive(Clone, Copy, Debug)]
 pub struct Laser {

@@ -139,6 +139,7 @@ pub(super) fn detect_peaks(y: &[f64], threshold: f64, hint: f64) -> Vec<Componen
             sigma_bins: sigma,
             area_photons: area,
             amplitude: peak,
+            one_surface: false,
         });
     }
     out

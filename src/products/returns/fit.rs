@@ -121,6 +121,7 @@ fn component(p: &Params) -> Component {
         sigma_bins: p[1],
         area_photons: p[2],
         amplitude: p[2] / (p[1] * (2.0 * std::f64::consts::PI).sqrt()),
+        one_surface: false,
     }
 }
 
@@ -263,7 +264,7 @@ fn fit_group(
 fn returns_made(params: &[Params], y: &[f64], noise: &Noise) -> usize {
     let mut comps: Vec<Component> = params.iter().map(component).collect();
     comps.sort_by(|a, b| a.centre_bin.total_cmp(&b.centre_bin));
-    blend(comps, y, noise).len()
+    blend(comps, y, noise, None).len()
 }
 
 /// Fits, then drops diverged, collapsed or duplicated components and refits the rest, at most

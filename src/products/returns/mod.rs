@@ -15,6 +15,7 @@
 mod detect;
 mod fit;
 mod solve;
+mod surface;
 #[cfg(test)]
 mod tests;
 
@@ -42,6 +43,10 @@ pub struct Component {
     /// Peak of the component in photons per bin: area / (sigma √(2π)) for a Gaussian, the
     /// parabola's summit for peak detection.
     pub amplitude: f64,
+    /// A return whose waveform is one surface's, the pulse smeared over its spread of ranges
+    /// (a slope, see `surface`): placed at its centroid, the range of the beam's axis, never at
+    /// a summit.
+    pub one_surface: bool,
 }
 
 /// Components fitted jointly: 6 Gaussians = 18 parameters, still a trivial dense solve.
@@ -83,7 +88,8 @@ const WIDE_SIGMAS: f64 = 1.5;
 /// of the centre of a wider one ([`WIDE_SIGMAS`]). A wide return is several surfaces within
 /// the pulse's length, leaves of a crown at a few ranges, whose centroid can lie between them
 /// on no surface at all; its summit is the strongest of them, where a peak detector puts it.
-/// On a slanted surface the summit stays on the surface's range spread, as the centroid does.
+/// A return merged as one smeared surface ([`Component::one_surface`]) keeps its centroid: the
+/// summit of a flat top is wherever the noise peaks, up to half the spread off the beam's axis.
 /// Over the quick bench's campaigns this took the points within 25 cm of a surface from
 /// 99.64 % to 99.88 % (town) and from 96.4 % to 99.6 % (forest).
 pub fn place_on_summits(comps: &mut [Component], photons: &[f32], pulse_sigma_bins: f64) {
@@ -93,7 +99,7 @@ pub fn place_on_summits(comps: &mut [Component], photons: &[f32], pulse_sigma_bi
     let y = |k: usize| f64::from(photons[k]).max(0.0);
     for c in comps.iter_mut() {
         let wide = c.sigma_bins > WIDE_SIGMAS * pulse_sigma_bins;
-        if !wide || !c.centre_bin.is_finite() {
+        if !wide || c.one_surface || !c.centre_bin.is_finite() {
             continue;
         }
         let lo = (c.centre_bin - c.sigma_bins).floor().max(0.0) as usize;
@@ -131,6 +137,8 @@ pub fn place_on_summits(comps: &mut [Component], photons: &[f32], pulse_sigma_bi
 /// sigma, and bounds the fitted sigma from below (no return is narrower than the pulse).
 /// When more components than `max_returns` are found, the strongest (largest area) are kept:
 /// the weakest are the least reliable, and a dense canopy must not hide the ground.
+/// `footprint_edge_sigmas` is where the beam's Gaussian footprint is cut, in its sigmas
+/// ([`footprint_edge_sigmas`]): it shapes the waveform of one surface seen obliquely.
 pub fn decompose(
     photons: &[f32],
     mc_se_photons: &[f32],
@@ -138,6 +146,7 @@ pub fn decompose(
     max_returns: usize,
     method: Decomposition,
     pulse_sigma_bins: f64,
+    footprint_edge_sigmas: Option<f64>,
 ) -> Vec<Component> {
     if max_returns == 0 || photons.is_empty() {
         return Vec::new();
@@ -187,10 +196,17 @@ pub fn decompose(
             per_bin: threshold,
             area: threshold,
         };
-        return decompose_bins(&y, &mc_se, threshold, max_returns, method, hint)
-            .into_iter()
-            .map(shifted)
-            .collect();
+        return decompose_bins(
+            &y,
+            &mc_se,
+            threshold,
+            max_returns,
+            method,
+            (hint, footprint_edge_sigmas),
+        )
+        .into_iter()
+        .map(shifted)
+        .collect();
     }
     // bin k of the coarse waveform is bins [f k, f k + f): its photons and (correlated, as
     // `Noise::mc_var` adds them) Monte Carlo errors are their sums
@@ -207,7 +223,7 @@ pub fn decompose(
         threshold,
         max_returns,
         method,
-        hint / k,
+        (hint / k, footprint_edge_sigmas),
     )
     .into_iter()
     .map(|c| Component {
@@ -215,6 +231,7 @@ pub fn decompose(
         sigma_bins: c.sigma_bins * k,
         area_photons: c.area_photons,
         amplitude: c.amplitude / k,
+        one_surface: c.one_surface,
     })
     .map(shifted)
     .collect()
@@ -259,11 +276,12 @@ fn decompose_bins(
     threshold: Threshold,
     max_returns: usize,
     method: Decomposition,
-    hint: f64,
+    (hint, footprint_edge_sigmas): (f64, Option<f64>),
 ) -> Vec<Component> {
     let noise = Noise {
         mc_se,
         pulse_sigma: hint,
+        footprint_edge_sigmas,
     };
     let peaks = detect_peaks(y, threshold.per_bin, hint);
     let peaks = resolve(peaks, y, threshold.per_bin, &noise, false);
@@ -315,17 +333,38 @@ pub(super) struct Noise<'a> {
     /// The pulse's sigma, bins: the convolution that spreads each bin's error over its
     /// neighbours.
     pub(super) pulse_sigma: f64,
+    /// Where the beam's footprint is cut, in sigmas of its Gaussian: the shape one surface
+    /// smears the pulse into ([`surface`]); None: not known, no such test.
+    pub(super) footprint_edge_sigmas: Option<f64>,
 }
 
 impl Noise<'_> {
-    /// Monte Carlo variance of the photons in bins [lo, hi). The bins' errors are added as if
-    /// fully correlated, as they are where one ray's paths make a spike over a few bins: the
-    /// one case the test must not miss, and an upper bound otherwise.
+    /// Monte Carlo variance of the photons in bins [lo, hi). The errors of bins within the
+    /// pulse's sigma (at least one bin) of each other are added as if fully correlated, as
+    /// they are where one ray's paths make a spike over a few bins: the one case the test must
+    /// not miss. Bins farther apart hold different rays' light, whose errors are independent
+    /// (or anticorrelated: a ray in one bin is in no other): added as fully correlated too, the
+    /// error of a return spread over hundreds of bins by a steep surface would be their
+    /// sum, as large as the return, and the return would not count.
     pub(super) fn mc_var(&self, lo: usize, hi: usize) -> f64 {
         let hi = hi.min(self.mc_se.len());
-        self.mc_se
-            .get(lo..hi)
-            .map_or(0.0, |v| v.iter().sum::<f64>().powi(2))
+        let Some(se) = self.mc_se.get(lo..hi) else {
+            return 0.0;
+        };
+        let reach = self.pulse_sigma.ceil().max(1.0) as usize;
+        // Σ_j se_j Σ_{|k - j| ≤ reach} se_k, the neighbours' sum kept as a sliding window
+        let mut near: f64 = se.iter().take(reach + 1).sum();
+        let mut var = 0.0;
+        for j in 0..se.len() {
+            var += se[j] * near;
+            if let Some(&next) = se.get(j + reach + 1) {
+                near += next;
+            }
+            if j >= reach {
+                near -= se[j - reach];
+            }
+        }
+        var.max(0.0)
     }
 
     /// Monte Carlo standard error of the pulse-convolved photons in bin `k`, at most: the
@@ -443,29 +482,88 @@ pub(super) fn resolve(
     if !by_shape {
         return out;
     }
-    blend(out, y, noise)
+    blend(out, y, noise, Some(threshold))
 }
 
-/// Time-ordered components with each neighbour a detector cannot tell apart ([`apart`])
-/// merged into the one before it: the returns they make.
-pub(super) fn blend(comps: Vec<Component>, y: &[f64], noise: &Noise) -> Vec<Component> {
+/// Time-ordered components merged into the returns a detector makes of them. Neighbours with
+/// no dip between them ([`dips`]) form a chain; with `surfaces` (the level of signal per bin),
+/// a chain with signal all along that one surface explains as well
+/// ([`surface::one_surface`]: a slope, a roof seen obliquely) is one return,
+/// and in any other chain each neighbour a detector cannot tell apart ([`apart`]) is merged
+/// into the one before it. The fit's search asks without `surfaces`: its components on the
+/// way to the last are no better than one surface, yet lead to it.
+pub(super) fn blend(
+    comps: Vec<Component>,
+    y: &[f64],
+    noise: &Noise,
+    surfaces: Option<f64>,
+) -> Vec<Component> {
     let mut one: Vec<Component> = Vec::with_capacity(comps.len());
-    for c in comps {
-        match one.last_mut() {
-            Some(l) if !apart(l, &c, y, noise) => *l = merged(&[*l, c]),
-            _ => one.push(c),
+    let mut start = 0;
+    while start < comps.len() {
+        let mut end = start + 1;
+        while end < comps.len() && !dips(&comps[end - 1], &comps[end], y, noise) {
+            end += 1;
         }
+        let chain = &comps[start..end];
+        let others = || {
+            comps[..start]
+                .iter()
+                .chain(&comps[end..])
+                .copied()
+                .collect::<Vec<_>>()
+        };
+        // a surface's light is continuous over its spread, sampled by rays whose ranges leave
+        // gaps shorter than the pulse (8 sigmas) where they are dense enough to see its shape;
+        // a longer gap (a crown above the ground) parts the components
+        let lit = |level: f64| {
+            let at = |c: &Component| (c.centre_bin.max(0.0) as usize).min(y.len());
+            let longest = (8.0 * noise.pulse_sigma).max(1.0) as usize;
+            let mut gap = 0;
+            y[at(&chain[0])..at(&chain[chain.len() - 1])]
+                .iter()
+                .all(|&v| {
+                    gap = if v > level { 0 } else { gap + 1 };
+                    gap <= longest
+                })
+        };
+        let surface = match surfaces {
+            Some(level) if chain.len() > 1 && lit(level) => {
+                surface::one_surface(chain, &others(), y, level, noise)
+            }
+            Some(level) if chain.len() == 1 => {
+                surface::unclaimed(&chain[0], &others(), y, level, noise)
+            }
+            _ => None,
+        };
+        if let Some(s) = surface {
+            one.push(s);
+        } else {
+            let first = one.len();
+            for &c in chain {
+                let last = one.len().checked_sub(1).filter(|&l| l >= first);
+                match last {
+                    Some(l) if !apart(&one[l], &c, y, noise) => one[l] = merged(&[one[l], c]),
+                    _ => one.push(c),
+                }
+            }
+        }
+        start = end;
     }
     one
 }
 
 /// Whether a detector tells `a` and `b` (a first) apart: they are [`BLENDED_SIGMAS`] apart,
-/// or the waveform between their centres dips below the lower of its values at them by more
-/// than [`MIN_SIGNIFICANCE`] standard errors of the trough (photon and simulation noise).
+/// or the waveform dips between them ([`dips`]).
 fn apart(a: &Component, b: &Component, y: &[f64], noise: &Noise) -> bool {
-    if b.centre_bin - a.centre_bin >= BLENDED_SIGMAS * a.sigma_bins.min(b.sigma_bins) {
-        return true;
-    }
+    b.centre_bin - a.centre_bin >= BLENDED_SIGMAS * a.sigma_bins.min(b.sigma_bins)
+        || dips(a, b, y, noise)
+}
+
+/// Whether the waveform between the centres of `a` and `b` (a first) dips below the lower of
+/// its values at them by more than [`MIN_SIGNIFICANCE`] standard errors of the trough (photon
+/// and simulation noise): Sparrow's criterion, the noise setting the depth a detector sees.
+fn dips(a: &Component, b: &Component, y: &[f64], noise: &Noise) -> bool {
     let at = |c: &Component| (c.centre_bin.max(0.0) as usize).min(y.len().saturating_sub(1));
     let (i, j) = (at(a), at(b));
     if j <= i + 1 {
@@ -506,6 +604,7 @@ fn merged(parts: &[Component]) -> Component {
         sigma_bins: sigma,
         area_photons: area,
         amplitude: area / (sigma * (2.0 * std::f64::consts::PI).sqrt()),
+        one_surface: false,
     }
 }
 

@@ -72,6 +72,12 @@ const MIN_SIGNIFICANCE: f64 = 2.0;
 /// least certain and must not merge it away.
 const BLENDED_SIGMAS: f64 = 2.5;
 
+/// Largest Monte Carlo error, relative to its area, of a wide return whose shape may show
+/// it is one slope: on the quick bench's town survey (16-19 rays) 0.2 left the points within
+/// 5 cm of a surface at 98.81 % where no limit gave 98.61 %, while planes at 200 rays and
+/// more are all placed at their centroids.
+const SHAPE_KNOWN: f64 = 0.2;
+
 /// Bins kept on each side of a waveform's signal for its decomposition: this many pulse sigmas
 /// plus [`SPAN_MARGIN_BINS`], beyond the fit's windows (6 sigmas and 3 bins of its widest
 /// components) and the smoothing's reach.
@@ -482,7 +488,25 @@ pub(super) fn resolve(
     if !by_shape {
         return out;
     }
-    blend(out, y, noise, Some(threshold))
+    let mut out = blend(out, y, noise, Some(threshold));
+    // A wide return is placed at its summit, the strongest of several surfaces (see
+    // `place_on_summits`), unless it is one slope's: its shape known to the simulation (Monte
+    // Carlo error of its light within 2 sigmas under [`SHAPE_KNOWN`] of its area) and one
+    // surface's waveform fitting it clearly better than its Gaussian does. A crown seen by a
+    // few rays fits any shape to its noise, and its summit stays the better guess.
+    for k in 0..out.len() {
+        let c = out[k];
+        if c.one_surface || c.sigma_bins <= WIDE_SIGMAS * noise.pulse_sigma {
+            continue;
+        }
+        let lo = (c.centre_bin - 2.0 * c.sigma_bins).floor().max(0.0) as usize;
+        let hi = (c.centre_bin + 2.0 * c.sigma_bins).ceil().max(0.0) as usize;
+        if noise.mc_var(lo, hi) < (SHAPE_KNOWN * c.area_photons).powi(2) {
+            let others: Vec<Component> = out[..k].iter().chain(&out[k + 1..]).copied().collect();
+            out[k].one_surface = surface::slope(&c, &others, y, threshold, noise);
+        }
+    }
+    out
 }
 
 /// Time-ordered components merged into the returns a detector makes of them. Neighbours with
@@ -527,8 +551,17 @@ pub(super) fn blend(
                     gap <= longest
                 })
         };
+        // neighbours a detector cannot tell apart by their distance or a dip merge first;
+        // only a chain that stays several returns is asked whether one surface made it
+        let mut pairs: Vec<Component> = Vec::with_capacity(chain.len());
+        for &c in chain {
+            match pairs.last_mut() {
+                Some(l) if !apart(l, &c, y, noise) => *l = merged(&[*l, c]),
+                _ => pairs.push(c),
+            }
+        }
         let surface = match surfaces {
-            Some(level) if chain.len() > 1 && lit(level) => {
+            Some(level) if pairs.len() > 1 && lit(level) => {
                 surface::one_surface(chain, &others(), y, level, noise)
             }
             Some(level) if chain.len() == 1 => {
@@ -536,17 +569,9 @@ pub(super) fn blend(
             }
             _ => None,
         };
-        if let Some(s) = surface {
-            one.push(s);
-        } else {
-            let first = one.len();
-            for &c in chain {
-                let last = one.len().checked_sub(1).filter(|&l| l >= first);
-                match last {
-                    Some(l) if !apart(&one[l], &c, y, noise) => one[l] = merged(&[one[l], c]),
-                    _ => one.push(c),
-                }
-            }
+        match surface {
+            Some(s) => one.push(s),
+            None => one.extend(pairs),
         }
         start = end;
     }

@@ -13,7 +13,7 @@ use crate::products::las::{write_las_chunks, Extent, Layout};
 use crate::products::mission::{Atl03, L1b};
 use crate::products::photons::{count_photons, photon_rows, photon_table, PhotonRow};
 use crate::products::points::{points_on_axis, Point, PointConfig};
-use crate::products::returns::{decompose, place_on_summits, Component, Decomposition};
+use crate::products::returns::{decompose, place_on_summits, Component, Decomposition, Receiver};
 use crate::products::spill::Spill;
 use crate::products::summary::{PhotonCounts, PointsSummary, ProductsSummary, WaveformTotals};
 use crate::progress::{log, progress};
@@ -110,14 +110,18 @@ fn decomposed<'w>(loaded: &Loaded, w: &'w Waveform) -> (Vec<Component>, Cow<'w, 
         )
     };
     let sigma_bins = sigma_s / (inst.bin_ns * 1e-9);
+    let receiver = Receiver {
+        sigma_bins,
+        footprint_edge_sigmas: Some(crate::sensor::footprint_edge_sigmas(inst)),
+        noise_floor: recorder.noise_floor_photons(w),
+    };
     let comps = decompose(
         &photons,
         &mc_se,
         inst.detection_threshold_photons,
         inst.max_returns as usize,
         Decomposition::Gaussian,
-        sigma_bins,
-        Some(crate::sensor::footprint_edge_sigmas(inst)),
+        &receiver,
     );
     (comps, photons, sigma_bins)
 }

@@ -203,7 +203,7 @@ fn fit_group(
             let (a, b) = (j.saturating_sub(half), (j + half + 1).min(r.len()));
             let area: f64 = r[a..b].iter().sum();
             let lo = win.offset as usize;
-            let mut var = m[a..b].iter().sum::<f64>() + 1.0;
+            let mut var = m[a..b].iter().sum::<f64>() + 1.0 + noise.floor * (b - a) as f64;
             if win.offset + j as f64 + 0.5 > earliest {
                 var += noise.mc_var(lo + a, lo + b);
             }

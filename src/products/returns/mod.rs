@@ -32,6 +32,24 @@ pub enum Decomposition {
     Gaussian,
 }
 
+/// What shapes a return in the waveform given to [`decompose`], and the noise of each bin
+/// besides the shot noise of its own photons.
+#[derive(Clone, Copy, Debug)]
+pub struct Receiver {
+    /// The return's standard deviation in bins (the pulse's and the detector response's):
+    /// it sizes the smoothing used for detection, seeds sigma, and bounds the fitted sigma
+    /// from below (no return is narrower).
+    pub sigma_bins: f64,
+    /// Where the beam's footprint is cut, in sigmas of its Gaussian
+    /// ([`crate::sensor::footprint_edge_sigmas`]): it shapes the waveform of one surface seen
+    /// obliquely; None: unknown, no such test.
+    pub footprint_edge_sigmas: Option<f64>,
+    /// Variance of each bin's photons besides their shot noise, photons²: the configured
+    /// electronic noise, the background's shot noise and the digitiser's rounding; 0 for the
+    /// mean waveform.
+    pub noise_floor: f64,
+}
+
 /// One return of a waveform, in bin units.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Component {
@@ -138,30 +156,33 @@ pub fn place_on_summits(comps: &mut [Component], photons: &[f32], pulse_sigma_bi
 /// has plenty of, besides the photon noise a real detector has.
 ///
 /// `threshold_photons` is both the minimum peak height (photons per bin) for detection and
-/// the minimum area (photons) of a reported component. `pulse_sigma_bins` is the emitted
-/// pulse's standard deviation in bins: it sizes the smoothing used for detection, seeds
-/// sigma, and bounds the fitted sigma from below (no return is narrower than the pulse).
-/// When more components than `max_returns` are found, the strongest (largest area) are kept:
-/// the weakest are the least reliable, and a dense canopy must not hide the ground.
-/// `footprint_edge_sigmas` is where the beam's Gaussian footprint is cut, in its sigmas
-/// ([`footprint_edge_sigmas`]): it shapes the waveform of one surface seen obliquely.
+/// the minimum area (photons) of a reported component; `receiver` the return's width, the
+/// beam's shape and the detector's noise (its noise floor adds to every test of
+/// significance). When more components than `max_returns` are found, the strongest (largest
+/// area) are kept: the weakest are the least reliable, and a dense canopy must not hide the
+/// ground.
 pub fn decompose(
     photons: &[f32],
     mc_se_photons: &[f32],
     threshold_photons: f64,
     max_returns: usize,
     method: Decomposition,
-    pulse_sigma_bins: f64,
-    footprint_edge_sigmas: Option<f64>,
+    receiver: &Receiver,
 ) -> Vec<Component> {
     if max_returns == 0 || photons.is_empty() {
         return Vec::new();
     }
-    let hint = if pulse_sigma_bins.is_finite() && pulse_sigma_bins > 0.0 {
-        pulse_sigma_bins
+    let hint = if receiver.sigma_bins.is_finite() && receiver.sigma_bins > 0.0 {
+        receiver.sigma_bins
     } else {
         0.0
     };
+    let floor = if receiver.noise_floor.is_finite() {
+        receiver.noise_floor.max(0.0)
+    } else {
+        0.0
+    };
+    let edge = receiver.footprint_edge_sigmas;
     let threshold = if threshold_photons.is_finite() {
         threshold_photons.max(0.0)
     } else {
@@ -208,7 +229,11 @@ pub fn decompose(
             threshold,
             max_returns,
             method,
-            (hint, footprint_edge_sigmas),
+            &Receiver {
+                sigma_bins: hint,
+                footprint_edge_sigmas: edge,
+                noise_floor: floor,
+            },
         )
         .into_iter()
         .map(shifted)
@@ -229,7 +254,12 @@ pub fn decompose(
         threshold,
         max_returns,
         method,
-        (hint / k, footprint_edge_sigmas),
+        // a coarse bin's noise floor is that of f bins
+        &Receiver {
+            sigma_bins: hint / k,
+            footprint_edge_sigmas: edge,
+            noise_floor: floor * k,
+        },
     )
     .into_iter()
     .map(|c| Component {
@@ -282,12 +312,14 @@ fn decompose_bins(
     threshold: Threshold,
     max_returns: usize,
     method: Decomposition,
-    (hint, footprint_edge_sigmas): (f64, Option<f64>),
+    receiver: &Receiver,
 ) -> Vec<Component> {
+    let hint = receiver.sigma_bins;
     let noise = Noise {
         mc_se,
         pulse_sigma: hint,
-        footprint_edge_sigmas,
+        footprint_edge_sigmas: receiver.footprint_edge_sigmas,
+        floor: receiver.noise_floor,
     };
     let peaks = detect_peaks(y, threshold.per_bin, hint);
     let peaks = resolve(peaks, y, threshold.per_bin, &noise, false);
@@ -331,7 +363,8 @@ pub fn coarsening(sigma_bins: f64) -> usize {
     }
 }
 
-/// What a return must stand out from besides its own photon noise: the simulation's.
+/// What a return must stand out from besides its own photon noise: the simulation's, and
+/// the detector's beyond shot noise.
 pub(super) struct Noise<'a> {
     /// Monte Carlo standard error of each bin's photons (impulse, before the pulse
     /// convolution).
@@ -342,6 +375,8 @@ pub(super) struct Noise<'a> {
     /// Where the beam's footprint is cut, in sigmas of its Gaussian: the shape one surface
     /// smears the pulse into ([`surface`]); None: not known, no such test.
     pub(super) footprint_edge_sigmas: Option<f64>,
+    /// Variance of each bin besides shot noise (see [`Receiver::noise_floor`]).
+    pub(super) floor: f64,
 }
 
 impl Noise<'_> {
@@ -392,13 +427,16 @@ impl Noise<'_> {
     }
 
     /// Whether a component's area exceeds [`MIN_SIGNIFICANCE`] standard errors: Poisson noise
-    /// of the area and, with `mc`, the Monte Carlo noise of the bins within one sigma (at
+    /// of the area, the detector's noise floor and, with `mc`, the Monte Carlo noise of the bins within one sigma (at
     /// least one bin) of its centre, where its photons are.
     pub(super) fn significant(&self, c: &Component, mc: bool) -> bool {
         let half = c.sigma_bins.max(1.0);
         let lo = (c.centre_bin - half).floor().max(0.0) as usize;
         let hi = (c.centre_bin + half).ceil().max(0.0) as usize;
-        let mut var = c.area_photons.max(0.0);
+        // the detector's floor as a matched filter of the return's shape weighs it: over
+        // 1 / Σ g² = 2√π σ bins
+        let matched = 2.0 * std::f64::consts::PI.sqrt() * c.sigma_bins.max(0.5);
+        let mut var = c.area_photons.max(0.0) + self.floor * matched;
         if mc {
             var += self.mc_var(lo, hi);
         }
@@ -586,8 +624,9 @@ fn apart(a: &Component, b: &Component, y: &[f64], noise: &Noise) -> bool {
 }
 
 /// Whether the waveform between the centres of `a` and `b` (a first) dips below the lower of
-/// its values at them by more than [`MIN_SIGNIFICANCE`] standard errors of the trough (photon
-/// and simulation noise): Sparrow's criterion, the noise setting the depth a detector sees.
+/// its values at them by more than [`MIN_SIGNIFICANCE`] standard errors of the trough (photon,
+/// detector and simulation noise): Sparrow's criterion, the noise setting the depth a detector
+/// sees.
 fn dips(a: &Component, b: &Component, y: &[f64], noise: &Noise) -> bool {
     let at = |c: &Component| (c.centre_bin.max(0.0) as usize).min(y.len().saturating_sub(1));
     let (i, j) = (at(a), at(b));
@@ -602,6 +641,7 @@ fn dips(a: &Component, b: &Component, y: &[f64], noise: &Noise) -> bool {
     // the depth's error: photon noise of both ends and the simulation's at each
     let var = y[s].max(0.0)
         + trough.max(0.0)
+        + 2.0 * noise.floor
         + noise.mc_se_convolved(s).powi(2)
         + noise.mc_se_convolved(k).powi(2);
     y[s] - trough > MIN_SIGNIFICANCE * var.sqrt()

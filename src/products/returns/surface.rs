@@ -294,11 +294,12 @@ fn smear_fit(
         .sum::<f64>()
         / m0;
     let stretch = ((m2 - sigma * sigma - 1.0 / 12.0).max(0.0) / profile_variance(edge)).sqrt();
-    // photon noise, and the simulation's as it is after the pulse's convolution
+    // photon noise, the detector's floor, and the simulation's as it is after the pulse's
+    // convolution
     let var: Vec<f64> = data
         .iter()
         .enumerate()
-        .map(|(k, &d)| d.max(1.0) + noise.mc_se_convolved(lo + k).powi(2))
+        .map(|(k, &d)| d.max(1.0) + noise.floor + noise.mc_se_convolved(lo + k).powi(2))
         .collect();
     let chi2 = |m: &[f64]| -> f64 {
         data.iter()

@@ -2,8 +2,15 @@ use super::*;
 use crate::rng::SplitMix64;
 use crate::waveform::normal_cdf;
 
-/// The footprint's edge in its sigmas for an edge energy fraction of e^-2, the default.
-const EDGE: Option<f64> = Some(2.0);
+/// A receiver of returns `sigma_bins` wide, with the default footprint (cut at 2 of its sigmas,
+/// an edge energy fraction of e^-2) and no noise beyond shot noise.
+fn rx(sigma_bins: f64) -> Receiver {
+    Receiver {
+        sigma_bins,
+        footprint_edge_sigmas: Some(2.0),
+        noise_floor: 0.0,
+    }
+}
 
 #[derive(Debug)]
 struct Truth {
@@ -56,7 +63,7 @@ fn noise_free_gaussians_are_recovered_exactly() {
         for case in 0..200 {
             let (t, len) = random_case(&mut r, count, 5000.0, 100.0);
             let y: Vec<f32> = mean_waveform(&t, len).iter().map(|&v| v as f32).collect();
-            let c = decompose(&y, &[], 2.0, 4, Decomposition::Gaussian, 1.5, EDGE);
+            let c = decompose(&y, &[], 2.0, 4, Decomposition::Gaussian, &rx(1.5));
             if c.len() != count {
                 missed.push(format!("count {count} case {case}: {c:?} truth {t:?}"));
                 continue;
@@ -96,7 +103,7 @@ fn noisy_gaussians_meet_a_tenth_of_a_bin_and_two_percent() {
                 .iter()
                 .map(|&v| r.poisson(v) as f32)
                 .collect();
-            let c = decompose(&y, &[], 5.0, 4, Decomposition::Gaussian, 1.5, EDGE);
+            let c = decompose(&y, &[], 5.0, 4, Decomposition::Gaussian, &rx(1.5));
             if c.len() != count {
                 missed.push(format!("count {count} case {case}: {c:?} truth {t:?}"));
                 continue;
@@ -148,7 +155,7 @@ fn poisson_gaussians_are_recovered_to_their_noise() {
                 }
                 real.push((c1 / a, a));
             }
-            let c = decompose(&y, &[], 2.0, 4, Decomposition::Gaussian, 1.5, EDGE);
+            let c = decompose(&y, &[], 2.0, 4, Decomposition::Gaussian, &rx(1.5));
             if c.len() != count {
                 missed.push(format!("count {count} case {case}: {c:?} truth {t:?}"));
                 continue;
@@ -205,12 +212,12 @@ fn weak_return_below_threshold_is_not_reported() {
     ];
     let y: Vec<f32> = mean_waveform(&t, 90).iter().map(|&v| v as f32).collect();
     for method in [Decomposition::Gaussian, Decomposition::PeakDetection] {
-        let c = decompose(&y, &[], 3.0, 4, method, 2.0, EDGE);
+        let c = decompose(&y, &[], 3.0, 4, method, &rx(2.0));
         assert_eq!(c.len(), 1, "{method:?}: {c:?}");
         assert!((c[0].centre_bin - 30.5).abs() < 0.05);
         // Lower the threshold and it is there.
         assert_eq!(
-            decompose(&y, &[], 0.5, 4, method, 2.0, EDGE).len(),
+            decompose(&y, &[], 0.5, 4, method, &rx(2.0)).len(),
             2,
             "{method:?}"
         );
@@ -242,10 +249,10 @@ fn max_returns_keeps_the_strongest_in_time_order() {
         },
     ];
     let y: Vec<f32> = mean_waveform(&t, 100).iter().map(|&v| v as f32).collect();
-    let c = decompose(&y, &[], 2.0, 2, Decomposition::Gaussian, 2.0, EDGE);
+    let c = decompose(&y, &[], 2.0, 2, Decomposition::Gaussian, &rx(2.0));
     assert_eq!(c.len(), 2);
     assert!((c[0].centre_bin - 40.5).abs() < 0.01 && (c[1].centre_bin - 80.5).abs() < 0.01);
-    assert!(decompose(&y, &[], 2.0, 0, Decomposition::Gaussian, 2.0, EDGE).is_empty());
+    assert!(decompose(&y, &[], 2.0, 0, Decomposition::Gaussian, &rx(2.0)).is_empty());
 }
 
 #[test]
@@ -263,7 +270,7 @@ fn peak_detection_finds_centres_and_areas() {
         },
     ];
     let y: Vec<f32> = mean_waveform(&t, 80).iter().map(|&v| v as f32).collect();
-    let c = decompose(&y, &[], 2.0, 4, Decomposition::PeakDetection, 2.0, EDGE);
+    let c = decompose(&y, &[], 2.0, 4, Decomposition::PeakDetection, &rx(2.0));
     assert_eq!(c.len(), 2);
     for (g, f) in t.iter().zip(&c) {
         assert!((f.centre_bin - g.centre).abs() < 0.05, "{f:?}");
@@ -286,21 +293,63 @@ fn shoulder_on_a_strong_return_is_found() {
         },
     ];
     let y: Vec<f32> = mean_waveform(&t, 90).iter().map(|&v| v as f32).collect();
-    let c = decompose(&y, &[], 2.0, 4, Decomposition::Gaussian, 1.5, EDGE);
+    let c = decompose(&y, &[], 2.0, 4, Decomposition::Gaussian, &rx(1.5));
     assert_eq!(c.len(), 2, "{c:?}");
     assert!((c[1].centre_bin - 52.0).abs() < 0.01 && (c[1].area_photons / 50.0 - 1.0).abs() < 0.01);
 }
 
 #[test]
 fn bad_input_gives_no_returns_and_no_panic() {
-    assert!(decompose(&[], &[], 1.0, 4, Decomposition::Gaussian, 1.0, EDGE).is_empty());
+    assert!(decompose(&[], &[], 1.0, 4, Decomposition::Gaussian, &rx(1.0)).is_empty());
     let y = [f32::NAN, f32::INFINITY, -3.0, 0.0, 5.0, 0.0];
     for m in [Decomposition::Gaussian, Decomposition::PeakDetection] {
-        for c in decompose(&y, &[], 1.0, 4, m, f64::NAN, EDGE) {
+        for c in decompose(&y, &[], 1.0, 4, m, &rx(f64::NAN)) {
             assert!(c.centre_bin.is_finite() && c.area_photons.is_finite());
         }
-        assert!(decompose(&[0.0; 50], &[], 1.0, 4, m, 2.0, EDGE).is_empty());
+        assert!(decompose(&[0.0; 50], &[], 1.0, 4, m, &rx(2.0)).is_empty());
+        for floor in [f64::NAN, f64::INFINITY, -1.0] {
+            let odd = Receiver {
+                noise_floor: floor,
+                footprint_edge_sigmas: Some(f64::NAN),
+                ..rx(1.5)
+            };
+            for c in decompose(&y, &[], 1.0, 4, m, &odd) {
+                assert!(c.centre_bin.is_finite() && c.area_photons.is_finite());
+            }
+        }
     }
+}
+
+/// A weak return (150 photons, 23 a bin at its peak) 5 sigmas after a strong one: two returns
+/// to a detector with shot noise alone, one to a detector whose electronic noise (σ_e = 12
+/// photons a bin, a floor of 144 photons²) buries it, the search for a return in the fit's
+/// residual weighing the excess against that noise too. The strong return's fit then holds
+/// the weak one's light, its centre pulled by a tenth of a sigma at most.
+#[test]
+fn the_configured_noise_decides_what_is_resolved() {
+    let sigma = 2.55;
+    let t = [
+        Truth {
+            centre: 40.3,
+            sigma,
+            area: 2e4,
+        },
+        Truth {
+            centre: 53.1,
+            sigma,
+            area: 150.0,
+        },
+    ];
+    let y: Vec<f32> = mean_waveform(&t, 90).iter().map(|&v| v as f32).collect();
+    let quiet = decompose(&y, &[], 5.0, 4, Decomposition::Gaussian, &rx(sigma));
+    assert_eq!(quiet.len(), 2, "{quiet:?}");
+    let noisy = Receiver {
+        noise_floor: 144.0,
+        ..rx(sigma)
+    };
+    let c = decompose(&y, &[], 5.0, 4, Decomposition::Gaussian, &noisy);
+    assert_eq!(c.len(), 1, "{c:?}");
+    assert!((c[0].centre_bin - 40.3).abs() < 0.1 * sigma, "{c:?}");
 }
 
 /// A strong return and, 17 bins later, a weak one of 230 photons: a surface when the
@@ -330,13 +379,13 @@ fn a_later_return_must_stand_out_from_the_simulations_noise() {
         *s = 0.1 * y[i];
     }
     se[57] = 1.0; // a well-sampled weak surface
-    let c = decompose(&y, &se, 5.0, 4, Decomposition::Gaussian, sigma, EDGE);
+    let c = decompose(&y, &se, 5.0, 4, Decomposition::Gaussian, &rx(sigma));
     assert_eq!(c.len(), 2, "{c:?}");
     se[57] = 230.0; // one path of one ray made it
-    let c = decompose(&y, &se, 5.0, 4, Decomposition::Gaussian, sigma, EDGE);
+    let c = decompose(&y, &se, 5.0, 4, Decomposition::Gaussian, &rx(sigma));
     assert_eq!(c.len(), 1, "{c:?}");
     assert!((c[0].centre_bin - 40.3).abs() < 0.01, "{c:?}");
-    let c = decompose(&y, &se, 5.0, 4, Decomposition::PeakDetection, sigma, EDGE);
+    let c = decompose(&y, &se, 5.0, 4, Decomposition::PeakDetection, &rx(sigma));
     assert_eq!(c.len(), 1, "{c:?}");
 }
 
@@ -361,7 +410,7 @@ fn the_first_return_is_judged_by_its_photon_noise_only() {
         .collect();
     let mut se = vec![0.0f32; 70];
     se[20] = 300.0;
-    let c = decompose(&y, &se, 5.0, 4, Decomposition::Gaussian, sigma, EDGE);
+    let c = decompose(&y, &se, 5.0, 4, Decomposition::Gaussian, &rx(sigma));
     assert_eq!(c.len(), 2, "{c:?}");
     assert!((c[0].centre_bin - 20.0).abs() < 0.05, "{c:?}");
 }
@@ -388,7 +437,7 @@ fn no_component_leaves_its_waveform() {
     let (y, se) = (list("photons"), list("mc_se_photons"));
     let sigma = 3.0 / 2.354_820_045 / 0.5;
     for method in [Decomposition::Gaussian, Decomposition::PeakDetection] {
-        let c = decompose(&y, &se, 5.0, 4, method, sigma, EDGE);
+        let c = decompose(&y, &se, 5.0, 4, method, &rx(sigma));
         assert!(!c.is_empty(), "{method:?}: the fit lost every return");
         for k in &c {
             assert!(
@@ -479,9 +528,9 @@ fn fine_gates_are_decomposed_on_coarser_bins_without_loss() {
                 per_bin: 0.5,
                 area: 0.5,
             };
-            let on_fine = decompose_bins(&fine, &[], th, 4, Decomposition::Gaussian, (sigma, EDGE));
+            let on_fine = decompose_bins(&fine, &[], th, 4, Decomposition::Gaussian, &rx(sigma));
             missed_fine += usize::from(on_fine.len() != count);
-            let c = decompose(&y, &[], 0.5, 4, Decomposition::Gaussian, sigma, EDGE);
+            let c = decompose(&y, &[], 0.5, 4, Decomposition::Gaussian, &rx(sigma));
             if c.len() != count {
                 missed_coarse += 1;
                 continue;
@@ -521,7 +570,7 @@ fn a_wide_return_is_placed_at_its_summit_a_narrow_one_at_its_fit() {
         .iter()
         .map(|&v| v as f32)
         .collect();
-    let mut c = decompose(&y, &[], 5.0, 4, Decomposition::Gaussian, sigma, EDGE);
+    let mut c = decompose(&y, &[], 5.0, 4, Decomposition::Gaussian, &rx(sigma));
     assert_eq!(c.len(), 1, "{c:?}");
     assert!(c[0].sigma_bins > WIDE_SIGMAS * sigma, "{c:?}");
     let fit = c[0].centre_bin;
@@ -545,7 +594,7 @@ fn a_wide_return_is_placed_at_its_summit_a_narrow_one_at_its_fit() {
         .iter()
         .map(|&v| v as f32)
         .collect();
-    let fitted = decompose(&y, &[], 5.0, 4, Decomposition::Gaussian, sigma, EDGE);
+    let fitted = decompose(&y, &[], 5.0, 4, Decomposition::Gaussian, &rx(sigma));
     let mut placed = fitted.clone();
     place_on_summits(&mut placed, &y, sigma);
     assert_eq!(placed, fitted);
@@ -635,7 +684,7 @@ fn a_smeared_surface_is_one_return_at_any_spread() {
                     .iter()
                     .map(|&v| if noisy { r.poisson(v) as f32 } else { v as f32 })
                     .collect();
-                let mut c = decompose(&y, &[], 5.0, 4, Decomposition::Gaussian, sigma, EDGE);
+                let mut c = decompose(&y, &[], 5.0, 4, Decomposition::Gaussian, &rx(sigma));
                 // where the point goes: a slope's return at its centroid, not its summit
                 place_on_summits(&mut c, &y, sigma);
                 // the footprint's spread of ranges: half × the profile's sd (≈ 0.4)
@@ -670,7 +719,7 @@ fn two_smeared_surfaces_stay_two_returns() {
         }
     }
     let y: Vec<f32> = y.iter().map(|&v| v as f32).collect();
-    let c = decompose(&y, &[], 5.0, 4, Decomposition::Gaussian, sigma, EDGE);
+    let c = decompose(&y, &[], 5.0, 4, Decomposition::Gaussian, &rx(sigma));
     assert_eq!(c.len(), 2, "{c:?}");
     assert!(
         (c[0].centre_bin - 60.0).abs() < 0.5 && (c[1].centre_bin - 80.0).abs() < 0.5,

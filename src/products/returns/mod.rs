@@ -549,7 +549,7 @@ pub(super) fn resolve(
 
 /// Time-ordered components merged into the returns a detector makes of them. Neighbours with
 /// no dip between them ([`dips`]) form a chain; with `surfaces` (the level of signal per bin),
-/// a chain with signal all along that one surface explains as well
+/// a chain joined by light ([`lit`]) that one surface explains as well
 /// ([`surface::one_surface`]: a slope, a roof seen obliquely) is one return,
 /// and in any other chain each neighbour a detector cannot tell apart ([`apart`]) is merged
 /// into the one before it. The fit's search asks without `surfaces`: its components on the
@@ -575,20 +575,6 @@ pub(super) fn blend(
                 .copied()
                 .collect::<Vec<_>>()
         };
-        // a surface's light is continuous over its spread, sampled by rays whose ranges leave
-        // gaps shorter than the pulse (8 sigmas) where they are dense enough to see its shape;
-        // a longer gap (a crown above the ground) parts the components
-        let lit = |level: f64| {
-            let at = |c: &Component| (c.centre_bin.max(0.0) as usize).min(y.len());
-            let longest = (8.0 * noise.pulse_sigma).max(1.0) as usize;
-            let mut gap = 0;
-            y[at(&chain[0])..at(&chain[chain.len() - 1])]
-                .iter()
-                .all(|&v| {
-                    gap = if v > level { 0 } else { gap + 1 };
-                    gap <= longest
-                })
-        };
         // neighbours a detector cannot tell apart by their distance or a dip merge first;
         // only a chain that stays several returns is asked whether one surface made it
         let mut pairs: Vec<Component> = Vec::with_capacity(chain.len());
@@ -599,11 +585,8 @@ pub(super) fn blend(
             }
         }
         let surface = match surfaces {
-            Some(level) if pairs.len() > 1 && lit(level) => {
+            Some(level) if pairs.len() > 1 && lit(&chain[0], &chain[chain.len() - 1], y, noise) => {
                 surface::one_surface(chain, &others(), y, level, noise)
-            }
-            Some(level) if chain.len() == 1 => {
-                surface::unclaimed(&chain[0], &others(), y, level, noise)
             }
             _ => None,
         };
@@ -613,7 +596,41 @@ pub(super) fn blend(
         }
         start = end;
     }
-    one
+    let Some(level) = surfaces else {
+        return one;
+    };
+    // Returns joined by light that together hold under half of it: a fit that settled on
+    // bumps of a flat top's noise, which one surface's return replaces where it fits
+    let mut out: Vec<Component> = Vec::with_capacity(one.len());
+    let mut start = 0;
+    while start < one.len() {
+        let mut end = start + 1;
+        while end < one.len() && lit(&one[end - 1], &one[end], y, noise) {
+            end += 1;
+        }
+        let others: Vec<Component> = one[..start].iter().chain(&one[end..]).copied().collect();
+        match surface::unclaimed(&one[start..end], &others, y, level, noise) {
+            Some(s) => out.push(s),
+            None => out.extend_from_slice(&one[start..end]),
+        }
+        start = end;
+    }
+    out
+}
+
+/// Whether light joins `a` and `b` (a first) as it joins the parts of one surface: a
+/// surface's light is continuous over its spread, sampled by rays whose ranges leave gaps
+/// shorter than the pulse (8 sigmas) where they are dense enough to show its shape; a longer
+/// gap without any light (a crown above the ground) parts them. Any light, not light above
+/// the threshold: a faint slope's bins hover about it.
+fn lit(a: &Component, b: &Component, y: &[f64], noise: &Noise) -> bool {
+    let at = |c: &Component| (c.centre_bin.max(0.0) as usize).min(y.len());
+    let longest = (8.0 * noise.pulse_sigma).max(1.0) as usize;
+    let mut gap = 0;
+    y[at(a)..at(b).max(at(a))].iter().all(|&v| {
+        gap = if v > 0.0 { 0 } else { gap + 1 };
+        gap <= longest
+    })
 }
 
 /// Whether a detector tells `a` and `b` (a first) apart: they are [`BLENDED_SIGMAS`] apart,

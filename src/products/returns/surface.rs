@@ -218,20 +218,20 @@ fn extent(
     (lo < hi).then_some((lo, hi))
 }
 
-/// A lone component holding under half the light of its run of signal (the others' taken out) (a fit on a wide flat
-/// top that settled on one bump of its noise) as the return of one surface, where that
-/// shape fits all the light to its noise.
+/// Components holding under half the light of their run of signal (the others' taken out:
+/// a fit that settled on one bump or two of a flat top's noise) as the return of one surface,
+/// where that shape fits all the light to its noise.
 pub(super) fn unclaimed(
-    c: &Component,
+    chain: &[Component],
     others: &[Component],
     y: &[f64],
     level: f64,
     noise: &Noise,
 ) -> Option<Component> {
-    let chain = std::slice::from_ref(c);
     let (lo, hi) = extent(chain, others, y, level, noise.pulse_sigma.max(0.3))?;
+    let held: f64 = chain.iter().map(|c| c.area_photons).sum();
     // most components hold their run's light: the raw sum, an upper bound, settles them
-    if y[lo..hi].iter().sum::<f64>() <= 2.0 * c.area_photons {
+    if y[lo..hi].iter().sum::<f64>() <= 2.0 * held {
         return None;
     }
     let mut background = vec![0.0; hi - lo];
@@ -241,7 +241,7 @@ pub(super) fn unclaimed(
         .zip(&background)
         .map(|(&v, &b)| (v - b).max(0.0))
         .sum();
-    if light <= 2.0 * c.area_photons {
+    if light <= 2.0 * held {
         return None;
     }
     smear_fit(chain, others, y, level, noise, &SmearFit::fits)

@@ -650,18 +650,45 @@ fn dips(a: &Component, b: &Component, y: &[f64], noise: &Noise) -> bool {
     if j <= i + 1 {
         return false;
     }
-    let s = if y[i] <= y[j] { i } else { j };
-    let (k, trough) = (i + 1..j)
-        .map(|k| (k, y[k]))
-        .min_by(|p, q| p.1.total_cmp(&q.1))
-        .unwrap_or((i, y[s]));
-    // the depth's error: photon noise of both ends and the simulation's at each
-    let var = y[s].max(0.0)
-        + trough.max(0.0)
-        + 2.0 * noise.floor
-        + noise.mc_se_convolved(s).powi(2)
-        + noise.mc_se_convolved(k).powi(2);
-    y[s] - trough > MIN_SIGNIFICANCE * var.sqrt()
+    // the waveform and its shot noise's variance at bin k, averaged over half the pulse's
+    // width: no feature of a pulse-convolved waveform is narrower, so a one-bin trough of
+    // counts is noise, which the average's smaller variance no longer mistakes for a dip
+    let s = 0.5 * noise.pulse_sigma;
+    let reach = if s >= 0.5 {
+        (3.0 * s).ceil() as usize
+    } else {
+        0
+    };
+    let level = |k: usize| -> (f64, f64) {
+        let (mut sum, mut weights, mut squares) = (0.0, 0.0, 0.0);
+        let from = k.saturating_sub(reach);
+        for (m, &v) in y.iter().enumerate().take(k + reach + 1).skip(from) {
+            let w = if reach == 0 {
+                1.0
+            } else {
+                (-0.5 * ((m as f64 - k as f64) / s).powi(2)).exp()
+            };
+            sum += w * v;
+            weights += w;
+            squares += w * w;
+        }
+        let v = sum / weights;
+        (
+            v,
+            (v.max(0.0) + noise.floor) * squares / (weights * weights),
+        )
+    };
+    let (yi, yj) = (level(i), level(j));
+    let (s_bin, (ys, vs)) = if yi.0 <= yj.0 { (i, yi) } else { (j, yj) };
+    // the trough where the counts are lowest: the average there, not the least average, which
+    // would cost an average at every bin between the two
+    let k = (i + 1..j)
+        .min_by(|&p, &q| y[p].total_cmp(&y[q]))
+        .unwrap_or(i);
+    let (trough, vt) = level(k);
+    // the depth's error: photon and detector noise of both ends and the simulation's at each
+    let var = vs + vt + noise.mc_se_convolved(s_bin).powi(2) + noise.mc_se_convolved(k).powi(2);
+    ys - trough > MIN_SIGNIFICANCE * var.sqrt()
 }
 
 /// One component with the area, centroid and spread (second moment) of several.

@@ -109,9 +109,9 @@ fn gain_needed(k: usize) -> f64 {
 
 /// Whether `chain`, neighbouring components with no dip between them, is one surface: the
 /// waveform over them is fitted no worse by one smeared pulse (see the module) than by the
-/// components, by less than [`gain_needed`] in χ² under the photon noise and the
-/// simulation's (`others`, the waveform's other components, held fixed under both). The
-/// return it makes, if so.
+/// components, by less than [`gain_needed`] in χ² under the photon, detector and simulation
+/// noise (`others`, the waveform's other components, held fixed under both). The return it
+/// makes, if so.
 pub(super) fn one_surface(
     chain: &[Component],
     others: &[Component],

@@ -333,7 +333,7 @@ fn bounds(params: &[Params], hint: f64, n: usize) -> Option<(usize, usize)> {
 }
 
 /// Adds bin-integrated Gaussians to `m`, whose first bin has index `offset`.
-fn add_gaussians(m: &mut [f64], offset: f64, params: &[Params]) {
+pub(super) fn add_gaussians(m: &mut [f64], offset: f64, params: &[Params]) {
     add_gaussians_keeping(m, offset, params, &mut Vec::new());
 }
 

@@ -11,6 +11,7 @@
 //! a slope one return while a second surface on the flank of the first (asymmetric) still
 //! counts as two.
 
+use super::fit::{add_gaussians, Params};
 use super::{Component, Noise};
 use crate::waveform::bin_masses_into;
 
@@ -83,20 +84,11 @@ fn add_smear(
 
 /// Adds the components' bin-integrated Gaussians to `m` (first bin `offset`).
 fn add_components(m: &mut [f64], offset: f64, comps: &[Component]) {
-    let n = m.len() as f64;
-    let mut masses = Vec::new();
-    for c in comps {
-        let s = c.sigma_bins;
-        let a = (c.centre_bin - offset - 8.0 * s - 1.0)
-            .floor()
-            .clamp(0.0, n) as usize;
-        let b = ((c.centre_bin - offset + 8.0 * s + 1.0).ceil().clamp(0.0, n) as usize).max(a);
-        masses.clear();
-        bin_masses_into(c.centre_bin, s, offset, (a, b), &mut masses);
-        for (mi, mass) in m[a..b].iter_mut().zip(&masses) {
-            *mi += c.area_photons * mass;
-        }
-    }
+    let params: Vec<Params> = comps
+        .iter()
+        .map(|c| [c.centre_bin, c.sigma_bins, c.area_photons])
+        .collect();
+    add_gaussians(m, offset, &params);
 }
 
 /// The least χ² gain for `k` components to be several surfaces rather than one: the 0.1 %

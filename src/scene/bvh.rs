@@ -32,7 +32,7 @@ pub(crate) struct Blas {
 }
 
 impl Blas {
-    pub fn build(mesh: MeshData) -> Blas {
+    pub fn build(mesh: &MeshData) -> Blas {
         let prims: Vec<Triangle> = mesh
             .tris
             .iter()
@@ -67,7 +67,7 @@ impl Blas {
             tris,
             slots,
             bvh,
-            slot_names: mesh.slot_names,
+            slot_names: mesh.slot_names.clone(),
             offset: mesh.offset,
             lo,
             hi,

@@ -115,6 +115,41 @@ impl Builder {
     }
 }
 
+/// Several meshes as one, in the frame of their joint box's centre (as [`Builder::finish`]
+/// frames one mesh); each part's slots numbered after the previous parts' slots. Each part is
+/// dropped once copied.
+pub(crate) fn fuse(parts: Vec<MeshData>) -> MeshData {
+    let mut lo = DVec3::splat(f64::INFINITY);
+    let mut hi = DVec3::splat(f64::NEG_INFINITY);
+    for p in &parts {
+        for v in p.tris.iter().flatten() {
+            let w = v.as_dvec3() + p.offset;
+            lo = lo.min(w);
+            hi = hi.max(w);
+        }
+    }
+    let offset = (lo + hi) * 0.5;
+    let n = parts.iter().map(|p| p.tris.len()).sum();
+    let mut fused = MeshData {
+        tris: Vec::with_capacity(n),
+        slots: Vec::with_capacity(n),
+        slot_names: Vec::new(),
+        offset,
+    };
+    for p in parts {
+        let shift = p.offset - offset;
+        let first = fused.slot_names.len() as u32;
+        fused.tris.extend(
+            p.tris
+                .iter()
+                .map(|t| t.map(|v| (v.as_dvec3() + shift).as_vec3())),
+        );
+        fused.slots.extend(p.slots.iter().map(|s| s + first));
+        fused.slot_names.extend(p.slot_names);
+    }
+    fused
+}
+
 fn stem(path: &Path) -> String {
     path.file_stem()
         .map(|s| s.to_string_lossy().into_owned())

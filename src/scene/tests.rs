@@ -739,6 +739,67 @@ fn ply_ascii_and_binary() {
     );
 }
 
+/// Objects placed by equal instance tables (a tree's foliage and trunk) are traced as one mesh,
+/// each triangle keeping its own object's material and class; other tables keep them apart.
+#[test]
+fn objects_placed_alike_are_one_mesh() {
+    let d = tmp("placed_alike");
+    // a horizontal leaf at z = 2 and an upright blade (the trunk) in the plane x = 2
+    write(
+        &d,
+        "leaf.obj",
+        "v -1 -1 2\nv 1 -1 2\nv 1 1 2\nv -1 1 2\nf 1 2 3\nf 1 3 4\n",
+    );
+    write(&d, "trunk.obj", BLADE_OBJ);
+    write(&d, "trees.csv", "0 0\n10 0\n");
+    write(&d, "others.csv", "0 0\n20 0\n");
+    let scene = |trunks: &str| {
+        let p = write(
+            &d,
+            "scene.yaml",
+            &format!("name: alike\nmaterials:\n  leaf: {{ reflectance: 0.4, transmittance: 0.5 }}\n  bark: {{ reflectance: 0.3 }}\nobjects:\n  - mesh: {{ file: leaf.obj, material: leaf, instances: trees.csv }}\n  - mesh: {{ file: trunk.obj, material: bark, class: building, instances: {trunks} }}\n"),
+        );
+        Scene::load(&p, 1064.0).unwrap()
+    };
+    let s = scene("trees.csv");
+    let st = s.stats();
+    assert_eq!((st.distinct_meshes, st.instances), (1, 2));
+    assert_eq!(st.instanced_triangles, 2 * 3);
+    // each tree's leaf from above, its trunk from the side: the second tree is at x = 10
+    for x0 in [0.0, 10.0] {
+        let h = s
+            .intersect(
+                DVec3::new(x0 + 0.5, 0.5, 10.0),
+                DOWN,
+                f64::INFINITY,
+                FacetId::NONE,
+            )
+            .unwrap();
+        let leaf = &s.surfaces[h.surface as usize];
+        assert!((h.position.z - 2.0).abs() < 1e-5, "{}", h.position);
+        assert_eq!(
+            (leaf.name.as_str(), leaf.class),
+            ("leaf", SurfaceClass::Vegetation)
+        );
+        let h = s
+            .intersect(
+                DVec3::new(x0 + 5.0, 0.0, 0.5),
+                -DVec3::X,
+                f64::INFINITY,
+                FacetId::NONE,
+            )
+            .unwrap();
+        let bark = &s.surfaces[h.surface as usize];
+        assert!((h.position.x - (x0 + 2.0)).abs() < 1e-5, "{}", h.position);
+        assert_eq!(
+            (bark.name.as_str(), bark.class),
+            ("bark", SurfaceClass::Building)
+        );
+    }
+    let st = scene("others.csv").stats();
+    assert_eq!((st.distinct_meshes, st.instances), (2, 4));
+}
+
 #[test]
 fn heightfield_and_shared_meshes() {
     let d = tmp("heightfield");
@@ -752,9 +813,11 @@ fn heightfield_and_shared_meshes() {
     );
     let s = Scene::load(&p, 1064.0).unwrap();
     let st = s.stats();
-    assert_eq!(st.distinct_meshes, 2, "blade.obj is loaded once");
-    assert_eq!(st.instances, 4);
-    assert_eq!(st.distinct_triangles, 8 + 1);
+    // the heightfield and the blade in the scene's frame are one mesh (placed alike); the
+    // blade's two instances share the other
+    assert_eq!(st.distinct_meshes, 2);
+    assert_eq!(st.instances, 1 + 2);
+    assert_eq!(st.distinct_triangles, (8 + 1) + 1);
     assert_eq!(st.instanced_triangles, 8 + 3);
     assert_eq!(
         s.bounds(),
@@ -794,7 +857,7 @@ fn heightfield_and_shared_meshes() {
         .unwrap();
     let mut found = [a.facet.instance, b.facet.instance];
     found.sort();
-    assert_eq!(found, [1, 3]);
+    assert_eq!(found, [0, 1]);
     assert!((a.t - 8.0).abs() < 1e-5 && (b.t - a.t).abs() < 1e-9);
     let by_instance = |h: &Hit| &s.surfaces[h.surface as usize];
     let (leaf, soil) = if a.facet.instance == 1 {
@@ -864,8 +927,9 @@ fn rami_orchard() {
         st.memory_bytes as f64 / 1e6
     );
     assert_eq!(trees, 1115);
-    assert_eq!(st.instances, 2 * 1115);
-    assert_eq!(st.distinct_meshes, 20);
+    // each tree's foliage and trunk, placed by the same table, are one mesh
+    assert_eq!(st.instances, 1115);
+    assert_eq!(st.distinct_meshes, 10);
     assert_eq!(
         st.distinct_triangles, distinct,
         "no RAMI triangle is degenerate"

@@ -508,9 +508,14 @@ fn campaigns_section(opts: &BenchOptions) -> Result<String> {
                     eprintln!("lidarsim bench: campaign {name} in one band and in three");
                     bands.push(campaigns::bands_row(&opts.dir, &name, &text, 3)?);
                 }
+                // each bench scene's traversals: the forest and the town by their ALS rows
+                // (2000 pulses spread over the campaign, with its rays per pulse), the orchard
+                // by 100 shots of the MABEL track with the sun (hundreds of rays each)
+                let path = opts.dir.join(&name).join("campaign.yaml");
+                if name == "mabel_1064_sun" {
+                    traversals.push(traversal::measure(&name, &path, 100)?);
+                }
                 if name.starts_with("als_") {
-                    // 2000 pulses spread over the campaign, with its rays per pulse
-                    let path = opts.dir.join(&name).join("campaign.yaml");
                     traversals.push(traversal::measure(&name, &path, 2000)?);
                     eprintln!("lidarsim bench: campaign {name} on one thread");
                     scaling.push(campaigns::scaling(&opts.dir, &row, &text)?);

@@ -247,7 +247,12 @@ impl Scene {
             if ti1 < pi0 || ti0 > pi1 || tj1 < pj0 || tj0 > pj1 {
                 continue;
             }
-            if ti0 == ti1 && tj0 == tj1 {
+            let e1 = p[1] - p[0];
+            let e2 = p[2] - p[0];
+            let area_xy = (e1.x * e2.y - e1.y * e2.x).abs();
+            // Seen edge-on from above: only its outline can be clipped.
+            let flat = area_xy <= 1e-9 * e1.cross(e2).length();
+            if ti0 == ti1 && tj0 == tj1 && !flat {
                 // Wholly inside one cell, as most leaves are: the maximum is a vertex.
                 let k = (tj0 - pj0) as usize * w + (ti0 - pi0) as usize;
                 if zmax > z[k] {
@@ -257,11 +262,6 @@ impl Scene {
             }
             let (ci0, ci1) = (ti0.max(pi0) as usize, ti1.min(pi1) as usize);
             let (cj0, cj1) = (tj0.max(pj0) as usize, tj1.min(pj1) as usize);
-            let e1 = p[1] - p[0];
-            let e2 = p[2] - p[0];
-            let area_xy = (e1.x * e2.y - e1.y * e2.x).abs();
-            // Seen edge-on from above: only its outline can be clipped, and any contact counts.
-            let flat = area_xy <= 1e-9 * e1.cross(e2).length();
             let min_area = 1e-9 * area_xy.min(min_cell_area);
             let (base_i, base_j) = (pi0 as usize, pj0 as usize);
             for j in cj0..=cj1 {
@@ -321,7 +321,8 @@ impl InstanceXf {
 
 /// First and last cell index (as f64) of the extent lo..hi given in cell units. The upper end
 /// is open, so a facet that stops exactly on a cell edge does not reach the next cell; a
-/// facet of zero extent on an edge goes to the cell above it, like a point would.
+/// facet of zero extent on an edge goes to the cell above it, like a point would (a vertical
+/// one then tops no cell, see [`clip_max`]).
 #[inline(always)]
 fn cell_span(lo: f64, hi: f64) -> (f64, f64) {
     let a = lo.floor();
@@ -330,7 +331,9 @@ fn cell_span(lo: f64, hi: f64) -> (f64, f64) {
 
 /// The highest z of the triangle `q` (coordinates relative to the cell's corner) over the
 /// cell [0, size]², or NEG_INFINITY when it does not cover a positive area of it (`min_area`),
-/// or, when `flat` (vertical facet), does not meet it at all.
+/// or, when `flat` (vertical facet), does not pass through its inside: a wall standing on a
+/// cell's edge tops the cell its roof covers, not the one beside it, whether or not the wall
+/// is stored with facets that reach that cell.
 fn clip_max(q: &[DVec3; 3], size: f64, flat: bool, min_area: f64) -> f64 {
     // Each half-plane adds at most one vertex: 3 + 4.
     let mut a = [DVec3::ZERO; 8];
@@ -350,7 +353,15 @@ fn clip_max(q: &[DVec3; 3], size: f64, flat: bool, min_area: f64) -> f64 {
         std::mem::swap(&mut a, &mut b);
     }
     let poly = &a[..n];
-    if !flat {
+    if flat {
+        // the clipped outline is a segment seen from above: inside the cell unless all of it
+        // lies on the cell's edge, where the mean of its vertices then lies too
+        let mean = poly.iter().fold(DVec3::ZERO, |m, v| m + *v) / n as f64;
+        let eps = 1e-9 * size;
+        if !(mean.x > eps && mean.x < size - eps && mean.y > eps && mean.y < size - eps) {
+            return f64::NEG_INFINITY;
+        }
+    } else {
         let mut twice = 0.0;
         for k in 0..n {
             let (u, v) = (poly[k], poly[(k + 1) % n]);
@@ -496,6 +507,38 @@ mod tests {
                     assert!(z.is_nan(), "({i}, {j}): {z}");
                 } else {
                     assert!((z - expect).abs() < 1e-5, "({i}, {j}): {z} != {expect}");
+                }
+            }
+        }
+    }
+
+    /// Walls on cell edges: the box's roof tops the cells it covers and no more, the same
+    /// whether the ground shares its mesh (and the walls are clipped against every cell) or not.
+    #[test]
+    fn walls_on_cell_edges_top_no_cell_beside_them() {
+        let obj = "v 1 1 0\nv 3 1 0\nv 3 2 0\nv 1 2 0\nv 1 1 5\nv 3 1 5\nv 3 2 5\nv 1 2 5\n\
+            f 5 6 7\nf 5 7 8\nf 1 2 6\nf 1 6 5\nf 2 3 7\nf 2 7 6\nf 3 4 8\nf 3 8 7\nf 4 1 5\nf 4 5 8\n";
+        let g = grid(0.0, 0.0, 1.0, 4, 3);
+        for ground in [
+            "  - plane: { z: 0, extent: [[0, 0], [4, 3]], material: m }\n",
+            "",
+        ] {
+            let s = scene(
+                "walls",
+                &[("walls.obj", obj)],
+                &format!("{ground}  - mesh: {{ file: walls.obj, material: m, class: building }}\n"),
+            );
+            let top = s.top_surface_grid(&g);
+            for j in 0..g.ny {
+                for i in 0..g.nx {
+                    let z = top[j * g.nx + i];
+                    if (1..=2).contains(&i) && j == 1 {
+                        assert!((z - 5.0).abs() < 1e-5, "({i}, {j}): {z}");
+                    } else if ground.is_empty() {
+                        assert!(z.is_nan(), "({i}, {j}): {z}");
+                    } else {
+                        assert!(z.abs() < 1e-5, "({i}, {j}): {z}");
+                    }
                 }
             }
         }

@@ -501,9 +501,7 @@ fn assign_surfaces(
 
 /// Objects placed alike (by equal instance tables, or all in the scene's own frame) traced as
 /// one mesh: a tree's foliage and trunk, each instanced at the same positions, then cost one
-/// instance per tree, not two overlapping ones that a ray through the crown enters both of
-/// (a MABEL shot over the RAMI orchard visited 4.9 instances per closest-hit query with them
-/// apart).
+/// instance per tree, not two overlapping ones that a ray through the crown enters both of.
 struct Units {
     /// Per unit: its objects, in file order.
     objects: Vec<Vec<usize>>,

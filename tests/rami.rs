@@ -48,9 +48,14 @@ fn orchard_check_reports_counts_and_memory() {
     let (code, out, err) = lidarsim(&["check", camp.to_str().unwrap()]);
     assert_eq!(code, 0, "{err}");
     println!("{out}");
-    // one instance per tree (its foliage and trunk, placed by the same table, are one mesh),
-    // plus the ground plane
-    assert_eq!(count(&out, "instances:"), trees + 1);
+    // one instance per tree for the foliage and one for the trunk, plus the ground plane
+    assert_eq!(count(&out, "instances:"), 2 * trees + 1);
+    // traced as one mesh per template (foliage and trunk share their table) and the ground
+    let traced = out.lines().find(|l| l.starts_with("traced as:")).unwrap();
+    assert_eq!(
+        traced,
+        "traced as: 11 meshes, 1116 instances (objects placed alike are one mesh)"
+    );
     assert_eq!(count(&out, "triangles (instanced):"), triangles + 2);
     assert!(triangles > 80_000_000, "{triangles}");
     let mb = count(&out, "scene memory:");

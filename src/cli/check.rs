@@ -44,6 +44,10 @@ pub(super) fn check(path: &std::path::Path) -> Result<()> {
     println!("rays per pulse: {}", c.simulation.rays_per_pulse);
     println!("instances: {}", s.instances);
     println!("distinct meshes: {}", s.distinct_meshes);
+    println!(
+        "traced as: {} meshes, {} instances (objects placed alike are one mesh)",
+        s.traced_meshes, s.traced_instances
+    );
     println!("triangles (distinct): {}", s.distinct_triangles);
     println!("triangles (instanced): {}", s.instanced_triangles);
     println!("scene memory: {:.1} MB", s.memory_bytes as f64 / 1e6);

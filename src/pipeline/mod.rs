@@ -131,9 +131,10 @@ impl SceneCache {
         let scene = Scene::load_bands(path, wavelengths_nm)?;
         let s = scene.stats();
         log(&format!(
-            "scene {}: {} instances, {} triangles ({} distinct), {:.1} MB, loaded in {:.2} s",
+            "scene {}: {} instances (traced as {}), {} triangles ({} distinct), {:.1} MB, loaded in {:.2} s",
             scene.name,
             s.instances,
+            s.traced_instances,
             s.instanced_triangles,
             s.distinct_triangles,
             s.memory_bytes as f64 / 1e6,

@@ -225,8 +225,16 @@ pub(crate) fn load(path: &Path, wavelengths_nm: &[f64]) -> Result<Scene> {
     let (sources, plans) = plan_objects(&doc, &file, &materials, &mut files)?;
 
     let mut units = group_units(&plans);
-    let (meshes, slot_names) = build_meshes(&units, &sources, path)?;
-    let slots = assign_surfaces(&doc, &plans, &slot_names, &materials)?;
+    let (meshes, read) = build_meshes(&units, &sources, path)?;
+    let declared = super::Declared {
+        meshes: sources.len(),
+        triangles: read.iter().map(|r| r.triangles).sum(),
+        instances: plans
+            .iter()
+            .map(|p| p.rows.as_ref().map_or(1, |r| r.len() as u64))
+            .sum(),
+    };
+    let slots = assign_surfaces(&doc, &plans, &read, &materials)?;
     units.number_slots(&slots);
     let placed = place_instances(&plans, &units, &meshes);
     if placed.len() >= u32::MAX as usize {
@@ -269,6 +277,7 @@ pub(crate) fn load(path: &Path, wavelengths_nm: &[f64]) -> Result<Scene> {
         clip_lo: top.clip_lo,
         clip_hi: top.clip_hi,
         instanced_triangles: top.instanced_triangles,
+        declared,
         water,
         ray_log: None,
     })
@@ -450,14 +459,14 @@ struct Slots {
 fn assign_surfaces(
     doc: &Doc,
     plans: &[ObjectPlan],
-    slot_names: &[Vec<SlotName>],
+    read: &[Read],
     materials: &BTreeMap<String, ResolvedMaterial>,
 ) -> Result<Slots> {
     let mut surfaces: Vec<Surface> = Vec::new();
     let mut surface_index: HashMap<(String, SurfaceClass), u32> = HashMap::new();
     let mut of_object: Vec<Vec<u32>> = Vec::with_capacity(plans.len());
     for plan in plans {
-        let slot_names = &slot_names[plan.source];
+        let slot_names = &read[plan.source].slot_names;
         let names: Vec<&str> = match &plan.mapping {
             Mapping::One(name) => vec![name.as_str(); slot_names.len()],
             Mapping::Map(map) => map_slots(doc, plan, slot_names, map)?,
@@ -553,15 +562,18 @@ impl Units {
     }
 }
 
+/// What reading a source told of it, besides its triangles (which its mesh keeps).
+#[derive(Clone, Default)]
+struct Read {
+    slot_names: Vec<SlotName>,
+    triangles: u64,
+}
+
 /// Each distinct mesh read and its BVH built, in parallel (each mesh's parts read where it is
-/// built, so that no more geometry than the threads build at once is held), and the slot
-/// names of every source. The first error in file order wins.
-fn build_meshes(
-    units: &Units,
-    sources: &[Source],
-    scene: &Path,
-) -> Result<(Vec<Blas>, Vec<Vec<SlotName>>)> {
-    type Built = std::result::Result<(Blas, Vec<Vec<SlotName>>), (usize, Error)>;
+/// built, so that no more geometry than the threads build at once is held), and what was read
+/// of every source. The first error in file order wins.
+fn build_meshes(units: &Units, sources: &[Source], scene: &Path) -> Result<(Vec<Blas>, Vec<Read>)> {
+    type Built = std::result::Result<(Blas, Vec<Read>), (usize, Error)>;
     let built: Vec<Built> = units
         .parts
         .par_iter()
@@ -578,7 +590,13 @@ fn build_meshes(
             if let Some(f) = failed {
                 return Err(f);
             }
-            let names = data.iter().map(|d| d.slot_names.clone()).collect();
+            let names = data
+                .iter()
+                .map(|d| Read {
+                    slot_names: d.slot_names.clone(),
+                    triangles: d.tris.len() as u64,
+                })
+                .collect();
             let blas = if data.len() == 1 {
                 Blas::build(&data[0])
             } else {
@@ -588,13 +606,13 @@ fn build_meshes(
         })
         .collect();
     let mut meshes = Vec::with_capacity(built.len());
-    let mut slot_names = vec![Vec::new(); sources.len()];
+    let mut read = vec![Read::default(); sources.len()];
     let mut failed: Option<(usize, Error)> = None;
     for (p, b) in units.parts.iter().zip(built) {
         match b {
             Ok((blas, names)) => {
-                for (&s, n) in p.iter().zip(names) {
-                    slot_names[s] = n;
+                for (&s, r) in p.iter().zip(names) {
+                    read[s] = r;
                 }
                 meshes.push(blas);
             }
@@ -604,7 +622,7 @@ fn build_meshes(
     }
     match failed {
         Some((_, e)) => Err(e),
-        None => Ok((meshes, slot_names)),
+        None => Ok((meshes, read)),
     }
 }
 

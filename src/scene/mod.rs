@@ -168,14 +168,21 @@ pub struct Hit {
     pub facet: FacetId,
 }
 
+/// What the scene file declares (its distinct geometries, their triangles, every object's
+/// instances), then how the tracer holds it: objects placed alike are one traced mesh.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct SceneStats {
+    /// Distinct geometries (mesh files, planes, heightfields), each read once.
     pub distinct_meshes: usize,
-    /// Triangles stored once (sum over distinct meshes).
+    /// Their triangles (degenerate ones dropped).
     pub distinct_triangles: u64,
     /// Triangles once instanced (sum over instances of their mesh's triangles).
     pub instanced_triangles: u64,
+    /// Every object's instances (one for an object without an instance table).
     pub instances: u64,
+    /// The tracer's meshes and instances.
+    pub traced_meshes: usize,
+    pub traced_instances: u64,
     /// Bytes held by geometry and acceleration structures.
     pub memory_bytes: u64,
 }
@@ -202,10 +209,20 @@ pub struct Scene {
     clip_lo: DVec3,
     clip_hi: DVec3,
     instanced_triangles: u64,
+    /// What the scene file declares: see [`SceneStats`].
+    pub(crate) declared: Declared,
     /// Every query while on (`start_ray_log`): the bench replays them against the bare BVH.
     ray_log: Option<std::sync::Mutex<Vec<LoggedRay>>>,
     /// `repeat: true`: the x-y box `world_lo..world_hi` is one period of an infinite landscape.
     repeat: bool,
+}
+
+/// The scene file's own counts, kept for [`SceneStats`].
+#[derive(Clone, Copy, Debug, Default)]
+pub(crate) struct Declared {
+    pub meshes: usize,
+    pub triangles: u64,
+    pub instances: u64,
 }
 
 /// Most periods a query crosses in a repeated scene before its ray is taken to have left:
@@ -708,10 +725,12 @@ impl Scene {
                 .map(|s| s.name.capacity())
                 .sum::<usize>();
         SceneStats {
-            distinct_meshes: self.meshes.len(),
-            distinct_triangles: self.meshes.iter().map(|m| m.tris.len() as u64).sum(),
+            distinct_meshes: self.declared.meshes,
+            distinct_triangles: self.declared.triangles,
             instanced_triangles: self.instanced_triangles,
-            instances: self.instances.len() as u64,
+            instances: self.declared.instances,
+            traced_meshes: self.meshes.len(),
+            traced_instances: self.instances.len() as u64,
             memory_bytes: memory as u64,
         }
     }

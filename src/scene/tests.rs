@@ -763,7 +763,8 @@ fn objects_placed_alike_are_one_mesh() {
     };
     let s = scene("trees.csv");
     let st = s.stats();
-    assert_eq!((st.distinct_meshes, st.instances), (1, 2));
+    assert_eq!((st.distinct_meshes, st.instances), (2, 4));
+    assert_eq!((st.traced_meshes, st.traced_instances), (1, 2));
     assert_eq!(st.instanced_triangles, 2 * 3);
     // each tree's leaf from above, its trunk from the side: the second tree is at x = 10
     for x0 in [0.0, 10.0] {
@@ -797,7 +798,7 @@ fn objects_placed_alike_are_one_mesh() {
         );
     }
     let st = scene("others.csv").stats();
-    assert_eq!((st.distinct_meshes, st.instances), (2, 4));
+    assert_eq!((st.traced_meshes, st.traced_instances), (2, 4));
 }
 
 #[test]
@@ -813,12 +814,13 @@ fn heightfield_and_shared_meshes() {
     );
     let s = Scene::load(&p, 1064.0).unwrap();
     let st = s.stats();
-    // the heightfield and the blade in the scene's frame are one mesh (placed alike); the
-    // blade's two instances share the other
-    assert_eq!(st.distinct_meshes, 2);
-    assert_eq!(st.instances, 1 + 2);
-    assert_eq!(st.distinct_triangles, (8 + 1) + 1);
+    assert_eq!(st.distinct_meshes, 2, "blade.obj is loaded once");
+    assert_eq!(st.instances, 4);
+    assert_eq!(st.distinct_triangles, 8 + 1);
     assert_eq!(st.instanced_triangles, 8 + 3);
+    // traced: the heightfield and the blade in the scene's frame are one mesh (placed
+    // alike), the blade's two instances share the other
+    assert_eq!((st.traced_meshes, st.traced_instances), (2, 1 + 2));
     assert_eq!(
         s.bounds(),
         (DVec3::new(2.0, -1.0, 0.0), DVec3::new(1004.0, 2004.0, 2.0))
@@ -927,9 +929,10 @@ fn rami_orchard() {
         st.memory_bytes as f64 / 1e6
     );
     assert_eq!(trees, 1115);
-    // each tree's foliage and trunk, placed by the same table, are one mesh
-    assert_eq!(st.instances, 1115);
-    assert_eq!(st.distinct_meshes, 10);
+    assert_eq!(st.instances, 2 * 1115);
+    assert_eq!(st.distinct_meshes, 20);
+    // each tree's foliage and trunk, placed by the same table, are traced as one mesh
+    assert_eq!((st.traced_meshes, st.traced_instances), (10, 1115));
     assert_eq!(
         st.distinct_triangles, distinct,
         "no RAMI triangle is degenerate"

@@ -54,7 +54,7 @@ fn orchard_check_reports_counts_and_memory() {
     let traced = out.lines().find(|l| l.starts_with("traced as:")).unwrap();
     assert_eq!(
         traced,
-        "traced as: 11 meshes, 1116 instances (objects placed alike are one mesh)"
+        "traced as: 11 meshes, 1116 instances (objects with equal instance tables are one mesh)"
     );
     assert_eq!(count(&out, "triangles (instanced):"), triangles + 2);
     assert!(triangles > 80_000_000, "{triangles}");

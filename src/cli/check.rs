@@ -45,7 +45,7 @@ pub(super) fn check(path: &std::path::Path) -> Result<()> {
     println!("instances: {}", s.instances);
     println!("distinct meshes: {}", s.distinct_meshes);
     println!(
-        "traced as: {} meshes, {} instances (objects placed alike are one mesh)",
+        "traced as: {} meshes, {} instances (objects with equal instance tables are one mesh)",
         s.traced_meshes, s.traced_instances
     );
     println!("triangles (distinct): {}", s.distinct_triangles);

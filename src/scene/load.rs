@@ -508,9 +508,11 @@ fn assign_surfaces(
     })
 }
 
-/// Objects placed alike (by equal instance tables, or all in the scene's own frame) traced as
-/// one mesh: a tree's foliage and trunk, each instanced at the same positions, then cost one
-/// instance per tree, not two overlapping ones that a ray through the crown enters both of.
+/// Objects placed by equal instance tables traced as one mesh: a tree's foliage and trunk,
+/// each instanced at the same positions, then cost one instance per tree, not two overlapping
+/// ones that a ray through the crown enters both of. Objects in the scene's own frame (no
+/// table) stay apart: fused, a large scene's ground and buildings would be held twice while
+/// their one mesh is built, and a generated town traced no faster for it.
 struct Units {
     /// Per unit: its objects, in file order.
     objects: Vec<Vec<usize>>,
@@ -527,7 +529,8 @@ struct Units {
 fn group_units(plans: &[ObjectPlan]) -> Units {
     let mut objects: Vec<Vec<usize>> = Vec::new();
     for (i, plan) in plans.iter().enumerate() {
-        match objects.iter_mut().find(|u| plans[u[0]].rows == plan.rows) {
+        let alike = |u: &&mut Vec<usize>| plan.rows.is_some() && plans[u[0]].rows == plan.rows;
+        match objects.iter_mut().find(alike) {
             Some(u) => u.push(i),
             None => objects.push(vec![i]),
         }

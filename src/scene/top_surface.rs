@@ -512,32 +512,34 @@ mod tests {
         }
     }
 
-    /// Walls on cell edges: the box's roof tops the cells it covers and no more, the same
-    /// whether the ground shares its mesh (and the walls are clipped against every cell) or not.
+    /// Walls on cell edges: the box's roof tops the cells it covers and no more, alone, beside
+    /// a ground object, or with the ground in its own mesh (where the walls are clipped
+    /// against every cell the mesh reaches).
     #[test]
     fn walls_on_cell_edges_top_no_cell_beside_them() {
-        let obj = "v 1 1 0\nv 3 1 0\nv 3 2 0\nv 1 2 0\nv 1 1 5\nv 3 1 5\nv 3 2 5\nv 1 2 5\n\
+        let walls = "v 1 1 0\nv 3 1 0\nv 3 2 0\nv 1 2 0\nv 1 1 5\nv 3 1 5\nv 3 2 5\nv 1 2 5\n\
             f 5 6 7\nf 5 7 8\nf 1 2 6\nf 1 6 5\nf 2 3 7\nf 2 7 6\nf 3 4 8\nf 3 8 7\nf 4 1 5\nf 4 5 8\n";
+        let with_ground =
+            format!("{walls}v 0 0 0\nv 4 0 0\nv 4 3 0\nv 0 3 0\nf 9 10 11\nf 9 11 12\n");
         let g = grid(0.0, 0.0, 1.0, 4, 3);
-        for ground in [
-            "  - plane: { z: 0, extent: [[0, 0], [4, 3]], material: m }\n",
-            "",
+        let mesh = "  - mesh: { file: walls.obj, material: m, class: building }\n";
+        let plane = "  - plane: { z: 0, extent: [[0, 0], [4, 3]], material: m }\n";
+        for (obj, objects, ground) in [
+            (walls, mesh.to_string(), false),
+            (walls, format!("{plane}{mesh}"), true),
+            (with_ground.as_str(), mesh.to_string(), true),
         ] {
-            let s = scene(
-                "walls",
-                &[("walls.obj", obj)],
-                &format!("{ground}  - mesh: {{ file: walls.obj, material: m, class: building }}\n"),
-            );
+            let s = scene("walls", &[("walls.obj", obj)], &objects);
             let top = s.top_surface_grid(&g);
             for j in 0..g.ny {
                 for i in 0..g.nx {
                     let z = top[j * g.nx + i];
                     if (1..=2).contains(&i) && j == 1 {
                         assert!((z - 5.0).abs() < 1e-5, "({i}, {j}): {z}");
-                    } else if ground.is_empty() {
-                        assert!(z.is_nan(), "({i}, {j}): {z}");
-                    } else {
+                    } else if ground {
                         assert!(z.abs() < 1e-5, "({i}, {j}): {z}");
+                    } else {
+                        assert!(z.is_nan(), "({i}, {j}): {z}");
                     }
                 }
             }

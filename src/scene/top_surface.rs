@@ -247,13 +247,9 @@ impl Scene {
             if ti1 < pi0 || ti0 > pi1 || tj1 < pj0 || tj0 > pj1 {
                 continue;
             }
-            let e1 = p[1] - p[0];
-            let e2 = p[2] - p[0];
-            let area_xy = (e1.x * e2.y - e1.y * e2.x).abs();
-            // Seen edge-on from above: only its outline can be clipped.
-            let flat = area_xy <= 1e-9 * e1.cross(e2).length();
-            if ti0 == ti1 && tj0 == tj1 && !flat {
-                // Wholly inside one cell, as most leaves are: the maximum is a vertex.
+            // Wholly inside one cell, as most leaves are: the maximum is a vertex. A facet of no
+            // extent along x or y may stand on a cell's edge instead, which `clip_max` judges.
+            if ti0 == ti1 && tj0 == tj1 && xmin < xmax && ymin < ymax {
                 let k = (tj0 - pj0) as usize * w + (ti0 - pi0) as usize;
                 if zmax > z[k] {
                     z[k] = zmax;
@@ -262,6 +258,11 @@ impl Scene {
             }
             let (ci0, ci1) = (ti0.max(pi0) as usize, ti1.min(pi1) as usize);
             let (cj0, cj1) = (tj0.max(pj0) as usize, tj1.min(pj1) as usize);
+            let e1 = p[1] - p[0];
+            let e2 = p[2] - p[0];
+            let area_xy = (e1.x * e2.y - e1.y * e2.x).abs();
+            // Seen edge-on from above: only its outline can be clipped.
+            let flat = area_xy <= 1e-9 * e1.cross(e2).length();
             let min_area = 1e-9 * area_xy.min(min_cell_area);
             let (base_i, base_j) = (pi0 as usize, pj0 as usize);
             for j in cj0..=cj1 {

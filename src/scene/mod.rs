@@ -169,7 +169,8 @@ pub struct Hit {
 }
 
 /// What the scene file declares (its distinct geometries, their triangles, every object's
-/// instances), then how the tracer holds it: objects placed alike are one traced mesh.
+/// instances), then how the tracer holds it: objects with equal instance tables are one
+/// traced mesh.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct SceneStats {
     /// Distinct geometries (mesh files, planes, heightfields), each read once.

@@ -117,20 +117,31 @@ pub fn bin_masses_into(
         }
         return;
     }
-    let start = out.len();
-    out.resize(start + (b - a), 0.0);
     let (half, full) = ((-0.5 * h * h).exp(), (-h * h).exp());
     let z0 = (offset + a as f64 - centre) / sigma;
-    for (x, w) in GAUSS_LEGENDRE_4 {
+    // The four nodes' φ stepped side by side, each bin's mass summed node after node: the
+    // same products and sums as one node's pass over the bins after another, four times as
+    // many multiplications in flight (one pass at a time waited on each step's product).
+    let mut phi = [0.0; 4];
+    let mut fall = [0.0; 4];
+    let mut weight = [0.0; 4];
+    for (k, (x, w)) in GAUSS_LEGENDRE_4.into_iter().enumerate() {
         // callers start at most 8 sigmas and 2 bins before the centre, so e^(-z h) stays
         // below e^5
         let z = z0 + x * h;
-        let (mut phi, mut fall) = (normal_pdf(z), (-z * h).exp());
-        for mass in &mut out[start..] {
-            *mass += w * h * phi;
-            phi *= fall * half;
-            fall *= full;
+        (phi[k], fall[k], weight[k]) = (normal_pdf(z), (-z * h).exp(), w * h);
+    }
+    out.reserve(b - a);
+    for _ in a..b {
+        let mut mass = 0.0;
+        for k in 0..4 {
+            mass += weight[k] * phi[k];
         }
+        for k in 0..4 {
+            phi[k] *= fall[k] * half;
+            fall[k] *= full;
+        }
+        out.push(mass);
     }
 }
 

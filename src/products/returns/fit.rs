@@ -406,12 +406,12 @@ impl Window<'_> {
         m
     }
 
-    /// [`Window::model`], with each component's bin integrals kept in `masses` (see
+    /// [`Window::model`] into `m`, with each component's bin integrals kept in `masses` (see
     /// [`add_gaussians_keeping`]).
-    pub(super) fn model_keeping(&self, params: &[Params], masses: &mut Vec<f64>) -> Vec<f64> {
-        let mut m = self.base.clone();
-        add_gaussians_keeping(&mut m, self.offset, params, masses);
-        m
+    pub(super) fn model_keeping(&self, params: &[Params], masses: &mut Vec<f64>, m: &mut Vec<f64>) {
+        m.clear();
+        m.extend_from_slice(&self.base);
+        add_gaussians_keeping(m, self.offset, params, masses);
     }
 
     /// Poisson deviance, 2 Σ [m - y + y ln(y/m)].

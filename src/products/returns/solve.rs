@@ -11,8 +11,8 @@ impl Window<'_> {
         let np = 3 * params.len();
         let nb = self.y.len();
         // the bin integrals of the current parameters, from the model that was made with them
-        let mut edges = Vec::new();
-        let mut m = self.model_keeping(&params, &mut edges);
+        let (mut edges, mut m) = (Vec::new(), Vec::with_capacity(nb));
+        self.model_keeping(&params, &mut edges, &mut m);
         let mut dev = self.deviance(&m);
         if !dev.is_finite() {
             return None;
@@ -21,6 +21,14 @@ impl Window<'_> {
         let mut jac = vec![0.0; nb * np];
         let mut h = vec![0.0; np * np];
         let mut g = vec![0.0; np];
+        // a trial step's buffers, swapped with the current ones when it is taken
+        let mut trial = Trial {
+            params: Vec::with_capacity(params.len()),
+            model: Vec::with_capacity(nb),
+            edges: Vec::with_capacity(edges.len()),
+            aug: vec![0.0; np * np],
+            step: vec![0.0; np],
+        };
         for _ in 0..100 {
             self.jacobian(&params, &edges, &mut jac);
             self.scoring(&jac, &m, &mut h, &mut g);
@@ -30,17 +38,15 @@ impl Window<'_> {
             }
             // None: the next step is too small to mean anything, or no step goes downhill
             // (a minimum within float precision)
-            let Some(Step {
-                params: trial,
-                model: tm,
-                deviance: td,
-            }) = self.damped_step(&params, &h, &g, (dev, dmax, floor), &mut lambda, &mut edges)
+            let Some(td) =
+                self.damped_step(&params, &h, &g, (dev, dmax, floor), &mut lambda, &mut trial)
             else {
                 break;
             };
             let gain = dev - td;
-            params = trial;
-            m = tm;
+            std::mem::swap(&mut params, &mut trial.params);
+            std::mem::swap(&mut m, &mut trial.model);
+            std::mem::swap(&mut edges, &mut trial.edges);
             dev = td;
             // A deviance gain of 1e-6 is a likelihood ratio of 1 + 5e-7. A model that cannot
             // fit (a canopy return is no Gaussian, and at 10^6 photons every bin says so)
@@ -96,31 +102,13 @@ impl Window<'_> {
     /// Fisher scoring: the Poisson deviance's half-gradient `g` = Σ (1 - y/m) J and its
     /// expected curvature `h` = Σ J Jᵀ / m (full symmetric matrix).
     fn scoring(&self, jac: &[f64], m: &[f64], h: &mut [f64], g: &mut [f64]) {
-        let np = g.len();
-        h.iter_mut().for_each(|v| *v = 0.0);
-        g.iter_mut().for_each(|v| *v = 0.0);
-        for i in 0..self.y.len() {
-            let row = &jac[i * np..(i + 1) * np];
-            if row.iter().all(|&v| v == 0.0) {
-                continue;
-            }
-            let w = 1.0 / m[i];
-            let r = 1.0 - self.y[i] * w;
-            for a in 0..np {
-                g[a] += r * row[a];
-                let wa = w * row[a];
-                if wa == 0.0 {
-                    continue;
-                }
-                for b in a..np {
-                    h[a * np + b] += wa * row[b];
-                }
-            }
-        }
-        for a in 0..np {
-            for b in 0..a {
-                h[a * np + b] = h[b * np + a];
-            }
+        // one and two components, most fits, with their sizes known to the compiler: its
+        // loops unrolled and unchecked (the general loop's index checks were a tenth of the
+        // fit's time); the same sums in the same order, so the same bits
+        match g.len() {
+            3 => scoring_sized(3, self.y, jac, m, h, g),
+            6 => scoring_sized(6, self.y, jac, m, h, g),
+            np => scoring_sized(np, self.y, jac, m, h, g),
         }
     }
 
@@ -129,8 +117,8 @@ impl Window<'_> {
     /// or when a step is too small to mean anything: then the fit has converged, and the
     /// step is not worth the model it would cost to try (most fits ended with such a step,
     /// often tried several times as float noise in the deviance rejected it).
-    /// `dmax` is the largest diagonal of `h`, `floor` the least sigma. `edges` takes the bin
-    /// integrals of the step it returns.
+    /// `dmax` is the largest diagonal of `h`, `floor` the least sigma. The step taken, its
+    /// model and bin integrals are left in `trial`, and its deviance returned.
     fn damped_step(
         &self,
         params: &[Params],
@@ -138,17 +126,19 @@ impl Window<'_> {
         g: &[f64],
         (dev, dmax, floor): (f64, f64, f64),
         lambda: &mut f64,
-        edges: &mut Vec<f64>,
-    ) -> Option<Step> {
-        let mut trial_edges = Vec::with_capacity(edges.capacity());
+        trial: &mut Trial,
+    ) -> Option<f64> {
         let np = g.len();
         for _ in 0..12 {
-            let mut aug = h.to_vec();
+            let (aug, step) = (&mut trial.aug, &mut trial.step);
+            aug.copy_from_slice(h);
             for a in 0..np {
                 aug[a * np + a] += *lambda * h[a * np + a].max(1e-12 * dmax);
             }
-            let mut step: Vec<f64> = g.iter().map(|v| -v).collect();
-            if !cholesky_solve(&mut aug, &mut step, np) {
+            for (s, v) in step.iter_mut().zip(g) {
+                *s = -v;
+            }
+            if !cholesky_solve(aug, step, np) {
                 *lambda *= 10.0;
                 continue;
             }
@@ -161,27 +151,19 @@ impl Window<'_> {
             if small {
                 return None;
             }
-            let trial: Vec<Params> = params
-                .iter()
-                .enumerate()
-                .map(|(c, p)| {
-                    [
-                        p[0] + step[3 * c],
-                        (p[1] + step[3 * c + 1]).max(floor),
-                        (p[2] + step[3 * c + 2]).max(1e-9),
-                    ]
-                })
-                .collect();
-            let model = self.model_keeping(&trial, &mut trial_edges);
-            let deviance = self.deviance(&model);
+            trial.params.clear();
+            trial.params.extend(params.iter().enumerate().map(|(c, p)| {
+                [
+                    p[0] + step[3 * c],
+                    (p[1] + step[3 * c + 1]).max(floor),
+                    (p[2] + step[3 * c + 2]).max(1e-9),
+                ]
+            }));
+            self.model_keeping(&trial.params, &mut trial.edges, &mut trial.model);
+            let deviance = self.deviance(&trial.model);
             if deviance.is_finite() && deviance <= dev {
                 *lambda = (*lambda / 3.0).max(1e-12);
-                std::mem::swap(edges, &mut trial_edges);
-                return Some(Step {
-                    params: trial,
-                    model,
-                    deviance,
-                });
+                return Some(deviance);
             }
             *lambda *= 4.0;
         }
@@ -189,11 +171,46 @@ impl Window<'_> {
     }
 }
 
-/// An accepted step of the solver.
-struct Step {
+/// A trial step of the solver: its parameters, model and bin integrals, and the buffers its
+/// damped system is solved in.
+struct Trial {
     params: Vec<Params>,
     model: Vec<f64>,
-    deviance: f64,
+    edges: Vec<f64>,
+    aug: Vec<f64>,
+    step: Vec<f64>,
+}
+
+/// [`Window::scoring`] for `np` parameters, inlined into each call so that a constant `np`
+/// sizes its loops.
+#[inline(always)]
+fn scoring_sized(np: usize, y: &[f64], jac: &[f64], m: &[f64], h: &mut [f64], g: &mut [f64]) {
+    let (h, g) = (&mut h[..np * np], &mut g[..np]);
+    h.fill(0.0);
+    g.fill(0.0);
+    for ((row, &yi), &mi) in jac.chunks_exact(np).zip(y).zip(m) {
+        if row.iter().all(|&v| v == 0.0) {
+            continue;
+        }
+        let w = 1.0 / mi;
+        let r = 1.0 - yi * w;
+        for a in 0..np {
+            g[a] += r * row[a];
+            let wa = w * row[a];
+            if wa == 0.0 {
+                continue;
+            }
+            let ha = &mut h[a * np..(a + 1) * np];
+            for (hb, &jb) in ha[a..].iter_mut().zip(&row[a..]) {
+                *hb += wa * jb;
+            }
+        }
+    }
+    for a in 0..np {
+        for b in 0..a {
+            h[a * np + b] = h[b * np + a];
+        }
+    }
 }
 
 /// Solves A x = b in place for a symmetric positive definite A (row-major n×n).

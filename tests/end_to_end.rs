@@ -997,13 +997,14 @@ fn a_busy_folder_is_refused_and_a_stale_lock_taken_over() {
     assert_same_files(&out, &clean);
 }
 
-/// A discrete-return track of 2500 pulses (three parts) over the plane, with the given seed.
+/// A discrete-return track of 2500 pulses over the plane, with the given seed: three parts, as
+/// its 100 rays per pulse keep parts at their fewest pulses (`waveform::file::Parts`).
 fn parts_track(dir: &Path, seed: u64) -> PathBuf {
     plane_scene(dir, 0.3, 30.0);
     write(
         dir,
         &format!("campaign_{seed}.yaml"),
-        &format!("name: parts\nscene: plane.yaml\nseed: {seed}\nwavelength_nm: 1064\ninstrument: {{ kind: discrete_return, pulse_energy_j: 0.00001, pulse_fwhm_ns: 3, footprint_half_angle_mrad: 0.3, fov_half_angle_mrad: 0.5, receiver_area_m2: 0.01, bin_ns: 1 }}\nplatform: {{ kind: track, altitude_m: 100, track: {{ start: [-10, 0], end: [15, 0] }}, along_track_step_m: 0.01 }}\nsimulation: {{ method: forward, rays_per_pulse: 20, max_order: 1 }}\n"),
+        &format!("name: parts\nscene: plane.yaml\nseed: {seed}\nwavelength_nm: 1064\ninstrument: {{ kind: discrete_return, pulse_energy_j: 0.00001, pulse_fwhm_ns: 3, footprint_half_angle_mrad: 0.3, fov_half_angle_mrad: 0.5, receiver_area_m2: 0.01, bin_ns: 1 }}\nplatform: {{ kind: track, altitude_m: 100, track: {{ start: [-10, 0], end: [15, 0] }}, along_track_step_m: 0.01 }}\nsimulation: {{ method: forward, rays_per_pulse: 100, max_order: 1 }}\n"),
     )
 }
 

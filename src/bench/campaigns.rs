@@ -434,9 +434,10 @@ pub fn bands_row(dir: &Path, name: &str, text: &str, pairs: usize) -> Result<Ban
     let pulses = last.map_or(0, |r| r.pulses);
     let run = dir.join(format!("{name}_3bands")).join("run");
     let mut sums = vec![0.0; THREE_BANDS.len()];
-    for k in 0..crate::waveform::file::part_count(pulses) {
-        let part =
-            crate::waveform::file::read_waveforms(&run.join(crate::waveform::file::part_name(k)))?;
+    // the run's parts, by index, up to the first that is not there
+    let parts = (0..).map(|k| run.join(crate::waveform::file::part_name(k)));
+    for path in parts.take_while(|p| p.is_file()) {
+        let part = crate::waveform::file::read_waveforms(&path)?;
         for w in part {
             let b = THREE_BANDS.iter().position(|&x| Some(x) == w.wavelength_nm);
             if let Some(b) = b {

@@ -122,23 +122,12 @@ pub(super) fn check(path: &std::path::Path) -> Result<()> {
 /// sample; a row group of pulses or photons being written.
 fn run_memory_bound(loaded: &crate::campaign::Loaded, scene: &Scene, plan: &plan::Plan) -> f64 {
     let c = &loaded.campaign;
-    let bins = if plan.is_empty() {
-        0.0
-    } else {
-        let p = plan.pulse(0);
-        crate::sensor::Gate::for_pulse(
-            &c.instrument,
-            p.origin,
-            p.direction,
-            scene.bounds_near(p.origin, p.direction),
-        )
-        .bins as f64
-    };
-    // a waveform: photons, impulse energy and its error, four classes, orders (f32 each);
-    // one per pulse and band
-    let waveform = bins * 4.0 * (3.0 + 4.0) + c.simulation.max_order as f64 * 16.0;
+    let bins = crate::waveform::file::gate_bins(loaded, scene, plan) as f64;
+    // a waveform: one per pulse and band
+    let waveform = crate::waveform::file::waveform_bytes(bins as usize, c.simulation.max_order);
     let bands = c.wavelength_nm.all().len() as f64;
-    let part = pipeline::PART_PULSES as f64 * waveform * bands;
+    let parts = crate::waveform::file::Parts::of_run(loaded, scene, plan);
+    let part = parts.size() as f64 * waveform * bands;
     let threads = rayon::current_num_threads() as f64;
     // a part in the making, the one queued, and the one being encoded (its table and bytes),
     // with a part's worth for the allocator's slack, and the Parquet writer's own buffers and

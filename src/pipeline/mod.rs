@@ -14,7 +14,7 @@ pub mod sweep;
 
 pub use manifest::StageRecord;
 use manifest::{fingerprint, forget_damaged, invalidate_after, record, save, Manifest};
-use simulate::{part_range, simulate_parts};
+use simulate::simulate_parts;
 pub use simulate::{probe_rays_per_second, simulate, with_method_chosen};
 use sweep::run_sweep;
 pub use sweep::RunTotals;
@@ -26,11 +26,9 @@ use crate::plan::{self, Plan};
 use crate::products;
 use crate::progress::log;
 use crate::scene::Scene;
-use crate::waveform::file::{part_count, part_is_whole, part_name};
+use crate::waveform::file::{part_is_whole, part_name, Parts};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
-
-pub use crate::waveform::file::PART_PULSES;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, clap::ValueEnum)]
 pub enum Stage {
@@ -400,9 +398,10 @@ fn run_single(
     let picked = chosen
         .as_ref()
         .map(|c| simulate::method_name(c.campaign.simulation.method));
-    let fp_sim = simulate_fingerprint(&fp_plan, scene, picked)?;
+    let parts = Parts::of_run(loaded, scene, &plan);
+    let fp_sim = simulate_fingerprint(&fp_plan, scene, picked, parts)?;
     if run.done(Stage::Simulate, &fp_sim) {
-        if let Some(bad) = first_broken_part(out, plan.len(), bands_of(loaded), &fp_sim) {
+        if let Some(bad) = first_broken_part(out, parts, bands_of(loaded), &fp_sim) {
             // the manifest says done, the files disagree: the files win
             log(&format!(
                 "simulate: a part file is missing or damaged ({bad}): it is simulated again"
@@ -413,7 +412,7 @@ fn run_single(
     }
     if run.wanted(Stage::Simulate) && !run.done(Stage::Simulate, &fp_sim) {
         let (t, cpu) = (Instant::now(), crate::progress::process_cpu_seconds());
-        let (rays, parts_done) = simulate_stage(&mut run, loaded, scene, &plan, &fp_sim)?;
+        let (rays, parts_done) = simulate_stage(&mut run, loaded, scene, &plan, parts, &fp_sim)?;
         summary.simulate_wall_s = Some(t.elapsed().as_secs_f64());
         summary.simulate_cpu_s = cpu
             .zip(crate::progress::process_cpu_seconds())
@@ -431,14 +430,14 @@ fn run_single(
 
     let fp_products = fingerprint(&[fp_sim.as_bytes(), b"products"]);
     if run.wanted(Stage::Products) && !run.done(Stage::Products, &fp_products) {
-        products_stage(&mut run, loaded, scene, &plan, &fp_products)?;
+        products_stage(&mut run, loaded, scene, &plan, parts, &fp_products)?;
     }
     let fp_report = fingerprint(&[fp_products.as_bytes(), b"report"]);
     if run.wanted(Stage::Report)
         && run.done(Stage::Products, &fp_products)
         && !run.done(Stage::Report, &fp_report)
     {
-        report_stage(&mut run, loaded, scene, &plan, &fp_report)?;
+        report_stage(&mut run, loaded, scene, parts, &fp_report)?;
     }
     if run.manifest == before {
         log("nothing to do: every stage is up to date");
@@ -454,10 +453,10 @@ fn products_stage(
     loaded: &Loaded,
     scene: &Scene,
     plan: &Plan,
+    parts: Parts,
     fp: &str,
 ) -> Result<()> {
     let t = Instant::now();
-    let parts = part_count(plan.len());
     let (outputs, note) = products::stage::run(loaded, scene, run.out, plan, parts)?;
     log(&format!(
         "products: {} in {:.2} s",
@@ -473,7 +472,7 @@ fn report_stage(
     run: &mut RunFolder,
     loaded: &Loaded,
     scene: &Scene,
-    plan: &Plan,
+    parts: Parts,
     fp: &str,
 ) -> Result<()> {
     let t = Instant::now();
@@ -483,7 +482,7 @@ fn report_stage(
         .get("simulate")
         .map(|r| r.wall_time_s)
         .unwrap_or(0.0);
-    let text = products::report::report(loaded, scene, plan.len(), run.out, simulate_s)?;
+    let text = products::report::report(loaded, scene, parts, run.out, simulate_s)?;
     write_text_atomic(&run.out.join("report.md"), &text)?;
     run.finish(Stage::Report, fp, vec!["report.md".into()], t, None, "done")
 }
@@ -529,7 +528,12 @@ fn plan_stage(run: &mut RunFolder, c: &Campaign, fp: &str) -> Result<Plan> {
 }
 
 /// The simulate stage's fingerprint: the plan's and every scene file's bytes.
-fn simulate_fingerprint(fp_plan: &str, scene: &Scene, picked: Option<&str>) -> Result<String> {
+fn simulate_fingerprint(
+    fp_plan: &str,
+    scene: &Scene,
+    picked: Option<&str>,
+    parts: Parts,
+) -> Result<String> {
     let mut scene_bytes = Vec::new();
     for f in &scene.files {
         let bytes = std::fs::read(f).map_err(|e| Error::io(f, "cannot read", e))?;
@@ -538,15 +542,17 @@ fn simulate_fingerprint(fp_plan: &str, scene: &Scene, picked: Option<&str>) -> R
     let mut inputs: Vec<&[u8]> = vec![fp_plan.as_bytes()];
     inputs.extend(scene_bytes.iter().map(|b| b.as_slice()));
     inputs.extend(picked.map(str::as_bytes));
+    // parts cut otherwise (another version's rule) are not this run's parts
+    let size = format!("parts of {}", parts.size());
+    inputs.push(size.as_bytes());
     Ok(fingerprint(&inputs))
 }
 
-/// The first part of a run of `pulses` pulses in `bands` bands that is missing or not whole,
-/// by its name.
-fn first_broken_part(out: &Path, pulses: usize, bands: usize, fp: &str) -> Option<String> {
-    (0..part_count(pulses))
+/// The first of a run's parts (in `bands` bands) that is missing or not whole, by its name.
+fn first_broken_part(out: &Path, parts: Parts, bands: usize, fp: &str) -> Option<String> {
+    (0..parts.count())
         .find(|&k| {
-            let rows = part_range(k, pulses).len() * bands;
+            let rows = parts.range(k).len() * bands;
             !part_is_whole(&out.join(part_name(k)), rows, fp)
         })
         .map(part_name)
@@ -564,11 +570,12 @@ fn simulate_stage(
     loaded: &Loaded,
     scene: &Scene,
     plan: &Plan,
+    cut: Parts,
     fp: &str,
 ) -> Result<(u64, usize)> {
     let (out, shard) = (run.out, run.opts.shard);
     let t = Instant::now();
-    let parts = part_count(plan.len());
+    let parts = cut.count();
     let part_files: Vec<String> = (0..parts).map(part_name).collect();
     let wf_dir = out.join("waveforms");
     let marker = wf_dir.join("fingerprint");
@@ -579,13 +586,13 @@ fn simulate_stage(
         let _ = std::fs::remove_dir_all(&wf_dir);
     }
     write_text_atomic(&marker, fp)?;
-    let rows = |k: usize| part_range(k, plan.len()).len() * bands_of(loaded);
+    let rows = |k: usize| cut.range(k).len() * bands_of(loaded);
     let whole = |k: usize| part_is_whole(&out.join(part_name(k)), rows(k), fp);
     let todo: Vec<usize> = (0..parts)
         .filter(|k| shard.is_none_or(|(i, n)| k % n == i))
         .filter(|&k| !whole(k))
         .collect();
-    let (rays, done, stopped) = simulate_parts(loaded, scene, plan, &todo, out, fp)?;
+    let (rays, done, stopped) = simulate_parts(loaded, scene, plan, cut, &todo, out, fp)?;
     // the parts written just now are whole; the others are read again, as another shard may
     // have written some meanwhile
     let mut written_now = vec![false; parts];

@@ -1,7 +1,6 @@
-//! The simulate stage: pulses in parts of [`PART_PULSES`], each part written when complete,
+//! The simulate stage: pulses in [`Parts`], each part written when complete,
 //! with per-pulse timing beside it.
 
-use super::PART_PULSES;
 use crate::campaign::{Loaded, Method};
 use crate::error::Result;
 use crate::fsutil::{Committer, Pending};
@@ -12,7 +11,7 @@ use crate::sensor::{pulse_sigma_s, Gate, Laser, Receiver, SunSource};
 use crate::transport::atmosphere::Atmosphere;
 use crate::transport::bands::Bands;
 use crate::transport::{simulate_pulse, simulate_pulse_in, PulseSetup, Scratch};
-use crate::waveform::file::{part_name, waveforms_pending};
+use crate::waveform::file::{part_name, waveforms_pending, Parts};
 use crate::waveform::{self, Radiometry, Waveform};
 use glam::DVec3;
 use indicatif::ProgressBar;
@@ -31,11 +30,12 @@ pub(super) fn simulate_parts(
     loaded: &Loaded,
     scene: &Scene,
     plan: &Plan,
+    parts: Parts,
     todo: &[usize],
     out: &Path,
     fingerprint: &str,
 ) -> Result<(u64, usize, Option<i32>)> {
-    let total: usize = todo.iter().map(|&k| part_range(k, plan.len()).len()).sum();
+    let total: usize = todo.iter().map(|&k| parts.range(k).len()).sum();
     let bar = progress(total as u64, "simulating");
     let (t, cpu) = (Instant::now(), crate::progress::process_cpu_seconds());
     let mut rays = 0u64;
@@ -69,7 +69,7 @@ pub(super) fn simulate_parts(
             stopped = Some(signal);
             break;
         }
-        let pulses = plan.pulses(part_range(k, plan.len()));
+        let pulses = plan.pulses(parts.range(k));
         let (written_before, (waveforms, secs)) = rayon::join(
             || pending.take().map_or(Ok(()), write),
             || simulate(loaded, scene, &pulses, &bar),
@@ -126,10 +126,6 @@ pub(super) fn simulate_parts(
         ));
     }
     Ok((rays, written, stopped))
-}
-
-pub(super) fn part_range(k: usize, n: usize) -> std::ops::Range<usize> {
-    k * PART_PULSES..((k + 1) * PART_PULSES).min(n)
 }
 
 /// Per-pulse counters beside the waveforms (of the first band): effective paths per ray and

@@ -6,18 +6,19 @@ use crate::products::dsm::DsmReport;
 use crate::products::summary::{ProductsSummary, WaveformTotals};
 use crate::scene::Scene;
 use crate::scene::SurfaceClass;
-use crate::waveform::file::{part_count, part_name, read_waveforms};
+use crate::waveform::file::{part_name, read_waveforms, Parts};
 use std::path::Path;
 
 /// `report.md`: what ran, on what, how fast, and what came back.
 pub fn report(
     loaded: &Loaded,
     scene: &Scene,
-    pulses: usize,
+    parts: Parts,
     out: &Path,
     simulate_s: f64,
 ) -> Result<String> {
     let c = &loaded.campaign;
+    let pulses = parts.pulses();
     let totals =
         match ProductsSummary::read(&out.join("products.json")).and_then(|p| p.waveform_totals) {
             Some(t) => t,
@@ -25,7 +26,7 @@ pub fn report(
                 // a products.json from before the totals: the parts by index, as the products
                 // stage reads them (another file in the folder is not part of the run)
                 let mut t = WaveformTotals::default();
-                for k in 0..part_count(pulses) {
+                for k in 0..parts.count() {
                     crate::progress::release_after_part(k);
                     for w in read_waveforms(&out.join(part_name(k)))? {
                         if w.wavelength_nm

@@ -20,7 +20,7 @@ use crate::progress::{log, progress};
 use crate::rng::SplitMix64;
 use crate::scene::{Scene, SurfaceClass};
 use crate::sensor::pulse_sigma_s;
-use crate::waveform::file::{part_name, read_waveforms_but_impulse};
+use crate::waveform::file::{part_name, read_waveforms_but_impulse, Parts};
 use crate::waveform::record::Recorder;
 use crate::waveform::Waveform;
 use glam::DVec3;
@@ -338,8 +338,9 @@ pub fn run(
     scene: &Scene,
     out: &Path,
     plan: &Plan,
-    parts: usize,
+    cut: Parts,
 ) -> Result<(Vec<String>, String)> {
+    let parts = cut.count();
     let want = wanted(loaded);
     let c = &loaded.campaign;
     let several = c.wavelength_nm.several();
@@ -532,8 +533,8 @@ pub fn run(
         outputs.extend(point_figures(loaded, out, examples, top, tally.points)?);
         summary.points = Some(tally.summary(plan.len()));
         if let Some(mut d) = dsm {
-            for start in (0..plan.len()).step_by(crate::waveform::file::PART_PULSES) {
-                d.aim(&plan.pulses(start..start + crate::waveform::file::PART_PULSES));
+            for k in 0..parts {
+                d.aim(&plan.pulses(cut.range(k)));
             }
             outputs.extend(d.write(out, c.frame.as_ref())?);
         }

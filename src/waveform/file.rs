@@ -9,12 +9,102 @@ use arrow_array::Array;
 use arrow_schema::DataType;
 use std::path::Path;
 
-/// Pulses per waveform part file.
-pub const PART_PULSES: usize = 1000;
+/// Fewest and most pulses a part file holds.
+const MIN_PART_PULSES: usize = 1000;
+const MAX_PART_PULSES: usize = 4000;
+/// Rays a part is traced with, about: at more rays per pulse a part of the fewest pulses
+/// is already seconds of work, whose files cost nothing beside it.
+const PART_RAYS: f64 = 100_000.0;
+/// Bytes of waveforms a part holds in memory, at most beyond the fewest pulses: two parts
+/// are in memory at once in either stage.
+const PART_BYTES: f64 = 64e6;
 
-/// Part files of a run of `pulses` pulses.
-pub fn part_count(pulses: usize) -> usize {
-    pulses.div_ceil(PART_PULSES)
+/// How a run's pulses are cut into part files: parts of `size` pulses, the last one shorter.
+/// Each part costs the same few milliseconds whatever it holds (its files created, synced and
+/// renamed, a compression context per column written and read, the workers meeting at its
+/// end: about 2.5 ms of CPU on the town survey), which parts of a thousand pulses of 19 rays
+/// made a tenth of that survey's run; so a part holds a thousand pulses, or up to four
+/// thousand where they are cheap: few rays and short gates. The size is a function of the
+/// campaign, scene and plan, which the simulation's fingerprint covers, so a resume and
+/// every shard cut the same parts.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Parts {
+    pulses: usize,
+    size: usize,
+}
+
+impl Parts {
+    /// The parts of a run: sized by its rays per pulse and its waveforms' bytes per pulse
+    /// ([`waveform_bytes`] of its first pulse's gate, in every band).
+    pub fn of_run(
+        loaded: &crate::campaign::Loaded,
+        scene: &crate::scene::Scene,
+        plan: &crate::plan::Plan,
+    ) -> Parts {
+        let c = &loaded.campaign;
+        let bins = gate_bins(loaded, scene, plan);
+        let bytes =
+            waveform_bytes(bins, c.simulation.max_order) * c.wavelength_nm.all().len() as f64;
+        let size = part_size(c.simulation.rays_per_pulse, bytes);
+        Parts::with_size(plan.len(), size)
+    }
+
+    /// `pulses` cut into parts of `size` (at least one pulse each).
+    pub fn with_size(pulses: usize, size: usize) -> Parts {
+        Parts {
+            pulses,
+            size: size.max(1),
+        }
+    }
+
+    /// Pulses a part holds (the last may hold fewer).
+    pub fn size(self) -> usize {
+        self.size
+    }
+
+    /// Pulses of the run.
+    pub fn pulses(self) -> usize {
+        self.pulses
+    }
+
+    /// Part files of the run.
+    pub fn count(self) -> usize {
+        self.pulses.div_ceil(self.size)
+    }
+
+    /// The pulses of part `k`.
+    pub fn range(self, k: usize) -> std::ops::Range<usize> {
+        (k * self.size).min(self.pulses)..((k + 1) * self.size).min(self.pulses)
+    }
+}
+
+/// Pulses of a part of pulses of `rays` rays and `bytes` of waveforms each (see [`Parts`]): as
+/// many thousands as [`PART_RAYS`] and [`PART_BYTES`] allow, within the fewest and most.
+fn part_size(rays: u64, bytes: f64) -> usize {
+    let fits = (PART_RAYS / rays.max(1) as f64).min(PART_BYTES / bytes.max(1.0));
+    // in thousands, so that part k starts at a round pulse
+    let thousands = (fits / 1000.0).floor() as usize * 1000;
+    thousands.clamp(MIN_PART_PULSES, MAX_PART_PULSES)
+}
+
+/// Bins of the gate of a run's first pulse (0 without pulses).
+pub fn gate_bins(
+    loaded: &crate::campaign::Loaded,
+    scene: &crate::scene::Scene,
+    plan: &crate::plan::Plan,
+) -> usize {
+    if plan.is_empty() {
+        return 0;
+    }
+    let p = plan.pulse(0);
+    let near = scene.bounds_near(p.origin, p.direction);
+    crate::sensor::Gate::for_pulse(&loaded.campaign.instrument, p.origin, p.direction, near).bins
+}
+
+/// Bytes of one waveform row in memory, about: photons, impulse energy and its error, four
+/// classes (f32 each, a gate of `bins`), and energies by order with their errors (f64).
+pub fn waveform_bytes(bins: usize, max_order: u32) -> f64 {
+    bins as f64 * 4.0 * (3.0 + 4.0) + max_order as f64 * 16.0
 }
 
 /// The path of part `k` inside a run folder.
@@ -371,6 +461,37 @@ fn name_is_list(name: &str) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Parts hold more pulses only where pulses are cheap (few rays, short gates), always in
+    /// thousands, and cut every pulse into exactly one part.
+    #[test]
+    fn parts_grow_only_where_pulses_are_cheap() {
+        // the town survey: 19 rays, a gate of ~700 bins
+        assert_eq!(part_size(19, waveform_bytes(700, 5)), 3000);
+        // one ray, a short gate: the most
+        assert_eq!(part_size(1, waveform_bytes(100, 1)), MAX_PART_PULSES);
+        // a photon-counting track at 1000 rays, a forest's 3152-bin gate at 32: the fewest
+        assert_eq!(part_size(1000, waveform_bytes(100, 10)), MIN_PART_PULSES);
+        assert_eq!(part_size(32, waveform_bytes(3152, 5)), MIN_PART_PULSES);
+        // no rays and no bins: the cheapest pulses, and no division by zero
+        assert_eq!(part_size(0, 0.0), MAX_PART_PULSES);
+        for (pulses, size) in [
+            (0, 1000),
+            (1, 1000),
+            (999, 1000),
+            (8001, 4000),
+            (12000, 3000),
+        ] {
+            let parts = Parts::with_size(pulses, size);
+            let cut: Vec<usize> = (0..parts.count()).flat_map(|k| parts.range(k)).collect();
+            assert_eq!(
+                cut,
+                (0..pulses).collect::<Vec<_>>(),
+                "{pulses} in parts of {size}"
+            );
+            assert!((0..parts.count()).all(|k| !parts.range(k).is_empty()));
+        }
+    }
 
     fn waveform(id: u64, brf_fov: f32, brf_footprint: f32) -> Waveform {
         Waveform {

@@ -161,10 +161,17 @@ fn fit_group(
         return Vec::new();
     };
     let win = Window::new(y, lo, hi, Some(others));
+    // One return alone in its window starts from the window's moments, which are a
+    // bin-integrated Gaussian's parameters (to e^(-2π²σ²), σ in bins) when it is one: the
+    // solver's first step then shows it converged.
+    let start = match (&seeds[..], others.is_empty()) {
+        ([_], true) => moments(&win, floor).map_or_else(|| seeds.clone(), |m| vec![m]),
+        _ => seeds.clone(),
+    };
     // a fit that fails (diverges, leaves its window, or shrinks every component below the
     // threshold) keeps the detector's seeds: it must not erase a return
-    let Some((mut params, mut dev)) = fit_clean(&win, seeds.clone(), floor)
-        .filter(|(p, _)| p.iter().any(|q| q[2] > threshold.area))
+    let Some((mut params, mut dev)) =
+        fit_clean(&win, start, floor).filter(|(p, _)| p.iter().any(|q| q[2] > threshold.area))
     else {
         return seeds;
     };
@@ -258,6 +265,24 @@ fn fit_group(
         }
     }
     params
+}
+
+/// The window's photons as one Gaussian: centroid, standard deviation (less a bin's own
+/// variance, 1/12, at least `floor`) and sum; None without photons.
+fn moments(win: &Window, floor: f64) -> Option<Params> {
+    let (mut sum, mut first, mut second) = (0.0, 0.0, 0.0);
+    for (i, &v) in win.y.iter().enumerate() {
+        let x = i as f64 + 0.5;
+        sum += v;
+        first += v * x;
+        second += v * x * x;
+    }
+    if sum.is_nan() || sum <= 0.0 {
+        return None;
+    }
+    let mean = first / sum;
+    let var = second / sum - mean * mean - 1.0 / 12.0;
+    Some([win.offset + mean, var.max(0.0).sqrt().max(floor), sum])
 }
 
 /// The returns a detector would make of these components ([`blend`]).

@@ -121,13 +121,10 @@ pub(super) fn check(path: &std::path::Path) -> Result<()> {
 /// chunk of points, the DSM grid over the scene, the distance histogram and the top view's
 /// sample; a row group of pulses or photons being written.
 fn run_memory_bound(loaded: &crate::campaign::Loaded, scene: &Scene, plan: &plan::Plan) -> f64 {
-    let c = &loaded.campaign;
-    let bins = crate::waveform::file::gate_bins(loaded, scene, plan) as f64;
-    // a waveform: one per pulse and band
-    let waveform = crate::waveform::file::waveform_bytes(bins as usize, c.simulation.max_order);
-    let bands = c.wavelength_nm.all().len() as f64;
-    let parts = crate::waveform::file::Parts::of_run(loaded, scene, plan);
-    let part = parts.size() as f64 * waveform * bands;
+    use crate::waveform::file::{gate_bins, pulse_bytes, Parts};
+    let bins = gate_bins(loaded, scene, plan);
+    let part = Parts::of_run(loaded, scene, plan).size() as f64 * pulse_bytes(loaded, bins);
+    let bins = bins as f64;
     let threads = rayon::current_num_threads() as f64;
     // a part in the making, the one queued, and the one being encoded (its table and bytes),
     // with a part's worth for the allocator's slack, and the Parquet writer's own buffers and

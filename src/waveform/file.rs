@@ -25,9 +25,8 @@ const PART_BYTES: f64 = 64e6;
 /// end): on the town survey (19 rays a pulse), parts of 3000 pulses instead of 1000 took 6 %
 /// off its CPU time and 8 % off its run's wall time, about 3 ms of CPU for each part fewer.
 /// So a part holds a thousand pulses, or up to four thousand where they are cheap: few rays
-/// and short gates. The size is a function of the
-/// campaign, scene and plan, which the simulation's fingerprint covers, so a resume and
-/// every shard cut the same parts.
+/// and short gates. The size is a function of the campaign, scene and plan, which the
+/// simulation's fingerprint covers, so a resume and every shard cut the same parts.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Parts {
     pulses: usize,
@@ -36,17 +35,14 @@ pub struct Parts {
 
 impl Parts {
     /// The parts of a run: sized by its rays per pulse and its waveforms' bytes per pulse
-    /// ([`waveform_bytes`] of its first pulse's gate, in every band).
+    /// ([`pulse_bytes`] of its first pulse's gate).
     pub fn of_run(
         loaded: &crate::campaign::Loaded,
         scene: &crate::scene::Scene,
         plan: &crate::plan::Plan,
     ) -> Parts {
-        let c = &loaded.campaign;
-        let bins = gate_bins(loaded, scene, plan);
-        let bytes =
-            waveform_bytes(bins, c.simulation.max_order) * c.wavelength_nm.all().len() as f64;
-        let size = part_size(c.simulation.rays_per_pulse, bytes);
+        let bytes = pulse_bytes(loaded, gate_bins(loaded, scene, plan));
+        let size = part_size(loaded.campaign.simulation.rays_per_pulse, bytes);
         Parts::with_size(plan.len(), size)
     }
 
@@ -100,6 +96,13 @@ pub fn gate_bins(
     let p = plan.pulse(0);
     let near = scene.bounds_near(p.origin, p.direction);
     crate::sensor::Gate::for_pulse(&loaded.campaign.instrument, p.origin, p.direction, near).bins
+}
+
+/// Bytes of a pulse's waveform rows in memory, about: one row ([`waveform_bytes`]) per band,
+/// over a gate of `bins`.
+pub fn pulse_bytes(loaded: &crate::campaign::Loaded, bins: usize) -> f64 {
+    let c = &loaded.campaign;
+    waveform_bytes(bins, c.simulation.max_order) * c.wavelength_nm.all().len() as f64
 }
 
 /// Bytes of one waveform row in memory, about: photons, impulse energy and its error, four

@@ -465,22 +465,24 @@ pub fn f32_list_leaf(
     })
 }
 
-/// Every row of the list columns at `leaves` (see [`f32_list_leaf`]) of a Parquet file, one
-/// vector per row, straight from the pages: Arrow's reader grows each batch's buffers by
-/// doubling, then each row is copied out of them again (80 % of a products stage reading
-/// 3152-bin waveforms).
+/// Every row of the list columns at `leaves` (see [`f32_list_leaf`]) of a Parquet file, given
+/// to `each` as (index into `leaves`, row, values), column after column, straight from the
+/// pages: Arrow's reader grows each batch's buffers by doubling, then each row is copied out
+/// of them again (80 % of a products stage reading 3152-bin waveforms).
 pub fn read_f32_lists(
     file: &std::fs::File,
     leaves: &[usize],
-) -> parquet::errors::Result<Vec<Vec<Vec<f32>>>> {
+    mut each: impl FnMut(usize, usize, &[f32]),
+) -> parquet::errors::Result<()> {
     use parquet::file::reader::FileReader;
     let reader = parquet::file::reader::SerializedFileReader::new(file.try_clone()?)?;
     let (mut def, mut rep, mut values) = (Vec::new(), Vec::new(), Vec::<f32>::new());
-    let mut out: Vec<Vec<Vec<f32>>> = vec![Vec::new(); leaves.len()];
+    // rows of the row groups before
+    let mut done = 0usize;
     for g in 0..reader.num_row_groups() {
         let group = reader.get_row_group(g)?;
         let rows = usize::try_from(group.metadata().num_rows()).unwrap_or(0);
-        for (rows_out, &leaf) in out.iter_mut().zip(leaves) {
+        for (k, &leaf) in leaves.iter().enumerate() {
             if leaf >= group.metadata().num_columns() {
                 return Err(parquet::errors::ParquetError::General(format!(
                     "row group {g} has no column {leaf}"
@@ -519,25 +521,25 @@ pub fn read_f32_lists(
             }
             // a row starts at repetition level 0 and holds a value per level, or is empty:
             // one level, defined to 0 (the items are required, so no other level is null)
-            let mut at = 0;
-            let mut k = 0;
-            while k < rep.len() {
-                let end = k
+            let (mut at, mut k_level, mut row) = (0, 0, done);
+            while k_level < rep.len() {
+                let end = k_level
                     + 1
-                    + rep[k + 1..]
+                    + rep[k_level + 1..]
                         .iter()
                         .position(|&r| r == 0)
-                        .unwrap_or(rep.len() - k - 1);
-                let n = if def[k] == 1 { end - k } else { 0 };
-                let row = values.get(at..at + n).ok_or_else(|| {
+                        .unwrap_or(rep.len() - k_level - 1);
+                let n = if def[k_level] == 1 { end - k_level } else { 0 };
+                let values = values.get(at..at + n).ok_or_else(|| {
                     parquet::errors::ParquetError::General(format!("column {leaf} ends early"))
                 })?;
-                rows_out.push(row.to_vec());
-                (at, k) = (at + n, end);
+                each(k, row, values);
+                (at, k_level, row) = (at + n, end, row + 1);
             }
         }
+        done += rows;
     }
-    Ok(out)
+    Ok(())
 }
 
 #[cfg(test)]

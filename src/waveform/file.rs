@@ -245,31 +245,34 @@ fn read_waveforms_with(path: &Path, pages: bool, impulse: bool) -> Result<Vec<Wa
         .map(|n| crate::parquet_io::f32_list_leaf(schema, n))
         .collect::<Option<_>>()
         .filter(|_| pages);
-    let (builder, mut bins) = match &leaves {
+    // The rows, made as their bins are read; the bins of each column go straight into them,
+    // one column after another, so only one column's values are ever held besides the rows.
+    let mut out: Vec<Waveform> = Vec::new();
+    // rows each bin column held
+    let mut held = [0usize; BIN_COLUMNS.len()];
+    let builder = match &leaves {
         Some(leaves) => {
             let rest = (0..schema.num_columns()).filter(|c| !leaves.contains(c));
             let mask = ProjectionMask::leaves(schema, rest);
             // the impulse energies, when not wanted, read as no lists at all
-            let read: Vec<usize> = (0..leaves.len())
-                .filter(|&c| impulse || c != 1)
-                .map(|c| leaves[c])
-                .collect();
-            let mut lists = crate::parquet_io::read_f32_lists(&file, &read)
-                .map_err(|e| err(&e))?
-                .into_iter();
-            let rows = builder.metadata().file_metadata().num_rows().max(0) as usize;
-            let bins: Vec<Vec<Vec<f32>>> = (0..leaves.len())
-                .map(|c| match impulse || c != 1 {
-                    true => lists.next().unwrap_or_default(),
-                    false => vec![Vec::new(); rows],
-                })
-                .collect();
-            (builder.with_projection(mask), Some(bins))
+            let read: Vec<usize> = (0..leaves.len()).filter(|&c| impulse || c != 1).collect();
+            let at: Vec<usize> = read.iter().map(|&c| leaves[c]).collect();
+            crate::parquet_io::read_f32_lists(&file, &at, |k, i, bins| {
+                let c = read[k];
+                *bins_of(row(&mut out, i), c) = bins.to_vec();
+                held[c] = held[c].max(i + 1);
+            })
+            .map_err(|e| err(&e))?;
+            if !impulse {
+                held[1] = usize::MAX;
+            }
+            builder.with_projection(mask)
         }
-        None => (builder, None),
+        None => builder,
     };
     let reader = builder.build().map_err(|e| err(&e))?;
-    let mut out = Vec::new();
+    // rows of the batches before
+    let mut done = 0usize;
     for b in reader {
         let b = b.map_err(|e| err(&e))?;
         // a file that is not ours (another tool's, or another version's) is an error, never
@@ -306,26 +309,17 @@ fn read_waveforms_with(path: &Path, pages: bool, impulse: bool) -> Result<Vec<Wa
         let bin = typed("bin_ns", &f32t)?
             .as_primitive::<Float32Type>()
             .clone();
-        // this batch's rows of each bin column, taken in row order
-        let mut rows: Vec<std::vec::IntoIter<Vec<f32>>> = Vec::with_capacity(BIN_COLUMNS.len());
-        for (c, name) in BIN_COLUMNS.iter().enumerate() {
-            rows.push(match &mut bins {
-                Some(bins) => {
-                    let n = b.num_rows().min(bins[c].len());
-                    bins[c].drain(..n).collect::<Vec<_>>().into_iter()
+        // a file laid out otherwise: its bins through Arrow's reader
+        if leaves.is_none() {
+            for (c, name) in BIN_COLUMNS.iter().enumerate() {
+                let l = typed(name, &f32t)?.as_list::<i32>().clone();
+                for i in 0..b.num_rows() {
+                    let bins = l.value(i).as_primitive::<Float32Type>().values().to_vec();
+                    *bins_of(row(&mut out, done + i), c) = bins;
                 }
-                None => {
-                    let l = typed(name, &f32t)?.as_list::<i32>().clone();
-                    let f32s = |i| l.value(i).as_primitive::<Float32Type>().values().to_vec();
-                    (0..b.num_rows()).map(f32s).collect::<Vec<_>>().into_iter()
-                }
-            });
+                held[c] = done + b.num_rows();
+            }
         }
-        let mut next = |c: usize| -> Result<Vec<f32>> {
-            rows[c]
-                .next()
-                .ok_or_else(|| err(&format!("column {} has fewer rows", BIN_COLUMNS[c])))
-        };
         let rec = typed("received_energy_j", &f64t)?
             .as_primitive::<Float64Type>()
             .clone();
@@ -364,62 +358,82 @@ fn read_waveforms_with(path: &Path, pages: bool, impulse: bool) -> Result<Vec<Wa
         };
         let bands =
             optional("wavelength_nm", &f64t)?.map(|c| c.as_primitive::<Float64Type>().clone());
-        let f64s = |l: &arrow_array::ListArray, i: usize| {
-            l.value(i).as_primitive::<Float64Type>().values().to_vec()
+        let f64s = |l: &arrow_array::ListArray, i: usize, v: &mut Vec<f64>| {
+            v.clear();
+            v.extend_from_slice(l.value(i).as_primitive::<Float64Type>().values());
         };
         // parts written before the spans (0304098) hold the whole gate in every bin column
         let first =
             optional("span_first_bin", &u32t)?.map(|c| c.as_primitive::<UInt32Type>().clone());
         for i in 0..b.num_rows() {
-            let laser_photons = next(0)?;
-            let bins = laser_photons.len();
+            let r = done + i;
+            if let Some(c) = (0..BIN_COLUMNS.len()).find(|&c| held[c] <= r) {
+                return Err(err(&format!("column {} has fewer rows", BIN_COLUMNS[c])));
+            }
+            let w = &mut out[r];
+            let bins = w.laser_photons.len();
             let span_first_bin = first.as_ref().map_or(0, |f| f.value(i) as usize);
-            let mut gate = |c: usize| -> Result<Vec<f32>> {
-                let v = next(c)?;
-                if span_first_bin.saturating_add(v.len()) > bins {
+            for (c, name) in BIN_COLUMNS.iter().enumerate().skip(2) {
+                if span_first_bin.saturating_add(bins_of(w, c).len()) > bins {
                     return Err(err(&format!(
-                        "row {i} of column {} runs past the gate's {bins} bins",
-                        BIN_COLUMNS[c]
+                        "row {i} of column {name} runs past the gate's {bins} bins"
                     )));
                 }
-                Ok(v)
+            }
+            w.pulse_id = ids.value(i);
+            w.t0_ns = t0.value(i);
+            w.bin_ns = bin.value(i);
+            w.received_energy_j = rec.value(i);
+            w.outside_gate_energy_j = out_g.value(i);
+            f64s(&oe, i, &mut w.order_energy_j);
+            f64s(&ose, i, &mut w.order_energy_se_j);
+            w.received_energy_se_j = rse.value(i);
+            w.solar_photons_per_bin = sol.value(i);
+            w.solar_power_w = spw.value(i);
+            w.solar_power_se_w = sps.value(i);
+            w.brf_fov_solar = if bfs.is_null(i) {
+                f32::NAN
+            } else {
+                bfs.value(i)
             };
-            let impulse_energy_se_j = gate(2)?;
-            let class_energy_j = [gate(3)?, gate(4)?, gate(5)?, gate(6)?];
-            out.push(Waveform {
-                pulse_id: ids.value(i),
-                t0_ns: t0.value(i),
-                bin_ns: bin.value(i),
-                laser_photons,
-                impulse_energy_j: next(1)?,
-                impulse_energy_se_j,
-                received_energy_j: rec.value(i),
-                outside_gate_energy_j: out_g.value(i),
-                order_energy_j: f64s(&oe, i),
-                order_energy_se_j: f64s(&ose, i),
-                received_energy_se_j: rse.value(i),
-                solar_photons_per_bin: sol.value(i),
-                solar_power_w: spw.value(i),
-                solar_power_se_w: sps.value(i),
-                brf_fov_solar: if bfs.is_null(i) {
-                    f32::NAN
-                } else {
-                    bfs.value(i)
-                },
-                brf_footprint_laser: if bfl.is_null(i) {
-                    f32::NAN
-                } else {
-                    bfl.value(i)
-                },
-                class_energy_j,
-                span_first_bin,
-                rays: rays.value(i),
-                paths_per_ray: ppr.value(i),
-                wavelength_nm: bands.as_ref().map(|a| a.value(i)),
-            });
+            w.brf_footprint_laser = if bfl.is_null(i) {
+                f32::NAN
+            } else {
+                bfl.value(i)
+            };
+            w.span_first_bin = span_first_bin;
+            w.rays = rays.value(i);
+            w.paths_per_ray = ppr.value(i);
+            w.wavelength_nm = bands.as_ref().map(|a| a.value(i));
         }
+        done += b.num_rows();
+    }
+    // bins of rows the other columns do not have
+    if out.len() > done {
+        return Err(err(&format!(
+            "the bin columns hold {} rows, the others {done}",
+            out.len()
+        )));
     }
     Ok(out)
+}
+
+/// Row `i` of `out`, made (empty) with those before it where it is not yet.
+fn row(out: &mut Vec<Waveform>, i: usize) -> &mut Waveform {
+    if out.len() <= i {
+        out.resize_with(i + 1, Waveform::default);
+    }
+    &mut out[i]
+}
+
+/// A waveform's list of bin column `c` ([`BIN_COLUMNS`]).
+fn bins_of(w: &mut Waveform, c: usize) -> &mut Vec<f32> {
+    match c {
+        0 => &mut w.laser_photons,
+        1 => &mut w.impulse_energy_j,
+        2 => &mut w.impulse_energy_se_j,
+        c => &mut w.class_energy_j[(c - 3).min(3)],
+    }
 }
 
 /// Whether a part file is whole: its bytes match the checksum written beside it, it was made

@@ -297,7 +297,7 @@ fn returns_made(params: &[Params], y: &[f64], noise: &Noise) -> usize {
 fn fit_clean(win: &Window, seeds: Vec<Params>, floor: f64) -> Option<(Vec<Params>, f64)> {
     let mut params = seeds;
     for round in 0..3 {
-        let (p, dev) = win.fit(params.clone(), floor)?;
+        let (p, dev) = win.fit(std::mem::take(&mut params), floor)?;
         let len = win.y.len() as f64;
         let mut kept: Vec<Params> = p
             .iter()

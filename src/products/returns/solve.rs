@@ -7,53 +7,68 @@ impl Window<'_> {
     /// Levenberg-Marquardt on the Poisson deviance: gradient Σ (1 - y/m) ∂m/∂θ and the
     /// Fisher information Σ ∂m/∂θ ∂m/∂θᵀ / m as the curvature. Returns the parameters
     /// and the deviance, or None if nothing finite came out.
-    pub(super) fn fit(&self, mut params: Vec<Params>, floor: f64) -> Option<(Vec<Params>, f64)> {
+    pub(super) fn fit(&self, params: Vec<Params>, floor: f64) -> Option<(Vec<Params>, f64)> {
+        BUFFERS.with_borrow_mut(|b| self.fit_in(params, floor, b))
+    }
+
+    /// [`Window::fit`] in a thread's buffers.
+    fn fit_in(
+        &self,
+        mut params: Vec<Params>,
+        floor: f64,
+        b: &mut Buffers,
+    ) -> Option<(Vec<Params>, f64)> {
         let np = 3 * params.len();
-        let nb = self.y.len();
+        let Buffers {
+            edges,
+            model: m,
+            jac,
+            h,
+            g,
+            trial,
+        } = b;
         // the bin integrals of the current parameters, from the model that was made with them
-        let (mut edges, mut m) = (Vec::new(), Vec::with_capacity(nb));
-        self.model_keeping(&params, &mut edges, &mut m);
-        let mut dev = self.deviance(&m);
+        self.model_keeping(&params, edges, m);
+        let mut dev = self.deviance(m);
         if !dev.is_finite() {
             return None;
         }
         let mut lambda = 1e-3;
-        let mut jac = vec![0.0; nb * np];
-        let mut h = vec![0.0; np * np];
-        let mut g = vec![0.0; np];
-        // a trial step's buffers, swapped with the current ones when it is taken
-        let mut trial = Trial {
-            params: Vec::with_capacity(params.len()),
-            model: Vec::with_capacity(nb),
-            edges: Vec::with_capacity(edges.len()),
-            aug: vec![0.0; np * np],
-            step: vec![0.0; np],
-        };
+        // each is written whole before it is read
+        jac.resize(self.y.len() * np, 0.0);
+        h.resize(np * np, 0.0);
+        g.resize(np, 0.0);
+        trial.aug.resize(np * np, 0.0);
+        trial.step.resize(np, 0.0);
+        let (jac, h, g) = (
+            &mut jac[..self.y.len() * np],
+            &mut h[..np * np],
+            &mut g[..np],
+        );
         for _ in 0..100 {
-            self.jacobian(&params, &edges, &mut jac);
-            self.scoring(&jac, &m, &mut h, &mut g);
+            self.jacobian(&params, edges, jac);
+            self.scoring(jac, m, h, g);
             let dmax = (0..np).map(|a| h[a * np + a]).fold(0.0, f64::max);
             if !(dmax.is_finite() && dmax > 0.0) {
                 return None;
             }
             // None: the next step is too small to mean anything, or no step goes downhill
             // (a minimum within float precision)
-            let Some(td) =
-                self.damped_step(&params, &h, &g, (dev, dmax, floor), &mut lambda, &mut trial)
+            let Some(td) = self.damped_step(&params, h, g, (dev, dmax, floor), &mut lambda, trial)
             else {
                 break;
             };
             let gain = dev - td;
             std::mem::swap(&mut params, &mut trial.params);
-            std::mem::swap(&mut m, &mut trial.model);
-            std::mem::swap(&mut edges, &mut trial.edges);
+            std::mem::swap(m, &mut trial.model);
+            std::mem::swap(edges, &mut trial.edges);
             dev = td;
             // A deviance gain of 1e-6 is a likelihood ratio of 1 + 5e-7. A model that cannot
             // fit (a canopy return is no Gaussian, and at 10^6 photons every bin says so)
             // keeps a deviance far above the bins' count and crawls along a valley, gaining
             // ~0.02 % an iteration for a hundred iterations: once a step removes less than
             // 0.1 % of that excess, further steps change nothing the fit can mean.
-            let excess = dev - nb as f64;
+            let excess = dev - self.y.len() as f64;
             if gain < 1e-6 || gain < 1e-3 * excess {
                 break;
             }
@@ -108,7 +123,7 @@ impl Window<'_> {
         match g.len() {
             3 => scoring_sized(3, self.y, jac, m, h, g),
             6 => scoring_sized(6, self.y, jac, m, h, g),
-            np => scoring_sized(np, self.y, jac, m, h, g),
+            np => scoring_sparse(np, self.y, jac, m, h, g),
         }
     }
 
@@ -130,7 +145,7 @@ impl Window<'_> {
     ) -> Option<f64> {
         let np = g.len();
         for _ in 0..12 {
-            let (aug, step) = (&mut trial.aug, &mut trial.step);
+            let (aug, step) = (&mut trial.aug[..np * np], &mut trial.step[..np]);
             aug.copy_from_slice(h);
             for a in 0..np {
                 aug[a * np + a] += *lambda * h[a * np + a].max(1e-12 * dmax);
@@ -171,8 +186,27 @@ impl Window<'_> {
     }
 }
 
+/// A thread's buffers for [`Window::fit`], kept from fit to fit: their ten vectors, allocated
+/// for each fit, were a fortieth of the town survey's products stage.
+#[derive(Default)]
+struct Buffers {
+    /// Each component's bin integrals at the current parameters.
+    edges: Vec<f64>,
+    /// The model at the current parameters.
+    model: Vec<f64>,
+    jac: Vec<f64>,
+    h: Vec<f64>,
+    g: Vec<f64>,
+    trial: Trial,
+}
+
+thread_local! {
+    static BUFFERS: std::cell::RefCell<Buffers> = std::cell::RefCell::default();
+}
+
 /// A trial step of the solver: its parameters, model and bin integrals, and the buffers its
 /// damped system is solved in.
+#[derive(Default)]
 struct Trial {
     params: Vec<Params>,
     model: Vec<f64>,
@@ -203,6 +237,62 @@ fn scoring_sized(np: usize, y: &[f64], jac: &[f64], m: &[f64], h: &mut [f64], g:
             let ha = &mut h[a * np..(a + 1) * np];
             for (hb, &jb) in ha[a..].iter_mut().zip(&row[a..]) {
                 *hb += wa * jb;
+            }
+        }
+    }
+    for a in 0..np {
+        for b in 0..a {
+            h[a * np + b] = h[b * np + a];
+        }
+    }
+}
+
+/// Components [`scoring_sparse`] keeps apart at a bin; a fit of more is scored whole.
+const SPARSE_COMPONENTS: usize = 16;
+
+/// [`scoring_sized`] for three components or more, each bin's sums over the components that
+/// reach it only: a bin far from a component has its three derivatives zero, and adding
+/// their zero products left a fit of six components summing 171 products a bin to find the
+/// few that are not (a third of the forest survey's products stage was this solver). The
+/// products skipped are zeros, so the sums are the same to the bit.
+fn scoring_sparse(np: usize, y: &[f64], jac: &[f64], m: &[f64], h: &mut [f64], g: &mut [f64]) {
+    let nc = np / 3;
+    if nc > SPARSE_COMPONENTS || !np.is_multiple_of(3) {
+        return scoring_sized(np, y, jac, m, h, g);
+    }
+    let (h, g) = (&mut h[..np * np], &mut g[..np]);
+    h.fill(0.0);
+    g.fill(0.0);
+    let mut active = [0usize; SPARSE_COMPONENTS];
+    for ((row, &yi), &mi) in jac.chunks_exact(np).zip(y).zip(m) {
+        let mut na = 0;
+        for c in 0..nc {
+            if row[3 * c..3 * c + 3].iter().any(|&v| v != 0.0) {
+                active[na] = c;
+                na += 1;
+            }
+        }
+        if na == 0 {
+            continue;
+        }
+        let w = 1.0 / mi;
+        let r = 1.0 - yi * w;
+        for (ia, &ca) in active[..na].iter().enumerate() {
+            for a in 3 * ca..3 * ca + 3 {
+                g[a] += r * row[a];
+                let wa = w * row[a];
+                if wa == 0.0 {
+                    continue;
+                }
+                let ha = &mut h[a * np..(a + 1) * np];
+                for b in a..3 * ca + 3 {
+                    ha[b] += wa * row[b];
+                }
+                for &cb in &active[ia + 1..na] {
+                    for b in 3 * cb..3 * cb + 3 {
+                        ha[b] += wa * row[b];
+                    }
+                }
             }
         }
     }
@@ -248,4 +338,42 @@ fn cholesky_solve(a: &mut [f64], b: &mut [f64], n: usize) -> bool {
         b[i] = s / a[i * n + i];
     }
     true
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The sparse sums skip only zero products: for components reaching a few bins each (a
+    /// Jacobian zero elsewhere, as a component's is far from its centre) they are the dense
+    /// sums to the bit, for every component count up to and past the sparse limit.
+    #[test]
+    fn sparse_scoring_is_the_dense_sums() {
+        let mut rng = crate::rng::SplitMix64::new(5);
+        let nb = 120;
+        for nc in [3, 4, 7, SPARSE_COMPONENTS, SPARSE_COMPONENTS + 1] {
+            let np = 3 * nc;
+            let mut jac = vec![0.0; nb * np];
+            for c in 0..nc {
+                let centre = rng.uniform() * nb as f64;
+                let reach = 1.0 + 20.0 * rng.uniform();
+                for i in 0..nb {
+                    if (i as f64 - centre).abs() < reach {
+                        for a in 3 * c..3 * c + 3 {
+                            jac[i * np + a] = rng.uniform() - 0.5;
+                        }
+                    }
+                }
+            }
+            let m: Vec<f64> = (0..nb).map(|_| 0.1 + 50.0 * rng.uniform()).collect();
+            let y: Vec<f64> = (0..nb).map(|_| (60.0 * rng.uniform()).floor()).collect();
+            let (mut h, mut g) = (vec![7.0; np * np], vec![7.0; np]);
+            scoring_sized(np, &y, &jac, &m, &mut h, &mut g);
+            let (mut hs, mut gs) = (vec![-3.0; np * np], vec![-3.0; np]);
+            scoring_sparse(np, &y, &jac, &m, &mut hs, &mut gs);
+            let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            assert_eq!(bits(&hs), bits(&h), "{nc} components: curvature");
+            assert_eq!(bits(&gs), bits(&g), "{nc} components: gradient");
+        }
+    }
 }

@@ -358,9 +358,8 @@ fn read_waveforms_with(path: &Path, pages: bool, impulse: bool) -> Result<Vec<Wa
         };
         let bands =
             optional("wavelength_nm", &f64t)?.map(|c| c.as_primitive::<Float64Type>().clone());
-        let f64s = |l: &arrow_array::ListArray, i: usize, v: &mut Vec<f64>| {
-            v.clear();
-            v.extend_from_slice(l.value(i).as_primitive::<Float64Type>().values());
+        let f64s = |l: &arrow_array::ListArray, i: usize| {
+            l.value(i).as_primitive::<Float64Type>().values().to_vec()
         };
         // parts written before the spans (0304098) hold the whole gate in every bin column
         let first =
@@ -380,31 +379,38 @@ fn read_waveforms_with(path: &Path, pages: bool, impulse: bool) -> Result<Vec<Wa
                     )));
                 }
             }
-            w.pulse_id = ids.value(i);
-            w.t0_ns = t0.value(i);
-            w.bin_ns = bin.value(i);
-            w.received_energy_j = rec.value(i);
-            w.outside_gate_energy_j = out_g.value(i);
-            f64s(&oe, i, &mut w.order_energy_j);
-            f64s(&ose, i, &mut w.order_energy_se_j);
-            w.received_energy_se_j = rse.value(i);
-            w.solar_photons_per_bin = sol.value(i);
-            w.solar_power_w = spw.value(i);
-            w.solar_power_se_w = sps.value(i);
-            w.brf_fov_solar = if bfs.is_null(i) {
-                f32::NAN
-            } else {
-                bfs.value(i)
+            // whole, so that a field Waveform gains cannot be left unread
+            *w = Waveform {
+                pulse_id: ids.value(i),
+                t0_ns: t0.value(i),
+                bin_ns: bin.value(i),
+                laser_photons: std::mem::take(&mut w.laser_photons),
+                impulse_energy_j: std::mem::take(&mut w.impulse_energy_j),
+                impulse_energy_se_j: std::mem::take(&mut w.impulse_energy_se_j),
+                received_energy_j: rec.value(i),
+                outside_gate_energy_j: out_g.value(i),
+                order_energy_j: f64s(&oe, i),
+                order_energy_se_j: f64s(&ose, i),
+                received_energy_se_j: rse.value(i),
+                solar_photons_per_bin: sol.value(i),
+                solar_power_w: spw.value(i),
+                solar_power_se_w: sps.value(i),
+                brf_fov_solar: if bfs.is_null(i) {
+                    f32::NAN
+                } else {
+                    bfs.value(i)
+                },
+                brf_footprint_laser: if bfl.is_null(i) {
+                    f32::NAN
+                } else {
+                    bfl.value(i)
+                },
+                class_energy_j: std::mem::take(&mut w.class_energy_j),
+                span_first_bin,
+                rays: rays.value(i),
+                paths_per_ray: ppr.value(i),
+                wavelength_nm: bands.as_ref().map(|a| a.value(i)),
             };
-            w.brf_footprint_laser = if bfl.is_null(i) {
-                f32::NAN
-            } else {
-                bfl.value(i)
-            };
-            w.span_first_bin = span_first_bin;
-            w.rays = rays.value(i);
-            w.paths_per_ray = ppr.value(i);
-            w.wavelength_nm = bands.as_ref().map(|a| a.value(i));
         }
         done += b.num_rows();
     }

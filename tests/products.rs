@@ -490,3 +490,75 @@ print("laspy and rasterio ok")
     );
     run_python(&script, &b);
 }
+
+/// report.md's simulation noise against photon noise is the waveforms' own figure,
+/// Σ (qe SE / hν)² over Σ qe E / hν, and it falls as 1 / rays: each pulse's variance over
+/// its rays times the rays (the variance of one ray's energy) is the same at 40 and at 160
+/// rays, within four standard errors of the mean over the pulses.
+#[test]
+fn simulation_noise_against_photon_noise_falls_as_one_over_rays() {
+    let dir = tmp("products-mc-noise");
+    let scene = plane_scene(&dir, 0.4, 200.0);
+    let qe = 0.3;
+    let mut per_ray = Vec::new();
+    for rays in [40u64, 160] {
+        let text = format!(
+            "name: pc\nscene: {}\nseed: 3\nwavelength_nm: 1064\ninstrument:\n  kind: photon_counting\n  pulse_energy_j: 1.0e-9\n  pulse_fwhm_ns: 1.0\n  footprint_half_angle_mrad: 0.2\n  fov_half_angle_mrad: 0.3\n  receiver_area_m2: 0.01\n  bin_ns: 0.5\n  quantum_efficiency: {qe}\n  dead_time_ns: 0\n  dark_count_hz: 0\nplatform: {{ kind: track, altitude_m: 300, track: {{ start: [-20, 0], end: [20, 0] }}, along_track_step_m: 0.5 }}\nsimulation: {{ method: bdpt, rays_per_pulse: {rays}, max_order: 2 }}\n",
+            scene.display()
+        );
+        let sub = dir.join(format!("r{rays}"));
+        std::fs::create_dir_all(&sub).unwrap();
+        let out = run_campaign(&sub, &text, None);
+        let mut rows = Vec::new();
+        for k in 0.. {
+            let part = out.join(lidarsim::waveform::file::part_name(k));
+            if !part.is_file() {
+                break;
+            }
+            rows.extend(lidarsim::waveform::file::read_waveforms(&part).unwrap());
+        }
+        assert!(rows.len() > 50, "{} pulses", rows.len());
+        let hv = lidarsim::photon_energy_j(1064.0);
+        let var: f64 = rows
+            .iter()
+            .map(|w| (qe * w.received_energy_se_j / hv).powi(2))
+            .sum();
+        let photons: f64 = rows.iter().map(|w| qe * w.received_energy_j / hv).sum();
+        let md = std::fs::read_to_string(out.join("report.md")).unwrap();
+        let line = md
+            .lines()
+            .find(|l| l.starts_with("| simulation noise against photon noise |"))
+            .unwrap_or_else(|| panic!("no noise line in report.md:\n{md}"));
+        let printed: f64 = line
+            .split('|')
+            .nth(2)
+            .unwrap()
+            .split_whitespace()
+            .next()
+            .unwrap()
+            .trim_end_matches(':')
+            .parse()
+            .unwrap();
+        let expected = var / photons;
+        println!("{rays} rays: {line}");
+        assert!(
+            (printed - expected).abs() <= 5e-4 * expected,
+            "{rays} rays: report {printed}, waveforms {expected}"
+        );
+        // one ray's variance of the received energy, per pulse
+        let v: Vec<f64> = rows
+            .iter()
+            .map(|w| (w.received_energy_se_j / w.received_energy_j).powi(2) * rays as f64)
+            .collect();
+        let n = v.len() as f64;
+        let mean = v.iter().sum::<f64>() / n;
+        let sd = (v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
+        per_ray.push((mean, sd / n.sqrt()));
+    }
+    let ((a, sa), (b, sb)) = (per_ray[0], per_ray[1]);
+    println!("relative variance of one ray: {a:.5} ± {sa:.5} at 40 rays, {b:.5} ± {sb:.5} at 160");
+    assert!(
+        (a - b).abs() <= 4.0 * (sa * sa + sb * sb).sqrt(),
+        "{a} ± {sa} against {b} ± {sb}"
+    );
+}

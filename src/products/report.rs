@@ -89,6 +89,9 @@ pub fn report(
             brf_fp / lit as f64
         ),
     };
+    if let Some(line) = noise_line(c, &totals) {
+        text += &line;
+    }
     if let Some(sun) = &c.sun {
         text += &format!(
             "| sun | zenith {}°, azimuth {}° |\n| solar photons per bin | {:.4} |\n| scene BRF in the field of view, from the sun (Eq. 20) | {:.4} |\n",
@@ -99,6 +102,29 @@ pub fn report(
     text += &products_section(out, c.points_format().file_name(), crs);
     text += &mission_section(out, &c.instrument, crs);
     Ok(text)
+}
+
+/// The simulation's noise against the photons' (for the first band): the variance of the
+/// expected photons a pulse's rays estimate, Σ SE², over their own Poisson variance, Σ λ,
+/// with λ the photons after the quantum efficiency (its share of those reaching the
+/// detector, all of them for an instrument that has none). It falls as 1 / rays: under 0.01
+/// the rays add under 1 % to the noise of any detected count, so fewer would do for counts
+/// alone; at 10 or more a waveform is far smoother than a detector's own noise would let it
+/// be, and its decomposition must weigh the simulation's noise (as it does). None before
+/// products.json recorded the sum, or without light.
+fn noise_line(c: &crate::campaign::Campaign, totals: &WaveformTotals) -> Option<String> {
+    let var = totals.received_energy_var_j2?;
+    let hv = crate::photon_energy_j(c.wavelength_nm.first());
+    let qe = c.instrument.quantum_efficiency.unwrap_or(1.0);
+    let photons = qe * totals.received_energy_j / hv;
+    if !(photons > 0.0 && var.is_finite()) {
+        return None;
+    }
+    let ratio = qe * qe * var / (hv * hv) / photons;
+    Some(format!(
+        "| simulation noise against photon noise | {ratio:.3e}: the Monte Carlo variance of the pulses' expected photons, summed, over their Poisson variance ({:.3e} photons per pulse after the quantum efficiency, before any dead time); it falls as 1 / rays |\n",
+        photons / totals.pulses.max(1) as f64
+    ))
 }
 
 /// The mission-shaped files in a run folder, and what the waveform record holds.

@@ -37,11 +37,21 @@ pub struct WaveformTotals {
     /// Sum of `brf_footprint_laser` over the `lit` pulses that have one.
     pub brf_footprint_laser: f64,
     pub lit: usize,
+    /// Σ of the square of each pulse's `received_energy_se_j`, J²: with `received_energy_j`,
+    /// how the simulation's noise compares with the photons' (report.md); null in a
+    /// products.json written before it.
+    #[serde(default)]
+    pub received_energy_var_j2: Option<f64>,
 }
 
 impl WaveformTotals {
     pub fn add(&mut self, w: &crate::waveform::Waveform) {
         self.received_energy_j += w.received_energy_j;
+        let se = w.received_energy_se_j;
+        if self.pulses == 0 || self.received_energy_var_j2.is_some() {
+            self.received_energy_var_j2 =
+                Some(self.received_energy_var_j2.unwrap_or(0.0) + se * se);
+        }
         self.pulses += 1;
         self.multiple_energy_j +=
             w.received_energy_j - w.order_energy_j.first().copied().unwrap_or(0.0);

@@ -565,3 +565,57 @@ fn a_sun_with_forward_tracing_is_warned_about() {
         }
     }
 }
+
+/// A run that could not fit in any machine's memory is refused before it starts, at the key
+/// that sizes it, by `check` and by `run`: gates of 10^15 bins (bins of 10^-12 ns) and DSM
+/// grids of 10^16 cells (0.1 µm cells), where the allocations used to abort the process with
+/// no message (the DSM's only after the simulation). More threads than can start are refused
+/// too: 100,000 ended the process in a panic as their stacks failed to map.
+#[test]
+fn runs_that_cannot_fit_in_memory() {
+    let dsm = CAMPAIGN
+        .replace("instrument:\n", "instrument:\n  kind: discrete_return\n")
+        .replace(
+            "simulation: { rays_per_pulse: 100 }\n",
+            "simulation: { rays_per_pulse: 100 }\nproducts: { points: true, dsm: { resolution_m: 1.0e-7 } }\n",
+        );
+    for (name, campaign, key) in [
+        (
+            "gate",
+            CAMPAIGN.replace(
+                "  receiver_area_m2: 0.1\n",
+                "  receiver_area_m2: 0.1\n  bin_ns: 1.0e-12\n",
+            ),
+            "instrument.bin_ns",
+        ),
+        ("dsm", dsm, "products.dsm.resolution_m"),
+    ] {
+        let (code, err, dir) = check(&format!("memory_{name}"), &campaign, SCENE);
+        assert_one_message(code, &err, &["campaign.yaml:", key, "memory"]);
+        let (code, err) = run(&dir, &[]);
+        // the run logs its plan stage first; its error is still one line
+        assert!(!err.contains("panicked"), "{err}");
+        let errors: Vec<&str> = err.lines().filter(|l| l.starts_with("error")).collect();
+        assert_eq!(errors.len(), 1, "{err}");
+        assert_one_message(code, errors[0], &["campaign.yaml:", key]);
+    }
+    let dir = tmp("bad_threads");
+    write(&dir, "scene.yaml", SCENE);
+    write(&dir, "campaign.yaml", CAMPAIGN);
+    let (code, err) = run(&dir, &["--threads", "100000"]);
+    assert_one_message(code, &err, &["--threads", "4096"]);
+}
+
+/// `lidarsim run DIR/campaign.yaml --out DIR/out ARGS`: its exit code and stderr.
+fn run(dir: &std::path::Path, args: &[&str]) -> (i32, String) {
+    let (path, out) = (dir.join("campaign.yaml"), dir.join("out"));
+    let mut all = vec![
+        "run",
+        path.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ];
+    all.extend(args);
+    let (code, _, err) = lidarsim(&all);
+    (code, err)
+}

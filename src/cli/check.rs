@@ -17,6 +17,8 @@ pub(super) fn check(path: &std::path::Path) -> Result<()> {
     let t = Instant::now();
     let scene = Scene::load_bands(&loaded.scene_path, c.wavelength_nm.all())?;
     let load_s = t.elapsed().as_secs_f64();
+    // before the probes below, which trace pulses in gates of the campaign's size
+    pipeline::memory::fits(&loaded, &scene, &plan)?;
     let s = scene.stats();
     let (lo, hi) = scene.bounds();
     println!("campaign: {} ({})", c.name, path.display());
@@ -92,7 +94,7 @@ pub(super) fn check(path: &std::path::Path) -> Result<()> {
         let names: Vec<&str> = runs.iter().map(|(_, n)| n.as_str()).collect();
         println!("sweep: {} runs ({})", runs.len(), names.join(", "));
     }
-    let run_bytes = run_memory_bound(loaded, &scene, &plan);
+    let run_bytes = pipeline::memory::bound(loaded, &scene, &plan).total();
     // what this process holds now: the program, its threads and the scene
     let base = peak_rss_bytes().map_or(s.memory_bytes as f64, |b| b as f64);
     println!(
@@ -113,35 +115,6 @@ pub(super) fn check(path: &std::path::Path) -> Result<()> {
     }
     println!("ok");
     Ok(())
-}
-
-/// What a run holds beyond the scene, bytes. Every stage works a part at a time, so this
-/// does not depend on the number of pulses: the simulate stage's part in the making and the
-/// one being written, with the workers' tallies; the products stage's part of waveforms, its
-/// chunk of points, the DSM grid over the scene, the distance histogram and the top view's
-/// sample; a row group of pulses or photons being written.
-fn run_memory_bound(loaded: &crate::campaign::Loaded, scene: &Scene, plan: &plan::Plan) -> f64 {
-    use crate::waveform::file::{gate_bins, pulse_bytes, Parts};
-    let bins = gate_bins(loaded, scene, plan);
-    let part = Parts::of_run(loaded, scene, plan).size() as f64 * pulse_bytes(loaded, bins);
-    let bins = bins as f64;
-    let threads = rayon::current_num_threads() as f64;
-    // a part in the making, the one queued, and the one being encoded (its table and bytes),
-    // with a part's worth for the allocator's slack, and the Parquet writer's own buffers and
-    // compressors: about 40 MB whatever the part, as measured on a 25,000-pulse survey
-    let simulate = 5.0 * part + 40e6 + threads * bins * 64.0 * 8.0;
-    let (lo, hi) = scene.bounds();
-    let dsm_cells = match crate::products::stage::wanted(loaded).dsm {
-        Some(res) => ((hi.x - lo.x) / res + 2.0) * ((hi.y - lo.y) / res + 2.0),
-        None => 0.0,
-    };
-    let points = crate::products::spill::CHUNK as f64 * 2.0 * 80.0;
-    // a part read (its table and its waveforms) and the next one read ahead, a chunk of
-    // points, the DSM, the distance histogram and the top view's sample
-    let top_view = crate::products::figures::TOP_VIEW_MAX_POINTS as f64 * 32.0 * 3.0;
-    let products = 3.0 * part + points + dsm_cells * 48.0 + 4e6 + top_view;
-    let writing = crate::parquet_io::ROW_GROUP_ROWS as f64 * 2.0 * 80.0;
-    simulate.max(products) + writing
 }
 
 fn human_seconds(s: f64) -> String {

@@ -9,6 +9,7 @@
 //! uninterrupted one, since every random draw derives from (seed, pulse, chunk).
 
 pub mod manifest;
+pub mod memory;
 pub mod simulate;
 pub mod sweep;
 
@@ -91,6 +92,10 @@ pub fn run(campaign_path: &Path, opts: &RunOptions) -> Result<RunSummary> {
     })
 }
 
+/// Most threads a run may ask for: 4096 start here in 8 s, 100,000 fail to start (each
+/// needs its stack), which ends the process where no error can be returned.
+pub const MAX_THREADS: usize = 4096;
+
 /// Runs `f` on a pool of `threads` threads (all cores when None).
 pub fn with_threads<T: Send>(
     threads: Option<usize>,
@@ -100,6 +105,12 @@ pub fn with_threads<T: Send>(
     if let Some(n) = threads {
         if n == 0 {
             return Err(Error::msg("--threads must be at least 1"));
+        }
+        if n > MAX_THREADS {
+            return Err(Error::msg(format!(
+                "--threads {n}: at most {MAX_THREADS} (threads beyond the cores only wait their \
+                 turn, and the system runs out of them)"
+            )));
         }
         b = b.num_threads(n);
     }
@@ -378,6 +389,7 @@ fn run_single(
     }
 
     let scene = cache.get(&loaded.scene_path, loaded.campaign.wavelength_nm.all())?;
+    memory::fits(loaded, scene, &plan)?;
     // `auto` resolved here, once the scene is known. The pilot is deterministic, but another
     // version of the program may pick otherwise: the method picked is part of the simulate
     // fingerprint, so a resume never mixes parts of two methods

@@ -171,6 +171,10 @@ pub struct Scratch {
     bufs: Buffers,
 }
 
+/// Chunks of a many-chunk pulse traced at once per thread (see [`simulate_pulse_in`]): enough
+/// that a slow chunk at the end of a batch leaves the other threads a few chunks to take.
+const CHUNKS_PER_THREAD: u64 = 16;
+
 /// Traces `rays` samples of one pulse, in chunks of [`chunk_rays`] run in parallel; each
 /// chunk has its own random stream and the chunks are merged in order, so the result is the
 /// same whatever the number of threads.
@@ -211,16 +215,25 @@ pub fn simulate_pulse_in<'s>(setup: &PulseSetup, rays: u64, scratch: &'s mut Scr
         trace(0, acc, &mut scratch.bufs);
         return &acc.tally;
     }
-    let parts: Vec<Accum> = (0..chunks)
-        .into_par_iter()
-        .map(|c| {
-            let mut part = Accum::new(setup);
-            trace(c, &mut part, &mut Buffers::default());
-            part
-        })
-        .collect();
-    for p in &parts {
-        acc.merge(p);
+    // the chunks in batches of a few per thread, each batch's merged in chunk order: the sums
+    // of all chunks at once, in memory that does not grow with the rays (a tally per chunk
+    // of 10^19 rays asked for 4·10^18 bytes)
+    let batch = CHUNKS_PER_THREAD * rayon::current_num_threads() as u64;
+    let mut first = 0;
+    while first < chunks {
+        let last = first.saturating_add(batch).min(chunks);
+        let parts: Vec<Accum> = (first..last)
+            .into_par_iter()
+            .map(|c| {
+                let mut part = Accum::new(setup);
+                trace(c, &mut part, &mut Buffers::default());
+                part
+            })
+            .collect();
+        for p in &parts {
+            acc.merge(p);
+        }
+        first = last;
     }
     &acc.tally
 }

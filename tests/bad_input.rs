@@ -567,9 +567,10 @@ fn a_sun_with_forward_tracing_is_warned_about() {
 }
 
 /// A run that could not fit in any machine's memory is refused before it starts, at the key
-/// that sizes it, by `check` and by `run`: gates of 10^15 bins (bins of 10^-12 ns) and DSM
-/// grids of 10^16 cells (0.1 µm cells), where the allocations used to abort the process with
-/// no message (the DSM's only after the simulation). More threads than can start are refused
+/// that sizes it, by `check` and by `run`: gates of 10^15 bins (bins of 10^-12 ns), DSM grids
+/// of 10^16 cells (0.1 µm cells) and gates made of a 10^9 ns pulse's tails, where the
+/// allocations used to abort the process with no message (the DSM's only after the
+/// simulation). More threads than can start are refused
 /// too: 100,000 ended the process in a panic as their stacks failed to map.
 #[test]
 fn runs_that_cannot_fit_in_memory() {
@@ -589,6 +590,11 @@ fn runs_that_cannot_fit_in_memory() {
             "instrument.bin_ns",
         ),
         ("dsm", dsm, "products.dsm.resolution_m"),
+        (
+            "pulse",
+            CAMPAIGN.replace("pulse_fwhm_ns: 2", "pulse_fwhm_ns: 1.0e9"),
+            "shorter pulse",
+        ),
     ] {
         let (code, err, dir) = check(&format!("memory_{name}"), &campaign, SCENE);
         assert_one_message(code, &err, &["campaign.yaml:", key, "memory"]);

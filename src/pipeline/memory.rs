@@ -110,11 +110,14 @@ pub fn fits(loaded: &Loaded, scene: &Scene, plan: &Plan) -> Result<()> {
             ),
         )
     } else {
+        // the gate spans the scene's ranges and the pulse's ±4σ on either side, in bins: a
+        // bin far finer than the pulse, or a pulse far longer than any scene, sizes it
+        let sigma_ns = crate::sensor::pulse_sigma_s(&c.instrument) * 1e9;
         loaded.doc.error(
             "instrument.bin_ns",
             format!(
-                "{needs} (gates of {} bins of {} ns over the scene's range): use wider bins or a \
-                 range_gate of fewer bins",
+                "{needs} (gates of {} bins of {} ns over the scene's ranges and the pulse's ±4σ, \
+                 σ = {sigma_ns:.3} ns): use wider bins, a shorter pulse or a range_gate",
                 b.gate_bins, c.instrument.bin_ns
             ),
         )

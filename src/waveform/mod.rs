@@ -181,7 +181,9 @@ pub fn convolve(
     // half a sigma: a few exponentials per sub-bin instead of an erfc per edge, whose 2 × 96
     // per sub-bin on the forest's gates (0.067 ns bins, 1.27 ns sigma) were most of building
     // a waveform
-    let mut masses = Vec::with_capacity(2 * reach as usize + 1);
+    // a sub-bin's masses cover its reach within the gate: no more than the gate's bins, whatever
+    // the pulse (one of 10^9 ns asked for 68 GB here)
+    let mut masses = Vec::with_capacity((2 * reach as usize + 1).min(gate.bins));
     for (i, &e) in sub.iter().enumerate() {
         if e == 0.0 {
             continue;

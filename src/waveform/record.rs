@@ -187,8 +187,15 @@ fn convolve_gaussian(v: &[f64], sigma_bins: f64) -> Vec<f64> {
     if sigma_bins.is_nan() || sigma_bins <= 0.0 || v.is_empty() {
         return v.to_vec();
     }
-    let half = (4.0 * sigma_bins).ceil() as usize;
+    let reach = (4.0 * sigma_bins).ceil();
     let cdf = |x: f64| super::normal_cdf(x / sigma_bins);
+    // taps further than the record is long never land in it: a response of 10^9 ns asked for
+    // a 54 GB kernel; its ±4σ mass is then taken whole from Φ
+    let half = if reach < v.len() as f64 {
+        reach as usize
+    } else {
+        v.len()
+    };
     let mut kernel: Vec<f64> = (0..=2 * half)
         .map(|j| {
             let d = j as f64 - half as f64;
@@ -196,7 +203,11 @@ fn convolve_gaussian(v: &[f64], sigma_bins: f64) -> Vec<f64> {
         })
         .collect();
     // the tails beyond ±4σ folded back in: the response keeps the energy
-    let total: f64 = kernel.iter().sum();
+    let total: f64 = if half as f64 == reach {
+        kernel.iter().sum()
+    } else {
+        cdf(reach + 0.5) - cdf(-reach - 0.5)
+    };
     kernel.iter_mut().for_each(|k| *k /= total);
     let mut out = vec![0.0; v.len()];
     for (i, &x) in v.iter().enumerate().filter(|(_, &x)| x != 0.0) {
@@ -213,6 +224,31 @@ fn convolve_gaussian(v: &[f64], sigma_bins: f64) -> Vec<f64> {
 mod tests {
     use super::*;
     use crate::testdata::most_outside_3se;
+
+    /// A response whose ±4σ is longer than the record is cut to the record's length: the same
+    /// values as the whole kernel, whose taps beyond the record land nowhere (to 1e-12, the
+    /// kernel's sum then being Φ's difference instead of its taps' sum).
+    #[test]
+    fn a_response_longer_than_the_record_gives_the_whole_kernels_values() {
+        let v: Vec<f64> = (0..12).map(|i| ((i * 7) % 5) as f64).collect();
+        let sigma: f64 = 5.0;
+        let got = convolve_gaussian(&v, sigma);
+        let half = (4.0 * sigma).ceil() as usize;
+        let cdf = |x: f64| crate::waveform::normal_cdf(x / sigma);
+        let kernel: Vec<f64> = (0..=2 * half)
+            .map(|j| cdf(j as f64 - half as f64 + 0.5) - cdf(j as f64 - half as f64 - 0.5))
+            .collect();
+        let total: f64 = kernel.iter().sum();
+        for (t, g) in got.iter().enumerate() {
+            let want: f64 = (0..v.len())
+                .map(|i| v[i] * kernel[t + half - i] / total)
+                .sum();
+            assert!(
+                (g - want).abs() <= 1e-12 * want.abs().max(1e-300),
+                "{t}: {g} against {want}"
+            );
+        }
+    }
 
     fn recorder() -> Recorder {
         Recorder {

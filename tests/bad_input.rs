@@ -610,6 +610,21 @@ fn runs_that_cannot_fit_in_memory() {
     write(&dir, "campaign.yaml", CAMPAIGN);
     let (code, err) = run(&dir, &["--threads", "100000"]);
     assert_one_message(code, &err, &["--threads", "4096"]);
+    // and a bench canopy of 10^11 crowns, which grew past 5 GB in a minute
+    let out = dir.join("bench");
+    let (code, _, err) = lidarsim(&[
+        "bench",
+        "--no-campaigns",
+        "--trees",
+        "100000000000",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 1, "{err}");
+    assert!(
+        err.contains("--trees") && !err.contains("panicked"),
+        "{err}"
+    );
 }
 
 /// `lidarsim run DIR/campaign.yaml --out DIR/out ARGS`: its exit code and stderr.

@@ -97,8 +97,9 @@ pub struct BenchArgs {
     /// Field-of-view half angle, mrad, 0 < x < 1500.
     #[arg(long, default_value_t = 0.3)]
     fov_mrad: f64,
-    /// Crowns in the generated canopy (100 m × 100 m).
-    #[arg(long, default_value_t = 700, value_parser = clap::value_parser!(u64).range(1..))]
+    /// Crowns in the generated canopy (100 m × 100 m), at most 10^7 as `scene generate`
+    /// allows (10^11 grew past 5 GB in a minute on its way to exhausting memory).
+    #[arg(long, default_value_t = 700, value_parser = clap::value_parser!(u64).range(1..=10_000_000))]
     trees: u64,
 }
 

@@ -779,6 +779,22 @@ fn compare_writes_csv_and_plots() {
             )
         });
     assert!(svg.contains("<svg"), "not an SVG");
+
+    // a products.json or DSM report cut short is named, not shown as an empty row
+    for file in ["products.json", "dsm/report.json"] {
+        let path = runs[1].join(file);
+        let whole = std::fs::read(&path).unwrap();
+        std::fs::write(&path, &whole[..whole.len() / 2]).unwrap();
+        let (code, stdout, err) = lidarsim(&[
+            "compare",
+            runs[0].to_str().unwrap(),
+            runs[1].to_str().unwrap(),
+        ]);
+        assert_eq!(code, 1, "{stdout}{err}");
+        assert!(err.contains(file) && err.contains("--resume"), "{err}");
+        assert!(!err.contains("panicked"), "{err}");
+        std::fs::write(&path, whole).unwrap();
+    }
 }
 
 /// A sweep of `platform.altitude_m: [100, 200]` over a 10-shot profiler: one sub-folder per

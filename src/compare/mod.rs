@@ -72,7 +72,24 @@ pub fn read_row(dir: &Path) -> Result<RunRow> {
         run_time_s: manifest.stages.values().map(|s| s.wall_time_s).sum(),
         ..RunRow::default()
     };
-    if let Some(p) = ProductsSummary::read(&dir.join("products.json")) {
+    // a file that is there but not ours (cut short, edited) is an error, not an empty row
+    let present = |name: &str| Some(dir.join(name)).filter(|p| p.is_file());
+    let unreadable = |path: &Path| {
+        Error::data(
+            path,
+            "not a lidarsim file (cut short or edited?): run the products stage again with \
+             `lidarsim run CAMPAIGN --out RUN --resume --stages products`",
+        )
+    };
+    let products = match present("products.json") {
+        Some(path) => Some(ProductsSummary::read(&path).ok_or_else(|| unreadable(&path))?),
+        None => None,
+    };
+    let dsm = match present("dsm/report.json") {
+        Some(path) => Some(DsmReport::read(&path).ok_or_else(|| unreadable(&path))?),
+        None => None,
+    };
+    if let Some(p) = products {
         row.pulses = p.pulses as u64;
         if let Some(pts) = p.points {
             row.points = Some(pts.points as u64);
@@ -85,7 +102,7 @@ pub fn read_row(dir: &Path) -> Result<RunRow> {
             }
         }
     }
-    if let Some(d) = DsmReport::read(&dir.join("dsm/report.json")) {
+    if let Some(d) = dsm {
         row.dsm_bias_m = finite(d.bias_m);
         row.dsm_rmse_m = finite(d.rmse_m);
         row.dsm_coverage = finite(d.coverage);

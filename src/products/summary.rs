@@ -48,10 +48,7 @@ impl WaveformTotals {
     pub fn add(&mut self, w: &crate::waveform::Waveform) {
         self.received_energy_j += w.received_energy_j;
         let se = w.received_energy_se_j;
-        if self.pulses == 0 || self.received_energy_var_j2.is_some() {
-            self.received_energy_var_j2 =
-                Some(self.received_energy_var_j2.unwrap_or(0.0) + se * se);
-        }
+        self.received_energy_var_j2 = Some(self.received_energy_var_j2.unwrap_or(0.0) + se * se);
         self.pulses += 1;
         self.multiple_energy_j +=
             w.received_energy_j - w.order_energy_j.first().copied().unwrap_or(0.0);

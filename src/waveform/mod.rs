@@ -163,20 +163,25 @@ pub fn impulse_bins(sub: &[f64], sub_bins: usize) -> Vec<f64> {
 /// of standard deviation `sigma` (s), integrated exactly over each bin.
 ///
 /// `sub_moment[i] / sub[i]` is the mean position (0..1) of sub-bin i's energy within it.
+/// Only the sub-bins of the bins `lit` are read: a pulse's energy lies within a few dozen of
+/// its gate's hundreds of bins, and the others are zero.
 pub fn convolve(
     sub: &[f64],
     sub_moment: &[f64],
     sub_bins: usize,
     gate: &Gate,
     sigma: f64,
+    lit: (usize, usize),
 ) -> Vec<f64> {
-    let mut out = vec![0.0; gate.bins];
     if sigma <= 0.0 {
         return impulse_bins(sub, sub_bins);
     }
+    let mut out = vec![0.0; gate.bins];
     let sub_dt = gate.dt / sub_bins as f64;
     let sigma_bins = sigma / gate.dt;
-    let reach = (5.0 * sigma_bins).ceil() as i64 + 1;
+    let reach = convolution_reach(sigma_bins);
+    let first = lit.0.saturating_mul(sub_bins).min(sub.len());
+    let last = lit.1.saturating_mul(sub_bins).min(sub.len()).max(first);
     // the bin integrals by the stepped quadrature of `bin_masses_into` where bins are at most
     // half a sigma: a few exponentials per sub-bin instead of an erfc per edge, whose 2 × 96
     // per sub-bin on the forest's gates (0.067 ns bins, 1.27 ns sigma) were most of building
@@ -184,7 +189,7 @@ pub fn convolve(
     // a sub-bin's masses cover its reach within the gate: no more than the gate's bins, whatever
     // the pulse (one of 10^9 ns asked for 68 GB here)
     let mut masses = Vec::with_capacity((2 * reach as usize + 1).min(gate.bins));
-    for (i, &e) in sub.iter().enumerate() {
+    for (i, &e) in sub.iter().enumerate().take(last).skip(first) {
         if e == 0.0 {
             continue;
         }
@@ -212,6 +217,12 @@ pub fn convolve(
         }
     }
     out
+}
+
+/// Bins on either side of a sub-bin's own that [`convolve`] spreads it over, for a pulse of
+/// `sigma_bins`.
+fn convolution_reach(sigma_bins: f64) -> i64 {
+    (5.0 * sigma_bins).ceil() as i64 + 1
 }
 
 /// Builds a pulse's waveform record from its tally.
@@ -282,15 +293,34 @@ pub fn waveform(
     let (lo, hi) = (tally.lit.0.min(gate.bins), tally.lit.1.min(gate.bins));
     let lit = |f: &dyn Fn(usize) -> f64| -> Vec<f64> { spanned(gate.bins, lo, hi, f) };
     let impulse = lit(&|b| tally.sub[b * sub_bins..(b + 1) * sub_bins].iter().sum());
-    let convolved = convolve(&tally.sub, &tally.sub_moment, sub_bins, gate, pulse_sigma_s);
+    let convolved = convolve(
+        &tally.sub,
+        &tally.sub_moment,
+        sub_bins,
+        gate,
+        pulse_sigma_s,
+        (lo, hi),
+    );
+    // the bins the convolution may have reached (a bin more each side than its reach): zero
+    // beyond, so the photons are made only here, as the impulse only over the lit span
+    let reach = if pulse_sigma_s > 0.0 {
+        usize::try_from(convolution_reach(pulse_sigma_s / gate.dt))
+            .unwrap_or(usize::MAX)
+            .saturating_add(1)
+    } else {
+        0
+    };
+    let (c_lo, c_hi) = (
+        lo.saturating_sub(reach),
+        hi.saturating_add(reach).min(gate.bins),
+    );
     let n = tally.rays.max(1) as f64;
     let (solar_w, solar_se) = tally.solar_power();
-    // range of the return's energy centroid, for the footprint's solid angle
-    let in_gate: f64 = impulse.iter().sum();
-    let t_mean = impulse
-        .iter()
-        .enumerate()
-        .map(|(i, e)| e * (gate.t0 + (i as f64 + 0.5) * gate.dt))
+    // range of the return's energy centroid, for the footprint's solid angle; the sums over
+    // the lit span are those over the gate, bit for bit (adding zeros changes no sum)
+    let in_gate: f64 = impulse[lo..hi.max(lo)].iter().sum();
+    let t_mean = (lo..hi)
+        .map(|i| impulse[i] * (gate.t0 + (i as f64 + 0.5) * gate.dt))
         .sum::<f64>()
         / in_gate.max(f64::MIN_POSITIVE);
     let range = crate::C * t_mean / 2.0;
@@ -299,11 +329,10 @@ pub fn waveform(
         pulse_id,
         t0_ns: gate.t0 * 1e9,
         bin_ns: (gate.dt * 1e9) as f32,
-        laser_photons: convolved
-            .iter()
-            .map(|e| (e / n / photon_energy_j) as f32)
-            .collect(),
-        impulse_energy_j: impulse.iter().map(|e| (e / n) as f32).collect(),
+        laser_photons: spanned(gate.bins, c_lo, c_hi.max(c_lo), &|b| {
+            (convolved[b] / n / photon_energy_j) as f32
+        }),
+        impulse_energy_j: spanned(gate.bins, lo, hi.max(lo), &|b| (impulse[b] / n) as f32),
         impulse_energy_se_j: (lo..hi).map(|b| tally.bin_se(b, sub_bins) as f32).collect(),
         received_energy_j: tally.total_energy(),
         outside_gate_energy_j: tally.outside / n,
@@ -362,7 +391,7 @@ mod tests {
             let mut moment = vec![0.0; 80 * m];
             sub[x as usize] = 2.0;
             moment[x as usize] = 2.0 * (x - x.floor());
-            let c = convolve(&sub, &moment, m, &gate, sigma);
+            let c = convolve(&sub, &moment, m, &gate, sigma, (0, gate.bins));
             let centroid: f64 = c
                 .iter()
                 .enumerate()
@@ -388,8 +417,8 @@ mod tests {
         let mut b = vec![0.0; 100 * m];
         b[50 * m + m - 1] = 1.0; // late in bin 50
         let half = |v: &[f64]| v.iter().map(|e| e * 0.5).collect::<Vec<f64>>();
-        let ca = convolve(&a, &half(&a), m, &gate, sigma);
-        let cb = convolve(&b, &half(&b), m, &gate, sigma);
+        let ca = convolve(&a, &half(&a), m, &gate, sigma, (0, gate.bins));
+        let cb = convolve(&b, &half(&b), m, &gate, sigma, (0, gate.bins));
         assert!((ca.iter().sum::<f64>() - 1.0).abs() < 1e-6);
         // centroids follow the sub-bin times, not the bin centre
         let centroid = |c: &[f64]| {

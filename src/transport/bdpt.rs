@@ -162,7 +162,9 @@ pub(super) fn walk(
         beta *= segment_transmittance(setup, &last, hit.position);
         let len = last.len + optical_length(setup, last.p, hit.position, hit.t);
         path.push(surface_vertex(&hit, beta, len));
-        link(setup, path);
+        if setup.both_subpaths() {
+            link(setup, path);
+        }
         if let Some(bands) = setup.bands {
             bands.segment(&mut run, &last, hit.position);
             ratios.push(run);

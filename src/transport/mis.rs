@@ -105,30 +105,39 @@ pub fn mis_weight(
             pc[k] = cam[nv - 1 - k].pdf_fwd;
         }
     }
-    // The densities next to the junction depend on this connection.
+    // The densities next to the junction depend on this connection. The sums below read
+    // the densities of x_k for k in [lo, hi) only: the others are not made (with one
+    // sub-path capped, most of them).
+    let read = |k: usize| (lo..hi).contains(&k);
     if t >= 1 {
-        pl[s] = pdf_area(
-            setup,
-            if s >= 2 { Some(x(s - 2)) } else { None },
-            x(s - 1),
-            x(s),
-        );
-        if t >= 2 {
+        if read(s) {
+            pl[s] = pdf_area(
+                setup,
+                if s >= 2 { Some(x(s - 2)) } else { None },
+                x(s - 1),
+                x(s),
+            );
+        }
+        if t >= 2 && read(s + 1) {
             pl[s + 1] = pdf_area(setup, Some(x(s - 1)), x(s), x(s + 1));
         }
-        pc[s - 1] = pdf_area(
-            setup,
-            if t >= 2 { Some(x(s + 1)) } else { None },
-            x(s),
-            x(s - 1),
-        );
-        if s >= 2 {
+        if read(s - 1) {
+            pc[s - 1] = pdf_area(
+                setup,
+                if t >= 2 { Some(x(s + 1)) } else { None },
+                x(s),
+                x(s - 1),
+            );
+        }
+        if s >= 2 && read(s - 2) {
             pc[s - 2] = pdf_area(setup, Some(x(s)), x(s - 1), x(s - 2));
         }
     } else {
         // t = 0: the light sub-path ends on the aperture, which the receiver samples uniformly.
         pc[nv - 1] = 1.0 / setup.receiver.area;
-        pc[nv - 2] = pdf_area(setup, None, x(nv - 1), x(nv - 2));
+        if read(nv - 2) {
+            pc[nv - 2] = pdf_area(setup, None, x(nv - 1), x(nv - 2));
+        }
     }
     // Specular vertices (pbrt-v4's MISWeight): a density sampled from one is a Dirac's, kept
     // as 0, and read as 1 in the ratios; a strategy whose connection touches one has no

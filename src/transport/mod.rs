@@ -101,6 +101,16 @@ impl PulseSetup<'_> {
         self.caps().0 > 1 && self.scene.water.as_ref().is_some_and(|w| w.mss == 0.0)
     }
 
+    /// Whether both sub-paths extend past their end points (bdpt). Only then does a strategy
+    /// read the densities that a surface vertex keeps ([`link`]): with one sub-path capped,
+    /// a path has at most two strategies, whose weight needs only the densities of the
+    /// junction, made afresh for each connection (and, for an aperture crossing, that
+    /// point's own density), so they are not made for every vertex.
+    pub fn both_subpaths(&self) -> bool {
+        let (s, t) = self.caps();
+        s > 1 && t > 1
+    }
+
     /// Most vertices the light and the receiver sub-paths may have, end points included.
     pub fn caps(&self) -> (usize, usize) {
         let full = self.max_order as usize + 1;

@@ -16,12 +16,26 @@ use super::mesh::{MeshData, SlotName};
 /// so that geometry closer than 1e-4 to the origin is not lost.
 pub(crate) const BACKOFF: f32 = 1e-3;
 
+/// obvhs's slow preset: large triangles' boxes split before the build (a long blade or a
+/// ground triangle no longer gives one box that most rays enter), a wider PLOC search and
+/// more reinsertion. Chosen over the medium preset by measurement (README, "BVH build
+/// quality"): a forest survey's whole run 0.92 of the CPU, the orchard's photon-counting
+/// track 0.99, the town survey 0.99 (and the same bytes), for 0.15 s more scene load on
+/// 0.8 M distinct triangles and 10-17 % more scene memory; the very slow preset traced no
+/// faster and built twice as long.
+const BUILD: BvhBuildParams = BvhBuildParams::slow_build();
+
 /// One distinct mesh with its BVH. Triangles are stored in BVH leaf order, so the id obvhs
 /// hands to the callback indexes them directly; `bvh.primitive_indices[k]` gives the
-/// triangle's index in the mesh as loaded, which is what `FacetId::triangle` reports.
+/// triangle's index in the mesh as loaded, which is what `FacetId::triangle` reports. The
+/// build splits the boxes of large triangles (see [`BUILD`]), so a triangle can stand in
+/// several leaves: code that must see each triangle once goes through [`Blas::distinct`].
 pub(crate) struct Blas {
     pub tris: Vec<[Vec3; 3]>,
     pub slots: Vec<u32>,
+    /// Each triangle's first place in `tris`, in leaf order (so a run of them is compact in
+    /// space, as the top surface's chunks want).
+    pub distinct: Vec<u32>,
     pub bvh: CwBvh,
     pub slot_names: Vec<SlotName>,
     /// Mesh-local position of the stored coordinates' origin.
@@ -50,22 +64,24 @@ impl Blas {
                 hi = hi.max(*v);
             }
         }
-        let mut bvh = build_cwbvh_from_tris(
-            &prims,
-            BvhBuildParams::medium_build(),
-            &mut Duration::default(),
-        );
+        let mut bvh = build_cwbvh_from_tris(&prims, BUILD, &mut Duration::default());
         drop(prims);
         shrink(&mut bvh);
         let mut tris = Vec::with_capacity(bvh.primitive_indices.len());
         let mut slots = Vec::with_capacity(bvh.primitive_indices.len());
-        for &i in &bvh.primitive_indices {
+        let mut seen = vec![false; mesh.tris.len()];
+        let mut distinct = Vec::with_capacity(mesh.tris.len());
+        for (k, &i) in bvh.primitive_indices.iter().enumerate() {
             tris.push(mesh.tris[i as usize]);
             slots.push(mesh.slots[i as usize]);
+            if !std::mem::replace(&mut seen[i as usize], true) {
+                distinct.push(k as u32);
+            }
         }
         Blas {
             tris,
             slots,
+            distinct,
             bvh,
             slot_names: mesh.slot_names.clone(),
             offset: mesh.offset,
@@ -74,10 +90,17 @@ impl Blas {
         }
     }
 
+    /// Each of the mesh's triangles once, with its material slot.
+    pub fn distinct(&self) -> impl Iterator<Item = (&[Vec3; 3], u32)> + '_ {
+        self.distinct
+            .iter()
+            .map(|&k| (&self.tris[k as usize], self.slots[k as usize]))
+    }
+
     pub fn memory_bytes(&self) -> usize {
         use std::mem::size_of;
         self.tris.capacity() * size_of::<[Vec3; 3]>()
-            + self.slots.capacity() * size_of::<u32>()
+            + (self.slots.capacity() + self.distinct.capacity()) * size_of::<u32>()
             + bvh_bytes(&self.bvh)
             + self
                 .slot_names

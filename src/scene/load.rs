@@ -735,7 +735,7 @@ impl TopLevel {
                 surfaces: p.surfaces,
                 id: id as u32,
             });
-            instanced_triangles += meshes[p.mesh as usize].tris.len() as u64;
+            instanced_triangles += meshes[p.mesh as usize].distinct.len() as u64;
         }
         drop(placed);
         let mut tlas = build_cwbvh(

@@ -752,7 +752,7 @@ pub fn leaf_area_index(scene: &Scene) -> Option<f64> {
             .or_insert_with(|| {
                 let blas = &scene.meshes[inst.mesh as usize];
                 let (mut l, mut g) = (0.0f64, 0.0f64);
-                for (t, &slot) in blas.tris.iter().zip(&blas.slots) {
+                for (t, slot) in blas.distinct() {
                     let s = &scene.surfaces
                         [scene.slot_surfaces[(inst.surfaces + slot) as usize] as usize];
                     let is_leaf = s.class == SurfaceClass::Vegetation && s.transmittance > 0.0;

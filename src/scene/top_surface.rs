@@ -164,7 +164,7 @@ impl Scene {
         let gy1 = grid.y0 + grid.ny as f64 * grid.cell;
         for (k, inst) in self.instances.iter().enumerate() {
             let blas = &self.meshes[inst.mesh as usize];
-            if blas.tris.is_empty() {
+            if blas.distinct.is_empty() {
                 continue;
             }
             let xf = InstanceXf::new(self, inst, -shift.0, -shift.1);
@@ -186,8 +186,8 @@ impl Scene {
                 continue;
             }
             let mut start = 0;
-            while start < blas.tris.len() {
-                let end = (start + CHUNK).min(blas.tris.len());
+            while start < blas.distinct.len() {
+                let end = (start + CHUNK).min(blas.distinct.len());
                 items.push(Item {
                     instance: k,
                     start,
@@ -204,7 +204,12 @@ impl Scene {
     /// because the second reuses the first's bounds and transform.
     fn rasterise_top(&self, grid: &Grid, item: &Item) -> Option<Patch> {
         let inst = &self.instances[item.instance];
-        let tris = &self.meshes[inst.mesh as usize].tris[item.start..item.end];
+        let blas = &self.meshes[inst.mesh as usize];
+        let tris = || {
+            blas.distinct[item.start..item.end]
+                .iter()
+                .map(|&k| &blas.tris[k as usize])
+        };
         // Coordinates relative to the grid's corner keep the clipping in small numbers.
         let xf = InstanceXf::new(self, inst, grid.x0 - item.shift.0, grid.y0 - item.shift.1);
         let inv = 1.0 / grid.cell;
@@ -213,7 +218,7 @@ impl Scene {
         // Pass 1: the cells this run of triangles can reach.
         let (mut x_lo, mut x_hi) = (f64::INFINITY, f64::NEG_INFINITY);
         let (mut y_lo, mut y_hi) = (f64::INFINITY, f64::NEG_INFINITY);
-        for t in tris {
+        for t in tris() {
             for v in t {
                 let p = xf.apply(*v);
                 x_lo = x_lo.min(p.x);
@@ -235,7 +240,7 @@ impl Scene {
         let min_cell_area = grid.cell * grid.cell;
 
         // Pass 2.
-        for t in tris {
+        for t in tris() {
             let p = [xf.apply(t[0]), xf.apply(t[1]), xf.apply(t[2])];
             let zmax = p[0].z.max(p[1].z).max(p[2].z);
             let xmin = p[0].x.min(p[1].x).min(p[2].x);

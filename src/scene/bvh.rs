@@ -248,6 +248,67 @@ impl WatertightRay {
 mod tests {
     use super::*;
 
+    /// A mesh of many small triangles and a few long ones (whose boxes the build splits):
+    /// the long ones stand in several leaves, yet `distinct` names every triangle once, at a
+    /// place holding that triangle.
+    #[test]
+    fn distinct_names_each_triangle_once_when_boxes_are_split() {
+        let mut tris = Vec::new();
+        for i in 0..40 {
+            for j in 0..40 {
+                let (x, y) = (i as f32 * 0.1, j as f32 * 0.1);
+                tris.push([
+                    Vec3::new(x, y, 0.0),
+                    Vec3::new(x + 0.05, y, 0.0),
+                    Vec3::new(x, y + 0.05, 0.01),
+                ]);
+            }
+        }
+        for k in 0..4 {
+            let z = 1.0 + k as f32;
+            tris.push([
+                Vec3::new(0.0, 0.0, z),
+                Vec3::new(4.0, 4.0, z + 2.0),
+                Vec3::new(0.1, 0.0, z),
+            ]);
+        }
+        let n = tris.len();
+        let mesh = MeshData {
+            slots: (0..n as u32).map(|i| i % 3).collect(),
+            tris,
+            slot_names: Vec::new(),
+            offset: DVec3::ZERO,
+        };
+        let blas = Blas::build(&mesh);
+        assert!(
+            blas.tris.len() > n,
+            "no box was split ({} references of {n} triangles): the test shows nothing",
+            blas.tris.len()
+        );
+        assert_eq!(blas.distinct.len(), n);
+        let mut seen = vec![false; n];
+        for &k in &blas.distinct {
+            let i = blas.bvh.primitive_indices[k as usize] as usize;
+            assert!(!std::mem::replace(&mut seen[i], true), "triangle {i} twice");
+            assert_eq!(blas.tris[k as usize], mesh.tris[i]);
+            assert_eq!(blas.slots[k as usize], mesh.slots[i]);
+        }
+        assert!(
+            blas.distinct.windows(2).all(|w| w[0] < w[1]),
+            "not in leaf order"
+        );
+        let area: f64 = blas
+            .distinct()
+            .map(|(t, _)| (t[1] - t[0]).cross(t[2] - t[0]).length() as f64)
+            .sum();
+        let want: f64 = mesh
+            .tris
+            .iter()
+            .map(|t| (t[1] - t[0]).cross(t[2] - t[0]).length() as f64)
+            .sum();
+        assert!((area - want).abs() <= 1e-9 * want, "{area} against {want}");
+    }
+
     #[test]
     fn watertight_hits_shared_edge_once_or_more() {
         // Two triangles sharing the diagonal of the unit square; rays through the diagonal

@@ -21,7 +21,7 @@ pub(crate) const BACKOFF: f32 = 1e-3;
 /// more reinsertion. Chosen over the medium preset by measurement (README, "BVH build
 /// quality"): a forest survey's whole run 0.92 of the CPU, the orchard's photon-counting
 /// track 0.99, the town survey 0.99 (and the same bytes), for 0.15 s more scene load on
-/// 0.8 M distinct triangles and 10-17 % more scene memory; the very slow preset traced no
+/// 0.8 M distinct triangles and 10-18 % more scene memory; the very slow preset traced no
 /// faster and built twice as long.
 const BUILD: BvhBuildParams = BvhBuildParams::slow_build();
 

@@ -267,7 +267,7 @@ fn atl03_photons_are_the_parquet_photons() {
         &dir,
         "c.yaml",
         &format!(
-            "name: atl\nscene: plane.yaml\nseed: 9\nwavelength_nm: 532\nframe: {{ crs: EPSG:32631, origin: [{}, {}, {}] }}\ninstrument: {{ kind: photon_counting, pulse_energy_j: 2.0e-5, pulse_fwhm_ns: 1.5, footprint_half_angle_mrad: 0.05, fov_half_angle_mrad: 0.105, receiver_area_m2: 0.0314, bin_ns: 0.5, bandwidth_nm: 1.0, quantum_efficiency: 0.125, dead_time_ns: 2.5, dark_count_hz: 5.0e7 }}\nplatform: {{ kind: track, altitude_m: 20000, track: {{ start: [-40, -5], end: [40, 5] }}, along_track_step_m: 0.5 }}\nsimulation: {{ method: bdpt, rays_per_pulse: 50, max_order: 1 }}\nsun: {{ zenith_deg: 40, azimuth_deg: 180, irradiance_w_m2_um: 1850 }}\n",
+            "name: atl\nscene: plane.yaml\nseed: 9\nwavelength_nm: 532\nframe: {{ crs: EPSG:32631, origin: [{}, {}, {}] }}\ninstrument: {{ kind: photon_counting, pulse_energy_j: 2.0e-5, pulse_fwhm_ns: 1.5, footprint_half_angle_mrad: 0.05, fov_half_angle_mrad: 0.105, receiver_area_m2: 0.0314, bin_ns: 0.5, bandwidth_nm: 1.0, quantum_efficiency: 0.125, dead_time_ns: 2.5, dark_count_hz: 5.0e7 }}\nplatform: {{ kind: track, altitude_m: 20000, track: {{ start: [-40, -5], end: [40, 5] }}, along_track_step_m: 0.5 }}\nsimulation: {{ method: bdpt, rays_per_pulse: 50, max_order: 1 }}\nsun: {{ zenith_deg: 40, azimuth_deg: 180, irradiance_w_m2_um: 1850, selection: fixed }}\n",
             ORIGIN[0], ORIGIN[1], ORIGIN[2]
         ),
     );
@@ -338,7 +338,10 @@ fn atl03_photons_are_the_parquet_photons() {
         by_source.iter().all(|&n| n > 20),
         "photons by source {by_source:?}"
     );
-    // signal photons lie on the plane, within a bin (7.5 cm): their median height
+    // signal photons lie on the plane, within a bin (7.5 cm): their median height. The 2.5 ns
+    // dead time keeps mostly each shot's first photon of about 67, which lifts the median
+    // (6.1 cm with the campaign's fixed selection, 8.4 cm with `power`'s draws in a trial):
+    // the sun's selection is pinned so that this check of the files' coordinates keeps its draws
     let mut sig: Vec<f64> = (0..rows)
         .filter(|&r| conf[5 * r] >= 3)
         .map(|r| h[r])

@@ -445,7 +445,7 @@ fn sun_section(opts: &BenchOptions, b: &Bench, reference: &Waveform) -> String {
         zenith_deg: 50.0,
         azimuth_deg: 180.0,
         irradiance_w_m2_um: 640.0,
-        selection,
+        selection: Some(selection),
         selection_probability: (selection == SunSelection::Fixed).then_some(0.5),
     };
     let gate_s = b.gate.dt * b.gate.bins as f64;
@@ -484,8 +484,11 @@ fn sun_section(opts: &BenchOptions, b: &Bench, reference: &Waveform) -> String {
     let selections: Vec<SelectionRow> = [SunSelection::Fixed, SunSelection::Power]
         .into_iter()
         .map(|sel| {
-            let sun = SunSource::new(&sun_spec(sel), 0.8, b.scene.bounds())
-                .for_gate(b.inst.pulse_energy_j, gate_s);
+            let sun = SunSource::new(&sun_spec(sel), 0.8, b.scene.bounds()).for_gate(
+                b.inst.pulse_energy_j,
+                gate_s,
+                b.gate.view_area_m2(&b.inst),
+            );
             selection_row(b, reference, sun, sel, sun_rays, opts.seeds)
         })
         .collect();

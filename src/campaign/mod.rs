@@ -304,24 +304,44 @@ pub struct Sun {
     /// Spectral irradiance at the top of the scene, W m⁻² µm⁻¹.
     pub irradiance_w_m2_um: f64,
     /// How a sample picks the light its light sub-path starts from: `fixed` with
-    /// `selection_probability` for the sun (the paper's 0.5), or `power`, in proportion to
-    /// the energy each light sends into the scene during the pulse's range gate.
-    #[serde(default)]
-    pub selection: SunSelection,
+    /// `selection_probability` for the sun (the paper's 0.5), `power`, in proportion to the
+    /// energy each light sends into the part of the scene the receiver sees during the pulse's
+    /// range gate, or `auto` (the default; `fixed` when only a probability is given), which
+    /// tries both on the pilot pulses and keeps the cheaper for the same laser and solar
+    /// errors. Read it through [`Sun::selection`].
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub selection: Option<SunSelection>,
     /// Probability of the sun with `selection: fixed`; default 0.5.
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub selection_probability: Option<f64>,
 }
 
-#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq, Default)]
+impl Sun {
+    /// The selection asked for: as written, else `fixed` when a probability is given, else
+    /// `auto`.
+    pub fn selection(&self) -> SunSelection {
+        match (self.selection, self.selection_probability) {
+            (Some(s), _) => s,
+            (None, Some(_)) => SunSelection::Fixed,
+            (None, None) => SunSelection::Auto,
+        }
+    }
+}
+
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq)]
 #[serde(rename_all = "lowercase")]
 pub enum SunSelection {
-    /// The default, as measured by `lidarsim bench` (README, "The sun"): on a GEDI-like
-    /// canopy pulse, by power picks the sun 1 time in 10 and needs 2.4× the wall time of
-    /// the paper's fixed 0.5 to reach the same laser and solar errors.
-    #[default]
+    /// The paper's: the sun with a fixed probability, 0.5 unless given. Best where the
+    /// receiver sees most of the scene (a GEDI footprint over the orchard): sun sub-paths
+    /// land in view and carry much of the solar signal.
     Fixed,
+    /// By the energy each light sends into the receiver's view
+    /// ([`crate::sensor::SunSource::for_gate`]). Best where it sees a few metres of a large
+    /// scene (MABEL): a sun sub-path then almost never lands in view.
     Power,
+    /// Chosen between the two by `simulation.method: auto`'s pilot; resolved before any
+    /// pulse is traced.
+    Auto,
 }
 
 #[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq, Default)]
@@ -739,10 +759,10 @@ impl Campaign {
                 ));
             }
             if let Some(q) = s.selection_probability {
-                if s.selection != SunSelection::Fixed {
+                if s.selection() != SunSelection::Fixed {
                     return Err(doc.error(
                         "sun.selection_probability",
-                        "applies to `selection: fixed` only: add it, or remove the probability to select by power",
+                        "applies to `selection: fixed` only: write that, or remove the probability to select by power or automatically",
                     ));
                 }
                 if !(q > 0.0 && q < 1.0) {

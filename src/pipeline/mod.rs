@@ -392,9 +392,10 @@ fn run_single(
     memory::fits(loaded, scene, &plan)?;
     // `auto` resolved here, once the scene is known. The pilot is deterministic, but another
     // version of the program may pick otherwise: the method picked is part of the simulate
-    // fingerprint, so a resume never mixes parts of two methods
+    // fingerprint (and the sun's selection), so a resume never mixes parts of two methods
     let t = Instant::now();
     let chosen = simulate::with_method_chosen(loaded, scene, &plan);
+    let original = loaded;
     let loaded = match &chosen {
         Some(c) => {
             let note = c.method_note.as_deref().unwrap_or_default();
@@ -407,9 +408,7 @@ fn run_single(
         }
         None => loaded,
     };
-    let picked = chosen
-        .as_ref()
-        .map(|c| simulate::method_name(c.campaign.simulation.method));
+    let picked = chosen.as_ref().map(|c| simulate::choices_made(c, original));
     let parts = Parts::of_run(loaded, scene, &plan);
     let fp_sim = simulate_fingerprint(&fp_plan, scene, picked, parts)?;
     if run.done(Stage::Simulate, &fp_sim) {
@@ -543,7 +542,7 @@ fn plan_stage(run: &mut RunFolder, c: &Campaign, fp: &str) -> Result<Plan> {
 fn simulate_fingerprint(
     fp_plan: &str,
     scene: &Scene,
-    picked: Option<&str>,
+    picked: Option<String>,
     parts: Parts,
 ) -> Result<String> {
     let mut scene_bytes = Vec::new();
@@ -553,7 +552,7 @@ fn simulate_fingerprint(
     }
     let mut inputs: Vec<&[u8]> = vec![fp_plan.as_bytes()];
     inputs.extend(scene_bytes.iter().map(|b| b.as_slice()));
-    inputs.extend(picked.map(str::as_bytes));
+    inputs.extend(picked.as_deref().map(str::as_bytes));
     // parts cut otherwise (another version's rule) are not this run's parts
     let size = format!("parts of {}", parts.size());
     inputs.push(size.as_bytes());

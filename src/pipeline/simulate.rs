@@ -1,7 +1,7 @@
 //! The simulate stage: pulses in [`Parts`], each part written when complete,
 //! with per-pulse timing beside it.
 
-use crate::campaign::{Loaded, Method};
+use crate::campaign::{Loaded, Method, SunSelection};
 use crate::error::Result;
 use crate::fsutil::{Committer, Pending};
 use crate::plan::{Plan, Pulse};
@@ -231,7 +231,11 @@ impl<'a> Shared<'a> {
             } else {
                 s
             };
-            s.for_gate(inst.pulse_energy_j, gate.dt * gate.bins as f64)
+            s.for_gate(
+                inst.pulse_energy_j,
+                gate.dt * gate.bins as f64,
+                gate.view_area_m2(inst),
+            )
         });
         PulseSetup {
             scene,
@@ -322,15 +326,9 @@ pub fn simulate(
 const PILOT_RAYS: u64 = crate::transport::CHUNK_RAYS;
 const PILOT_RAY_BUDGET: u64 = 8 * PILOT_RAYS;
 
-/// `simulation.method: auto`: the method whose estimate costs least for a given error on
-/// this campaign, and why. Each method traces the same pilot pulses; its score is the
-/// relative variance of the pilot's total laser energy (plus that of its solar power, with
-/// a sun) times the scene queries per pulse it made: variance falls as 1/rays and queries grow
-/// with rays, so the product is the cost of a given error, counted in queries (the same on any
-/// machine and thread count, so the choice, and the run's bytes, are too). A method that
-/// finds no energy where another does scores infinity; ties go to bdpt.
-/// Returns the method and a note for the run log, the resolved campaign and report.md.
-pub fn choose_method(loaded: &Loaded, scene: &Scene, plan: &Plan) -> (Method, String) {
+/// The pilot's pulses and rays per pulse ([`PILOT_RAYS`], [`PILOT_RAY_BUDGET`]); no pulses
+/// for an empty plan.
+fn pilot_pulses(loaded: &Loaded, plan: &Plan) -> (Vec<Pulse>, u64) {
     let rays = loaded
         .campaign
         .simulation
@@ -340,14 +338,75 @@ pub fn choose_method(loaded: &Loaded, scene: &Scene, plan: &Plan) -> (Method, St
     let budget = PILOT_RAY_BUDGET.min(total / 10);
     let n = (plan.len() as u64).min((budget / rays).max(1)) as usize;
     if n == 0 {
+        return (Vec::new(), rays);
+    }
+    (plan.spread(n, loaded.campaign.seed), rays)
+}
+
+/// A pilot's score for tracing `pulses` with `method` as `loaded` asks: the relative
+/// variance of their total laser energy (plus that of their solar power, with a sun) times
+/// the scene queries per pulse made. Variance falls as 1/rays and queries grow with rays,
+/// so the product is the cost of a given error, counted in queries (the same on any machine
+/// and thread count, so the choice, and the run's bytes, are too). Infinite where no energy
+/// was found.
+fn pilot_score(loaded: &Loaded, scene: &Scene, pulses: &[Pulse], rays: u64, method: Method) -> f64 {
+    let shared = Shared::new(loaded, scene);
+    let tallies: Vec<_> = pulses
+        .par_iter()
+        .map(|p| simulate_pulse(&shared.setup(p, method), rays))
+        .collect();
+    let (mut e, mut var, mut sun, mut sun_var, mut queries) = (0.0, 0.0, 0.0, 0.0, 0);
+    for t in &tallies {
+        e += t.total_energy();
+        var += t.total_se().powi(2);
+        let (p, se) = t.solar_power();
+        sun += p;
+        sun_var += se * se;
+        queries += t.queries;
+    }
+    let relative = |v: f64, x: f64| if x > 0.0 { v / (x * x) } else { f64::INFINITY };
+    let mut rv = relative(var, e);
+    if loaded.campaign.sun.is_some() {
+        rv += relative(sun_var, sun);
+    }
+    rv * queries as f64 / pulses.len().max(1) as f64
+}
+
+/// Each candidate's score, as the run log and report.md give them: "bdpt 1.2e0, ...".
+fn score_table<T: Copy>(scores: &[(T, f64)], name: fn(T) -> &'static str) -> String {
+    scores
+        .iter()
+        .map(|&(m, x)| format!("{} {x:.3e}", name(m)))
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+/// The candidate with the least finite score, the first of equals; None when none is finite.
+fn cheapest<T: Copy>(scores: &[(T, f64)]) -> Option<T> {
+    scores
+        .iter()
+        .filter(|(_, x)| x.is_finite())
+        .fold(None::<(T, f64)>, |b, &(m, x)| match b {
+            Some((_, y)) if y <= x => b,
+            _ => Some((m, x)),
+        })
+        .map(|(m, _)| m)
+}
+
+/// `simulation.method: auto`: the method whose estimate costs least for a given error on
+/// this campaign ([`pilot_score`]), and why. Each method traces the same pilot pulses. A
+/// method that finds no energy where another does scores infinity; ties go to bdpt. A sun
+/// whose selection is still `auto` is taken as `fixed` here.
+/// Returns the method and a note for the run log, the resolved campaign and report.md.
+pub fn choose_method(loaded: &Loaded, scene: &Scene, plan: &Plan) -> (Method, String) {
+    let (pulses, rays) = pilot_pulses(loaded, plan);
+    let n = pulses.len();
+    if n == 0 {
         return (
             Method::Bdpt,
             "simulation.method auto: no pulses to try, bdpt".into(),
         );
     }
-    let pulses = plan.spread(n, loaded.campaign.seed);
-    let with_sun = loaded.campaign.sun.is_some();
-    let shared = Shared::new(loaded, scene);
     // backward tracing cannot find the paths a smooth water surface makes (laser, specular
     // surface, bottom, specular surface, telescope: no connection reaches the laser through
     // a specular vertex), so it is no candidate over water
@@ -358,44 +417,11 @@ pub fn choose_method(loaded: &Loaded, scene: &Scene, plan: &Plan) -> (Method, St
     };
     let scores: Vec<(Method, f64)> = candidates
         .iter()
-        .copied()
-        .map(|m| {
-            let tallies: Vec<_> = pulses
-                .par_iter()
-                .map(|p| simulate_pulse(&shared.setup(p, m), rays))
-                .collect();
-            let (mut e, mut var, mut sun, mut sun_var, mut queries) = (0.0, 0.0, 0.0, 0.0, 0);
-            for t in &tallies {
-                e += t.total_energy();
-                var += t.total_se().powi(2);
-                let (p, se) = t.solar_power();
-                sun += p;
-                sun_var += se * se;
-                queries += t.queries;
-            }
-            let relative = |v: f64, x: f64| if x > 0.0 { v / (x * x) } else { f64::INFINITY };
-            let mut rv = relative(var, e);
-            if with_sun {
-                rv += relative(sun_var, sun);
-            }
-            (m, rv * queries as f64 / n as f64)
-        })
+        .map(|&m| (m, pilot_score(loaded, scene, &pulses, rays, m)))
         .collect();
-    let table = scores
-        .iter()
-        .map(|(m, x)| format!("{} {x:.3e}", method_name(*m)))
-        .collect::<Vec<_>>()
-        .join(", ");
-    let best =
-        scores
-            .iter()
-            .filter(|(_, x)| x.is_finite())
-            .fold(None::<(Method, f64)>, |b, &(m, x)| match b {
-                Some((_, y)) if y <= x => b,
-                _ => Some((m, x)),
-            });
-    match best {
-        Some((m, _)) => (
+    let table = score_table(&scores, method_name);
+    match cheapest(&scores) {
+        Some(m) => (
             m,
             format!(
                 "simulation.method auto chose {}: relative variance x scene queries per pulse over {n} pilot pulses of {rays} rays (lower is better): {table}",
@@ -411,19 +437,101 @@ pub fn choose_method(loaded: &Loaded, scene: &Scene, plan: &Plan) -> (Method, St
     }
 }
 
-/// The campaign as it runs when it asks for `simulation.method: auto`: the method its pilot
-/// picks written in, and the note saying why ([`choose_method`]); `None` for a campaign that
-/// names its method. Everything that simulates a campaign's pulses goes through this, so the
-/// transport never sees `auto`.
+/// `sun.selection: auto`: `fixed` (0.5) or `power`, whichever costs least for the same laser
+/// and solar errors with the campaign's method, on the method's pilot pulses, and why. Ties
+/// go to fixed, the paper's.
+pub fn choose_sun_selection(loaded: &Loaded, scene: &Scene, plan: &Plan) -> (SunSelection, String) {
+    let (pulses, rays) = pilot_pulses(loaded, plan);
+    let n = pulses.len();
+    let method = loaded.campaign.simulation.method;
+    if n == 0 || loaded.campaign.sun.is_none() {
+        return (
+            SunSelection::Fixed,
+            "sun.selection auto: no pulses to try, fixed".into(),
+        );
+    }
+    let scores: Vec<(SunSelection, f64)> = [SunSelection::Fixed, SunSelection::Power]
+        .into_iter()
+        .map(|sel| {
+            let mut trial = loaded.clone();
+            if let Some(sun) = trial.campaign.sun.as_mut() {
+                sun.selection = Some(sel);
+            }
+            (sel, pilot_score(&trial, scene, &pulses, rays, method))
+        })
+        .collect();
+    let table = score_table(&scores, selection_name);
+    match cheapest(&scores) {
+        Some(sel) => (
+            sel,
+            format!(
+                "sun.selection auto chose {}: laser and solar relative variance x scene queries per pulse over {n} pilot pulses of {rays} rays, {} (lower is better): {table}",
+                selection_name(sel),
+                method_name(method)
+            ),
+        ),
+        None => (
+            SunSelection::Fixed,
+            format!(
+                "sun.selection auto: no light found in {n} pilot pulses of {rays} rays, fixed (the paper's)"
+            ),
+        ),
+    }
+}
+
+/// The campaign as it runs when it asks for `simulation.method: auto` or `sun.selection:
+/// auto`: the method its pilot picks ([`choose_method`]), then the sun's selection for that
+/// method ([`choose_sun_selection`]), written in, and the note saying why; `None` for a
+/// campaign that names both. Everything that simulates a campaign's pulses goes through
+/// this, so the transport never sees `auto`.
 pub fn with_method_chosen(loaded: &Loaded, scene: &Scene, plan: &Plan) -> Option<Loaded> {
-    if loaded.campaign.simulation.method != Method::Auto {
+    let method_auto = loaded.campaign.simulation.method == Method::Auto;
+    let sun_auto = loaded
+        .campaign
+        .sun
+        .as_ref()
+        .is_some_and(|s| s.selection() == SunSelection::Auto);
+    if !method_auto && !sun_auto {
         return None;
     }
-    let (method, note) = choose_method(loaded, scene, plan);
     let mut c = loaded.clone();
-    c.campaign.simulation.method = method;
-    c.method_note = Some(note);
+    let mut notes = Vec::new();
+    if method_auto {
+        let (method, note) = choose_method(&c, scene, plan);
+        c.campaign.simulation.method = method;
+        notes.push(note);
+    }
+    if sun_auto {
+        let (selection, note) = choose_sun_selection(&c, scene, plan);
+        if let Some(sun) = c.campaign.sun.as_mut() {
+            sun.selection = Some(selection);
+        }
+        notes.push(note);
+    }
+    c.method_note = Some(notes.join("; "));
     Some(c)
+}
+
+/// What a run's `auto` choices picked, as the simulate stage's fingerprint holds it: the
+/// method, and the sun's selection when the run chose it.
+pub fn choices_made(chosen: &Loaded, asked: &Loaded) -> String {
+    let method = method_name(chosen.campaign.simulation.method);
+    let sun_asked = asked.campaign.sun.as_ref().map(|s| s.selection());
+    match (sun_asked, chosen.campaign.sun.as_ref()) {
+        (Some(SunSelection::Auto), Some(s)) => {
+            format!("{method}; sun {}", selection_name(s.selection()))
+        }
+        _ => method.to_string(),
+    }
+}
+
+/// A sun selection as campaign files spell it.
+pub fn selection_name(s: SunSelection) -> &'static str {
+    match s {
+        SunSelection::Fixed => "fixed",
+        SunSelection::Power => "power",
+        SunSelection::Auto => "auto",
+    }
 }
 
 /// A method as campaign files spell it.

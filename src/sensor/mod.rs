@@ -208,6 +208,43 @@ mod tests {
         }
     }
 
+    /// By power the sun's share is that of the energy sent into the receiver's view: a view
+    /// of a few metres in a large scene makes it small, one wider than the sampling disk is
+    /// cut to the disk, and the bounds hold at either end.
+    #[test]
+    fn power_selection_counts_the_view_not_the_disk() {
+        let spec = crate::campaign::Sun {
+            zenith_deg: 60.0,
+            azimuth_deg: 0.0,
+            irradiance_w_m2_um: 1000.0,
+            selection: Some(crate::campaign::SunSelection::Power),
+            selection_probability: None,
+        };
+        // a 1 nm band: E Δλ = 1 W m⁻²; a disk of radius 50 m (7854 m²)
+        let a = 50.0 / 3f64.sqrt();
+        let bounds = (DVec3::splat(-a), DVec3::splat(a));
+        let sun = SunSource::new(&spec, 1.0, bounds);
+        assert!((sun.disk_area() - PI * 2500.0).abs() < 1e-6);
+        let (gate, q_e) = (1e-6, 1e-5);
+        // 100 m² seen at cos 60° = 0.5: 50 W over 1 µs = 5e-5 J against 1e-5 J
+        let q = sun.for_gate(q_e, gate, 100.0).probability;
+        assert!((q - 5e-5 / 6e-5).abs() < 1e-12, "{q}");
+        // a view wider than the disk: the disk's 7854 W, as the whole sunlit scene
+        let q = sun.for_gate(1e-2, gate, 1e6).probability;
+        let e = sun.disk_area() * gate;
+        assert!((q - e / (e + 1e-2)).abs() < 1e-12, "{q}");
+        // within 0.02-0.98 whatever the energies, and untouched with a fixed selection
+        assert_eq!(sun.for_gate(1.0, gate, 1.0).probability, 0.02);
+        assert_eq!(sun.for_gate(1e-12, gate, 1e6).probability, 0.98);
+        let fixed = crate::campaign::Sun {
+            selection: None,
+            selection_probability: Some(0.3),
+            ..spec
+        };
+        let sun = SunSource::new(&fixed, 1.0, bounds);
+        assert_eq!(sun.for_gate(q_e, gate, 100.0).probability, 0.3);
+    }
+
     #[test]
     fn laser_pdf_integrates_to_one_and_matches_sampling() {
         let laser = Laser::new(&inst(), DVec3::ZERO, -DVec3::Z);
@@ -281,6 +318,14 @@ impl Gate {
 
     pub fn end(&self) -> f64 {
         self.t0 + self.dt * self.bins as f64
+    }
+
+    /// Cross-section of the field of view at the gate's middle range, m²: the part of the
+    /// scene the receiver sees, for choosing the light by power.
+    pub fn view_area_m2(&self, inst: &Instrument) -> f64 {
+        let range = (crate::C * 0.25 * (self.t0 + self.end())).max(0.0);
+        let radius = range * (inst.fov_half_angle_mrad * 1e-3).tan();
+        PI * radius * radius
     }
 }
 
@@ -366,7 +411,8 @@ impl SunSource {
             radius: ((bounds.1 - bounds.0).length() * 0.5).max(1e-3),
             cos_zenith: t.cos(),
             probability: sun.selection_probability.unwrap_or(0.5),
-            by_power: sun.selection == crate::campaign::SunSelection::Power,
+            // `auto` is resolved before any pulse is traced; the method's pilot takes it as fixed
+            by_power: sun.selection() == crate::campaign::SunSelection::Power,
         }
     }
 
@@ -376,13 +422,20 @@ impl SunSource {
     pub const POWER_SELECTION_BOUNDS: (f64, f64) = (0.02, 0.98);
 
     /// The sun for one pulse. By power, the sun is chosen with probability
-    /// E_sun / (E_sun + Q_e), where E_sun = E Δλ · πR² · T is the solar energy that crosses the
-    /// disk during the range gate (T long), Q_e the pulse energy: the lights' shares of
-    /// the energy emitted into the scene while the receiver listens.
-    pub fn for_gate(&self, pulse_energy_j: f64, gate_s: f64) -> SunSource {
+    /// E_sun / (E_sun + Q_e): the lights' shares of the energy sent, while the receiver
+    /// listens, into the part of the scene it sees, whose light is what both lights' sub-paths
+    /// must find. E_sun = E Δλ cos θ_s · A · T, with A the ground area of the field of view at
+    /// the gate's middle range (`view_area_m2`, at most the sampling disk's πR² / cos θ_s) and
+    /// T the gate's length; Q_e the pulse energy, which all falls in the view. Both lights
+    /// scattered by the same surface then return in that ratio (closed forms 1 and 4): a sun
+    /// sub-path started over the whole disk where the receiver sees a few metres of it
+    /// (MABEL's 4 m over the 100 m orchard) finds the view about 1 time in 1000, and its
+    /// connections are almost all shadowed.
+    pub fn for_gate(&self, pulse_energy_j: f64, gate_s: f64, view_area_m2: f64) -> SunSource {
         let mut s = *self;
         if self.by_power {
-            let e_sun = self.band_irradiance * self.disk_area() * gate_s.max(0.0);
+            let lit = (self.cos_zenith * view_area_m2).min(self.disk_area());
+            let e_sun = self.band_irradiance * lit * gate_s.max(0.0);
             let q = e_sun / (e_sun + pulse_energy_j);
             let (lo, hi) = Self::POWER_SELECTION_BOUNDS;
             s.probability = if q.is_finite() { q.clamp(lo, hi) } else { 0.5 };

@@ -101,6 +101,21 @@ fn sun_selection_auto_is_chosen_by_the_pilot_and_said() {
         "{resolved}"
     );
     assert!(report.contains("sun.selection auto chose power"));
+    // the choice is part of the simulate stage's fingerprint and the same on any thread
+    // count: a resume redoes nothing, and one thread writes the same part
+    let again = lidarsim::pipeline::run(
+        &dir.join("auto").join("campaign.yaml"),
+        &lidarsim::pipeline::RunOptions {
+            out: Some(out.clone()),
+            resume: true,
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    assert_eq!(again.parts_done, 0);
+    let one = run_campaign(&sub("auto_one_thread"), &auto, Some(1));
+    let part = |o: &std::path::Path| std::fs::read(o.join("waveforms/part-00000.parquet")).unwrap();
+    assert!(part(&out) == part(&one), "one thread wrote another part");
     let fixed = with_sun_selected(&base, 0.0, 180.0, "auto")
         .replace("selection: auto", "selection_probability: 0.3");
     let out = run_campaign(&sub("fixed"), &fixed, None);

@@ -116,6 +116,47 @@ fn sun_selection_auto_is_chosen_by_the_pilot_and_said() {
     let one = run_campaign(&sub("auto_one_thread"), &auto, Some(1));
     let part = |o: &std::path::Path| std::fs::read(o.join("waveforms/part-00000.parquet")).unwrap();
     assert!(part(&out) == part(&one), "one thread wrote another part");
+    // both `auto`s: every method with each selection on the same pilot pulses, and the pair
+    // the note names is the pair written in
+    let both = with_sun_selected(
+        &campaign(
+            &scene,
+            &inst,
+            [10.0, -20.0, 1000.0],
+            [0.0, 0.0, -1.0],
+            "auto",
+            2000,
+            5,
+        ),
+        0.0,
+        180.0,
+        "auto",
+    );
+    let out_both = run_campaign(&sub("both"), &both, None);
+    let resolved = std::fs::read_to_string(out_both.join("campaign.resolved.yaml")).unwrap();
+    let note = resolved.lines().next().unwrap_or_default();
+    println!("{note}");
+    let prefix = "# simulation.method and sun.selection auto chose ";
+    assert!(note.starts_with(prefix), "{note}");
+    for pair in [
+        "bdpt fixed",
+        "bdpt power",
+        "forward fixed",
+        "forward power",
+        "backward",
+    ] {
+        assert!(note.contains(&format!("{pair} ")), "{pair}: {note}");
+    }
+    let chosen: Vec<&str> = note[prefix.len()..].split([' ', ':']).collect();
+    assert_eq!(chosen[1], "with", "{note}");
+    assert!(
+        resolved.contains(&format!("method: {}\n", chosen[0])),
+        "{resolved}"
+    );
+    assert!(
+        resolved.contains(&format!("selection: {}\n", chosen[2])),
+        "{resolved}"
+    );
     let fixed = with_sun_selected(&base, 0.0, 180.0, "auto")
         .replace("selection: auto", "selection_probability: 0.3");
     let out = run_campaign(&sub("fixed"), &fixed, None);

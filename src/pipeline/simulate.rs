@@ -480,9 +480,9 @@ pub fn choose_sun_selection(loaded: &Loaded, scene: &Scene, plan: &Plan) -> (Sun
 }
 
 /// The campaign as it runs when it asks for `simulation.method: auto` or `sun.selection:
-/// auto`: the method its pilot picks ([`choose_method`]), then the sun's selection for that
-/// method ([`choose_sun_selection`]), written in, and the note saying why; `None` for a
-/// campaign that names both. Everything that simulates a campaign's pulses goes through
+/// auto`: the method its pilot picks ([`choose_method`]), the sun's selection for the
+/// campaign's method ([`choose_sun_selection`]), or both at once ([`choose_jointly`]), written
+/// in, and the note saying why; `None` for a campaign that names both. Everything that simulates a campaign's pulses goes through
 /// this, so the transport never sees `auto`.
 pub fn with_method_chosen(loaded: &Loaded, scene: &Scene, plan: &Plan) -> Option<Loaded> {
     let method_auto = loaded.campaign.simulation.method == Method::Auto;
@@ -495,21 +495,90 @@ pub fn with_method_chosen(loaded: &Loaded, scene: &Scene, plan: &Plan) -> Option
         return None;
     }
     let mut c = loaded.clone();
-    let mut notes = Vec::new();
-    if method_auto {
-        let (method, note) = choose_method(&c, scene, plan);
-        c.campaign.simulation.method = method;
-        notes.push(note);
-    }
-    if sun_auto {
-        let (selection, note) = choose_sun_selection(&c, scene, plan);
-        if let Some(sun) = c.campaign.sun.as_mut() {
-            sun.selection = Some(selection);
+    let (method, selection, note) = match (method_auto, sun_auto) {
+        (true, true) => choose_jointly(&c, scene, plan),
+        (true, false) => {
+            let (method, note) = choose_method(&c, scene, plan);
+            (method, None, note)
         }
-        notes.push(note);
+        _ => {
+            let (selection, note) = choose_sun_selection(&c, scene, plan);
+            (c.campaign.simulation.method, Some(selection), note)
+        }
+    };
+    c.campaign.simulation.method = method;
+    if let (Some(sun), Some(selection)) = (c.campaign.sun.as_mut(), selection) {
+        sun.selection = Some(selection);
     }
-    c.method_note = Some(notes.join("; "));
+    c.method_note = Some(note);
     Some(c)
+}
+
+/// Both `auto`s at once: each method with each sun selection on the same pilot pulses
+/// ([`pilot_score`]), and the cheapest pair. A method's best selection depends on it (by
+/// power, bdpt's light sub-paths start at the laser; backward has none, so its selection
+/// changes nothing and it is tried once). Ties go to the first: bdpt, then fixed.
+fn choose_jointly(
+    loaded: &Loaded,
+    scene: &Scene,
+    plan: &Plan,
+) -> (Method, Option<SunSelection>, String) {
+    let (pulses, rays) = pilot_pulses(loaded, plan);
+    let n = pulses.len();
+    if n == 0 {
+        return (
+            Method::Bdpt,
+            Some(SunSelection::Fixed),
+            "simulation.method and sun.selection auto: no pulses to try, bdpt and fixed".into(),
+        );
+    }
+    let mut candidates = vec![
+        (Method::Bdpt, SunSelection::Fixed),
+        (Method::Bdpt, SunSelection::Power),
+        (Method::Forward, SunSelection::Fixed),
+        (Method::Forward, SunSelection::Power),
+    ];
+    // backward tracing cannot find the paths a smooth water surface makes (see
+    // `choose_method`)
+    if scene.water.is_none() {
+        candidates.push((Method::Backward, SunSelection::Fixed));
+    }
+    let scores: Vec<((Method, SunSelection), f64)> = candidates
+        .into_iter()
+        .map(|(m, sel)| {
+            let mut trial = loaded.clone();
+            if let Some(sun) = trial.campaign.sun.as_mut() {
+                sun.selection = Some(sel);
+            }
+            ((m, sel), pilot_score(&trial, scene, &pulses, rays, m))
+        })
+        .collect();
+    let table = scores
+        .iter()
+        .map(|&((m, sel), x)| match m {
+            Method::Backward => format!("{} {x:.3e}", method_name(m)),
+            _ => format!("{} {} {x:.3e}", method_name(m), selection_name(sel)),
+        })
+        .collect::<Vec<_>>()
+        .join(", ");
+    match cheapest(&scores) {
+        Some((m, sel)) => (
+            m,
+            Some(sel),
+            format!(
+                "simulation.method and sun.selection auto chose {} with {}: laser and solar relative variance x scene queries per pulse over {n} pilot pulses of {rays} rays (lower is better): {table}",
+                method_name(m),
+                selection_name(sel)
+            ),
+        ),
+        None => (
+            Method::Bdpt,
+            Some(SunSelection::Fixed),
+            format!(
+                "simulation.method and sun.selection auto: no light found in {n} pilot pulses of {rays} rays, bdpt and fixed (the defaults)"
+            ),
+        ),
+    }
 }
 
 /// What a run's `auto` choices picked, as the simulate stage's fingerprint holds it: the

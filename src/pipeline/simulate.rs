@@ -381,6 +381,15 @@ fn score_table<T: Copy>(scores: &[(T, f64)], name: fn(T) -> &'static str) -> Str
         .join(", ")
 }
 
+/// The campaign with its sun (if any) selected as `selection`.
+fn with_selection(loaded: &Loaded, selection: SunSelection) -> Loaded {
+    let mut c = loaded.clone();
+    if let Some(sun) = c.campaign.sun.as_mut() {
+        sun.selection = Some(selection);
+    }
+    c
+}
+
 /// The candidate with the least finite score, the first of equals; None when none is finite.
 fn cheapest<T: Copy>(scores: &[(T, f64)]) -> Option<T> {
     scores
@@ -453,10 +462,7 @@ pub fn choose_sun_selection(loaded: &Loaded, scene: &Scene, plan: &Plan) -> (Sun
     let scores: Vec<(SunSelection, f64)> = [SunSelection::Fixed, SunSelection::Power]
         .into_iter()
         .map(|sel| {
-            let mut trial = loaded.clone();
-            if let Some(sun) = trial.campaign.sun.as_mut() {
-                sun.selection = Some(sel);
-            }
+            let trial = with_selection(loaded, sel);
             (sel, pilot_score(&trial, scene, &pulses, rays, method))
         })
         .collect();
@@ -507,8 +513,8 @@ pub fn with_method_chosen(loaded: &Loaded, scene: &Scene, plan: &Plan) -> Option
         }
     };
     c.campaign.simulation.method = method;
-    if let (Some(sun), Some(selection)) = (c.campaign.sun.as_mut(), selection) {
-        sun.selection = Some(selection);
+    if let Some(selection) = selection {
+        c = with_selection(&c, selection);
     }
     c.method_note = Some(note);
     Some(c)
@@ -546,10 +552,7 @@ fn choose_jointly(
     let scores: Vec<((Method, SunSelection), f64)> = candidates
         .into_iter()
         .map(|(m, sel)| {
-            let mut trial = loaded.clone();
-            if let Some(sun) = trial.campaign.sun.as_mut() {
-                sun.selection = Some(sel);
-            }
+            let trial = with_selection(loaded, sel);
             ((m, sel), pilot_score(&trial, scene, &pulses, rays, m))
         })
         .collect();

@@ -384,10 +384,9 @@ pub fn run(
     // join, as the simulate stage writes: the same threads do both, so no core waits for a
     // reader (a reader thread beside the workers made the loop wait for it a tenth of its
     // time on the town survey, whenever it lost its share of the cores to them)
-    let read = |k: usize| read_waveforms_but_impulse(&out.join(part_name(k)));
-    let mut next = (parts > 0).then(|| read(0));
-    // The part before is freed beside the reading of the next: its thousands of buffers, freed
-    // between two joins, left one core idle for a fifteenth of the loop on the town survey.
+    let read = |k: usize, spare| read_waveforms_but_impulse(&out.join(part_name(k)), spare);
+    let mut next = (parts > 0).then(|| read(0, Vec::new()));
+    // The part before lends its buffers to the reading of the next.
     let mut previous: Option<Vec<Waveform>> = None;
     for k in 0..parts {
         if let Some(signal) = crate::interrupt::requested() {
@@ -403,10 +402,7 @@ pub fn run(
         let part = part?;
         let finished = previous.take();
         let (ahead, done) = rayon::join(
-            || {
-                drop(finished);
-                (k + 1 < parts).then(|| read(k + 1))
-            },
+            || (k + 1 < parts).then(|| read(k + 1, finished.unwrap_or_default())),
             || -> Result<()> {
                 if part.iter().any(|w| w.pulse_id as usize >= plan.len()) {
                     return Err(Error::msg(format!(

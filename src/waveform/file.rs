@@ -204,14 +204,17 @@ pub fn waveform_table(w: &[Waveform]) -> Table<'_> {
 /// As long as the contract for the same reason as [`write_waveforms`]: every column is
 /// checked for its type, then read, in the file's order.
 pub fn read_waveforms(path: &Path) -> Result<Vec<Waveform>> {
-    read_waveforms_with(path, true, true)
+    read_waveforms_with(path, true, true, Vec::new())
 }
 
 /// [`read_waveforms`] but for the impulse energies, left empty: what the products stage reads,
 /// as it decomposes photons. The impulse energies are a column as long as the gate, like the
 /// photons: a third of the bins a part holds.
-pub fn read_waveforms_but_impulse(path: &Path) -> Result<Vec<Waveform>> {
-    read_waveforms_with(path, true, false)
+/// The rows of `spare` (a part done with) lend their buffers to the rows read: a part's
+/// thousands of bin lists, allocated and freed part after part, were a twelfth of the town
+/// survey's products stage.
+pub fn read_waveforms_but_impulse(path: &Path, spare: Vec<Waveform>) -> Result<Vec<Waveform>> {
+    read_waveforms_with(path, true, false, spare)
 }
 
 /// The columns of a waveform's bins, in [`Waveform`]'s order: laser photons, impulse energy
@@ -230,7 +233,12 @@ const BIN_COLUMNS: [&str; 7] = [
 /// [`read_waveforms`]; with `pages`, the bins of a file laid out as lidarsim writes it are read
 /// straight from its pages (`parquet_io::read_f32_lists`) and the other columns through
 /// Arrow's reader, which reads every column of any other file.
-fn read_waveforms_with(path: &Path, pages: bool, impulse: bool) -> Result<Vec<Waveform>> {
+fn read_waveforms_with(
+    path: &Path,
+    pages: bool,
+    impulse: bool,
+    mut spare: Vec<Waveform>,
+) -> Result<Vec<Waveform>> {
     use arrow_array::cast::AsArray;
     use arrow_array::types::{Float32Type, Float64Type, UInt32Type, UInt64Type};
     use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
@@ -259,7 +267,9 @@ fn read_waveforms_with(path: &Path, pages: bool, impulse: bool) -> Result<Vec<Wa
             let at: Vec<usize> = read.iter().map(|&c| leaves[c]).collect();
             crate::parquet_io::read_f32_lists(&file, &at, |k, i, bins| {
                 let c = read[k];
-                *bins_of(row(&mut out, i), c) = bins.to_vec();
+                let into = bins_of(row(&mut out, &mut spare, i), c);
+                into.clear();
+                into.extend_from_slice(bins);
                 held[c] = held[c].max(i + 1);
             })
             .map_err(|e| err(&e))?;
@@ -314,8 +324,10 @@ fn read_waveforms_with(path: &Path, pages: bool, impulse: bool) -> Result<Vec<Wa
             for (c, name) in BIN_COLUMNS.iter().enumerate() {
                 let l = typed(name, &f32t)?.as_list::<i32>().clone();
                 for i in 0..b.num_rows() {
-                    let bins = l.value(i).as_primitive::<Float32Type>().values().to_vec();
-                    *bins_of(row(&mut out, done + i), c) = bins;
+                    let bins = l.value(i);
+                    let into = bins_of(row(&mut out, &mut spare, done + i), c);
+                    into.clear();
+                    into.extend_from_slice(bins.as_primitive::<Float32Type>().values());
                 }
                 held[c] = done + b.num_rows();
             }
@@ -358,8 +370,10 @@ fn read_waveforms_with(path: &Path, pages: bool, impulse: bool) -> Result<Vec<Wa
         };
         let bands =
             optional("wavelength_nm", &f64t)?.map(|c| c.as_primitive::<Float64Type>().clone());
-        let f64s = |l: &arrow_array::ListArray, i: usize| {
-            l.value(i).as_primitive::<Float64Type>().values().to_vec()
+        let f64s = |l: &arrow_array::ListArray, i: usize, mut into: Vec<f64>| {
+            into.clear();
+            into.extend_from_slice(l.value(i).as_primitive::<Float64Type>().values());
+            into
         };
         // parts written before the spans (0304098) hold the whole gate in every bin column
         let first =
@@ -389,8 +403,8 @@ fn read_waveforms_with(path: &Path, pages: bool, impulse: bool) -> Result<Vec<Wa
                 impulse_energy_se_j: std::mem::take(&mut w.impulse_energy_se_j),
                 received_energy_j: rec.value(i),
                 outside_gate_energy_j: out_g.value(i),
-                order_energy_j: f64s(&oe, i),
-                order_energy_se_j: f64s(&ose, i),
+                order_energy_j: f64s(&oe, i, std::mem::take(&mut w.order_energy_j)),
+                order_energy_se_j: f64s(&ose, i, std::mem::take(&mut w.order_energy_se_j)),
                 received_energy_se_j: rse.value(i),
                 solar_photons_per_bin: sol.value(i),
                 solar_power_w: spw.value(i),
@@ -424,12 +438,25 @@ fn read_waveforms_with(path: &Path, pages: bool, impulse: bool) -> Result<Vec<Wa
     Ok(out)
 }
 
-/// Row `i` of `out`, made (empty) with those before it where it is not yet.
-fn row(out: &mut Vec<Waveform>, i: usize) -> &mut Waveform {
-    if out.len() <= i {
-        out.resize_with(i + 1, Waveform::default);
+/// Row `i` of `out`, made (empty, in a row of `spare` where there is one) with those before
+/// it where it is not yet.
+fn row<'o>(out: &'o mut Vec<Waveform>, spare: &mut Vec<Waveform>, i: usize) -> &'o mut Waveform {
+    while out.len() <= i {
+        out.push(spare.pop().map_or_else(Waveform::default, emptied));
     }
     &mut out[i]
+}
+
+/// A row with its lists empty, their buffers kept: every other field is written whole
+/// before the row is read.
+fn emptied(mut w: Waveform) -> Waveform {
+    w.laser_photons.clear();
+    w.impulse_energy_j.clear();
+    w.impulse_energy_se_j.clear();
+    w.order_energy_j.clear();
+    w.order_energy_se_j.clear();
+    w.class_energy_j.iter_mut().for_each(Vec::clear);
+    w
 }
 
 /// A waveform's list of bin column `c` ([`BIN_COLUMNS`]).
@@ -617,8 +644,15 @@ mod tests {
                 ..w.clone()
             })
             .collect();
-        let products = read_waveforms_but_impulse(&path).unwrap();
+        let products = read_waveforms_but_impulse(&path, Vec::new()).unwrap();
         assert_eq!(text(&products), text(&without));
+        // the same read into the buffers of rows done with: more rows than the part has, of
+        // other lengths, the impulse energies among them filled
+        let mut spare = back.clone();
+        spare.extend(back.iter().rev().cloned());
+        spare[0].impulse_energy_j = vec![9.0; 3 * bins];
+        let lent = read_waveforms_but_impulse(&path, spare).unwrap();
+        assert_eq!(text(&lent), text(&without));
         for (w, &(a, b)) in back.iter().zip(&spans) {
             for j in 0..bins {
                 let inside = (a..b).contains(&j);
@@ -692,11 +726,15 @@ mod tests {
         write_waveforms(&path, &rows, "fp").unwrap();
         let text = |w: &[Waveform]| format!("{w:?}");
         assert_eq!(
-            text(&read_waveforms_with(&path, true, true).unwrap()),
+            text(&read_waveforms_with(&path, true, true, Vec::new()).unwrap()),
             text(&rows)
         );
         assert_eq!(
-            text(&read_waveforms_with(&path, false, true).unwrap()),
+            // Arrow's reader, into the buffers of rows done with
+            text(
+                &read_waveforms_with(&path, false, true, rows.iter().rev().cloned().collect())
+                    .unwrap()
+            ),
             text(&rows)
         );
         // nullable items: not the layout read from the pages
@@ -778,8 +816,9 @@ mod tests {
             }
             std::fs::write(&bad, &data).unwrap();
             for (pages, impulse) in [(true, true), (false, true), (true, false)] {
-                let read =
-                    std::panic::catch_unwind(|| read_waveforms_with(&bad, pages, impulse).is_ok());
+                let read = std::panic::catch_unwind(|| {
+                    read_waveforms_with(&bad, pages, impulse, vec![Waveform::default(); 3]).is_ok()
+                });
                 assert!(
                     read.is_ok(),
                     "case {case} (pages {pages}, impulse {impulse}): the reader panicked"

@@ -4,6 +4,21 @@
 mod common;
 use common::*;
 
+/// The score a pilot's note gives candidate `name` (" name 1.2e0,").
+fn score_in(note: &str, name: &str) -> f64 {
+    let at = note
+        .find(&format!(" {name} "))
+        .unwrap_or_else(|| panic!("{note}"))
+        + name.len()
+        + 2;
+    note[at..]
+        .split([',', ' '])
+        .next()
+        .unwrap()
+        .parse()
+        .unwrap()
+}
+
 /// (chosen method, the resolved campaign's text, report.md) of an auto run, after checking that
 /// its waveforms are those of a run with the chosen method written out, on 1 and 2 threads.
 fn auto_run(name: &str, inst: &Inst) -> (String, String, String) {
@@ -32,19 +47,7 @@ fn auto_run(name: &str, inst: &Inst) -> (String, String, String) {
         .to_string();
     // the scores in the note: the chosen one is the least
     let note = resolved.lines().next().unwrap();
-    let score = |m: &str| -> f64 {
-        let at = note
-            .find(&format!(" {m} "))
-            .unwrap_or_else(|| panic!("{note}"))
-            + m.len()
-            + 2;
-        note[at..]
-            .split([',', ' '])
-            .next()
-            .unwrap()
-            .parse()
-            .unwrap()
-    };
+    let score = |m: &str| score_in(note, m);
     for m in ["bdpt", "forward", "backward"] {
         assert!(score(&chosen) <= score(m), "{note}");
     }
@@ -120,4 +123,64 @@ fn auto_is_the_default_and_its_pilot_sees_the_scene_whatever_the_scan() {
         resolved.starts_with("# simulation.method auto chose"),
         "{resolved}"
     );
+}
+
+/// `simulation.receiver_depth: auto`, the default, with bdpt named: the pilot scores `full`
+/// and `first` on the same pulses and keeps the cheaper (over a plane, where nothing is seen
+/// twice, the receiver's deeper vertices find no light: `first`), says so in the log and the
+/// resolved campaign, and the run is that of the depth written out, on 1 and 2 threads. A
+/// depth written out runs no pilot; forward, with one sub-path, has no use for one.
+#[test]
+fn receiver_depth_auto_is_chosen_by_the_pilot_and_said() {
+    let dir = tmp("depth_auto");
+    let scene = plane_scene(&dir, 0.3, 200.0);
+    let inst = Inst {
+        fp_mrad: 1.0,
+        fov_mrad: 1.5,
+        ..Inst::default()
+    };
+    let text = |method: &str| {
+        campaign(
+            &scene,
+            &inst,
+            [0.0, 0.0, 100.0],
+            [0.0, 0.0, -1.0],
+            method,
+            4096,
+            3,
+        )
+    };
+    let camp = write(&dir, "auto.yaml", &text("bdpt"));
+    let out = dir.join("auto");
+    let err = run_cli(&camp, &out, Some(2));
+    assert!(
+        err.contains("simulation.receiver_depth auto chose first"),
+        "{err}"
+    );
+    let resolved = std::fs::read_to_string(out.join("campaign.resolved.yaml")).unwrap();
+    assert!(resolved.contains("receiver_depth: first"), "{resolved}");
+    let note = resolved.lines().next().unwrap();
+    let score = |d: &str| score_in(note, d);
+    assert!(score("first") < score("full"), "{note}");
+    let report = std::fs::read_to_string(out.join("report.md")).unwrap();
+    assert!(report.contains("simulation.receiver_depth auto chose first"));
+    // written out, on one thread: no pilot, the same part
+    let explicit = write(&dir, "first.yaml", &text("bdpt, receiver_depth: first"));
+    let out1 = dir.join("first");
+    let err1 = run_cli(&explicit, &out1, Some(1));
+    assert!(!err1.contains("receiver_depth auto"), "{err1}");
+    let part = "waveforms/part-00000.parquet";
+    assert!(
+        std::fs::read(out.join(part)).unwrap() == std::fs::read(out1.join(part)).unwrap(),
+        "auto's waveforms differ from first's"
+    );
+    // full written out: a run of its own
+    let full = write(&dir, "full.yaml", &text("bdpt, receiver_depth: full"));
+    let out2 = dir.join("full");
+    run_cli(&full, &out2, Some(2));
+    assert!(std::fs::read(out.join(part)).unwrap() != std::fs::read(out2.join(part)).unwrap());
+    // forward: nothing to choose
+    let fwd = write(&dir, "forward.yaml", &text("forward"));
+    let err3 = run_cli(&fwd, &dir.join("forward"), Some(2));
+    assert!(!err3.contains("receiver_depth"), "{err3}");
 }

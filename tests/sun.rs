@@ -164,6 +164,53 @@ fn sun_selection_auto_is_chosen_by_the_pilot_and_said() {
     assert!(!report.contains("sun.selection auto"), "{report}");
 }
 
+/// With a sun, `receiver_depth: first` changes the laser's strategies only: every receiver
+/// vertex still joins the sun, and the sub-paths draw the same numbers, so the solar columns
+/// are the same to the bit, while the laser's energy agrees within its standard error.
+#[test]
+fn the_first_receiver_surface_leaves_the_solar_signal_as_it_was() {
+    let dir = tmp("sun_depth");
+    // leaves over soil: light seen after several surfaces, which the depth changes
+    let scene = leaf_layer(&dir);
+    let inst = Inst {
+        fp_mrad: 20.0,
+        ..sun_inst(25.0)
+    };
+    let go = |depth: &str| {
+        let text = campaign(
+            &scene,
+            &inst,
+            [0.0, 0.0, 100.0],
+            [0.0, 0.0, -1.0],
+            &format!("bdpt, receiver_depth: {depth}"),
+            50_000,
+            5,
+        );
+        let sub = dir.join(depth);
+        std::fs::create_dir_all(&sub).unwrap();
+        run(&sub, &with_sun_selected(&text, 30.0, 180.0, "fixed"), None).remove(0)
+    };
+    let (full, first) = (go("full"), go("first"));
+    assert!(full.solar_power_w > 0.0);
+    assert_eq!(full.solar_power_w.to_bits(), first.solar_power_w.to_bits());
+    assert_eq!(
+        full.solar_power_se_w.to_bits(),
+        first.solar_power_se_w.to_bits()
+    );
+    assert_eq!(
+        full.solar_photons_per_bin.to_bits(),
+        first.solar_photons_per_bin.to_bits()
+    );
+    assert_ne!(full.received_energy_j, first.received_energy_j);
+    let se = full.received_energy_se_j.hypot(first.received_energy_se_j);
+    let z = (full.received_energy_j - first.received_energy_j) / se;
+    println!(
+        "laser energy full/first: z {z:+.2}, rel se {:.4}",
+        se / full.received_energy_j
+    );
+    assert!(se < 0.02 * full.received_energy_j && z.abs() < 3.0, "z {z}");
+}
+
 #[test]
 fn no_sun_means_no_solar_signal() {
     let dir = tmp("sun_none");

@@ -412,4 +412,13 @@ fn forward_and_bdpt_agree_in_a_trench_under_water() {
         "order 4 must matter"
     );
     agree("trench under water forward/bdpt", &f, &b, &[1, 3, 4]);
+    // bdpt's receiver depth `auto` keeps every strategy over water, without a pilot: with
+    // `first` the light under the surface was left to the light sub-paths (order 4's standard
+    // error 8 % of it, against 1-2 % with every strategy)
+    let resolved = std::fs::read_to_string(dir.join("bdpt/run/campaign.resolved.yaml")).unwrap();
+    assert!(resolved.contains("receiver_depth: full"), "{resolved}");
+    assert!(
+        resolved.starts_with("# simulation.receiver_depth auto: full, as the scene has water"),
+        "{resolved}"
+    );
 }

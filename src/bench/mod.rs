@@ -206,6 +206,7 @@ impl Bench<'_> {
             method,
             heuristic: MisHeuristic::Power,
             sampler,
+            receiver_depth: crate::campaign::ReceiverDepth::Full,
             sun,
             max_order: 100,
             seed,

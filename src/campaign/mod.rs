@@ -360,6 +360,28 @@ pub enum Method {
     Auto,
 }
 
+/// Which vertices of bdpt's receiver sub-path join the laser's light (its light sub-paths
+/// and the laser itself). The sun's light joins every one either way: its light sub-paths
+/// rarely land in a narrow view, so the solar signal of every order comes from the receiver
+/// sub-path's vertices connected to the sun.
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum ReceiverDepth {
+    /// Every vertex, up to `max_order`: all of bdpt's strategies.
+    Full,
+    /// The aperture point and the first surface the receiver sees: each order of laser light
+    /// is then made by the laser's light sub-path connected to the aperture or to that
+    /// surface (and order 1 also by that surface connected to the laser). Where the laser's
+    /// light sub-paths find the receiver's view as well as the receiver's sub-paths find the
+    /// beam (MABEL over the orchard), its deeper strategies add connections, not accuracy;
+    /// without a sun, the receiver sub-path then stops at that surface.
+    First,
+    /// Chosen between the two by a pilot for bdpt (`pipeline::simulate`); forward and
+    /// backward have one sub-path and take it as `full`.
+    #[default]
+    Auto,
+}
+
 /// How multiple importance sampling weighs the strategies that can make a path.
 #[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq, Default)]
 #[serde(rename_all = "snake_case")]
@@ -395,6 +417,8 @@ pub struct Simulation {
     pub mis: MisHeuristic,
     #[serde(default)]
     pub sampler: Sampler,
+    #[serde(default)]
+    pub receiver_depth: ReceiverDepth,
 }
 
 impl Default for Simulation {
@@ -405,6 +429,7 @@ impl Default for Simulation {
             max_order: default_max_order(),
             mis: MisHeuristic::default(),
             sampler: Sampler::default(),
+            receiver_depth: ReceiverDepth::default(),
         }
     }
 }

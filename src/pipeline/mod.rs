@@ -20,7 +20,7 @@ pub use simulate::{probe_rays_per_second, simulate, with_method_chosen};
 use sweep::run_sweep;
 pub use sweep::RunTotals;
 
-use crate::campaign::{Campaign, Loaded};
+use crate::campaign::{Campaign, Loaded, Method, ReceiverDepth};
 use crate::error::{Error, Result};
 use crate::fsutil::write_text_atomic;
 use crate::plan::{self, Plan};
@@ -390,6 +390,14 @@ fn run_single(
 
     let scene = cache.get(&loaded.scene_path, loaded.campaign.wavelength_nm.all())?;
     memory::fits(loaded, scene, &plan)?;
+    let sim = &loaded.campaign.simulation;
+    let bdpt = matches!(sim.method, Method::Bdpt | Method::Auto);
+    if scene.water.is_some() && bdpt && sim.receiver_depth == ReceiverDepth::First {
+        log(&format!(
+            "warning: simulation.receiver_depth first {}; full (or auto) keeps every strategy",
+            simulate::WATER_DEPTH
+        ));
+    }
     // `auto` resolved here, once the scene is known. The pilot is deterministic, but another
     // version of the program may pick otherwise: the method picked is part of the simulate
     // fingerprint (and the sun's selection), so a resume never mixes parts of two methods

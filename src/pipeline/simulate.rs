@@ -1,7 +1,7 @@
 //! The simulate stage: pulses in [`Parts`], each part written when complete,
 //! with per-pulse timing beside it.
 
-use crate::campaign::{Loaded, Method, SunSelection};
+use crate::campaign::{Loaded, Method, ReceiverDepth, SunSelection};
 use crate::error::Result;
 use crate::fsutil::{Committer, Pending};
 use crate::plan::{Plan, Pulse};
@@ -250,6 +250,7 @@ impl<'a> Shared<'a> {
             method,
             heuristic: c.simulation.mis,
             sampler: c.simulation.sampler,
+            receiver_depth: c.simulation.receiver_depth,
             sun,
             atmosphere: self.atmosphere.as_ref(),
             bands: self.bands.as_ref(),
@@ -485,11 +486,14 @@ pub fn choose_sun_selection(loaded: &Loaded, scene: &Scene, plan: &Plan) -> (Sun
     }
 }
 
-/// The campaign as it runs when it asks for `simulation.method: auto` or `sun.selection:
-/// auto`: the method its pilot picks ([`choose_method`]), the sun's selection for the
-/// campaign's method ([`choose_sun_selection`]), or both at once ([`choose_jointly`]), written
-/// in, and the note saying why; `None` for a campaign that names both. Everything that simulates a campaign's pulses goes through
-/// this, so the transport never sees `auto`.
+/// The campaign as it runs when it asks for `simulation.method: auto`, `sun.selection: auto`
+/// or (with bdpt) `simulation.receiver_depth: auto`: the method its pilot picks
+/// ([`choose_method`]), the sun's selection for the campaign's method
+/// ([`choose_sun_selection`]), or both at once ([`choose_jointly`]), then bdpt's receiver
+/// depth for them ([`choose_receiver_depth`]), written in, and the notes saying why; `None`
+/// for a campaign that names them all. Everything that simulates a campaign's pulses goes
+/// through this, so the transport never sees `auto` (but a receiver depth `auto` with
+/// forward or backward, which have one sub-path and no use for it).
 pub fn with_method_chosen(loaded: &Loaded, scene: &Scene, plan: &Plan) -> Option<Loaded> {
     let method_auto = loaded.campaign.simulation.method == Method::Auto;
     let sun_auto = loaded
@@ -497,27 +501,102 @@ pub fn with_method_chosen(loaded: &Loaded, scene: &Scene, plan: &Plan) -> Option
         .sun
         .as_ref()
         .is_some_and(|s| s.selection() == SunSelection::Auto);
-    if !method_auto && !sun_auto {
+    let depth_auto = loaded.campaign.simulation.receiver_depth == ReceiverDepth::Auto;
+    let bdpt_given = loaded.campaign.simulation.method == Method::Bdpt;
+    let depth_to_choose = depth_auto && bdpt_given;
+    if !(method_auto || sun_auto || depth_to_choose) {
         return None;
     }
     let mut c = loaded.clone();
     let (method, selection, note) = match (method_auto, sun_auto) {
-        (true, true) => choose_jointly(&c, scene, plan),
+        (true, true) => {
+            let (method, selection, note) = choose_jointly(&c, scene, plan);
+            (method, selection, Some(note))
+        }
         (true, false) => {
             let (method, note) = choose_method(&c, scene, plan);
-            (method, None, note)
+            (method, None, Some(note))
         }
-        _ => {
+        (false, true) => {
             let (selection, note) = choose_sun_selection(&c, scene, plan);
-            (c.campaign.simulation.method, Some(selection), note)
+            (c.campaign.simulation.method, Some(selection), Some(note))
         }
+        (false, false) => (c.campaign.simulation.method, None, None),
     };
     c.campaign.simulation.method = method;
     if let Some(selection) = selection {
         c = with_selection(&c, selection);
     }
-    c.method_note = Some(note);
+    let mut notes: Vec<String> = note.into_iter().collect();
+    if depth_auto {
+        if method == Method::Bdpt {
+            let (depth, note) = choose_receiver_depth(&c, scene, plan);
+            c.campaign.simulation.receiver_depth = depth;
+            notes.push(note);
+        } else {
+            c.campaign.simulation.receiver_depth = ReceiverDepth::Full;
+        }
+    }
+    c.method_note = Some(notes.join("; "));
     Some(c)
+}
+
+/// Why `first` is no candidate over water, and why a campaign that names it there is warned.
+pub const WATER_DEPTH: &str = "as the scene has water: a receiver sub-path's first surface is then often the water's, and the laser's light under it would be joined only through that surface (a smooth one joins none: no connection passes it), so left to the light sub-paths that cross the aperture";
+
+/// `simulation.receiver_depth: auto` with bdpt: `full` or `first`, whichever costs least
+/// for the same laser and solar errors with the campaign's sun selection, on the pilot
+/// pulses of `simulation.method: auto`, and why. Ties go to full, all of bdpt's strategies.
+pub fn choose_receiver_depth(
+    loaded: &Loaded,
+    scene: &Scene,
+    plan: &Plan,
+) -> (ReceiverDepth, String) {
+    if scene.water.is_some() {
+        return (
+            ReceiverDepth::Full,
+            format!("simulation.receiver_depth auto: full, {WATER_DEPTH}"),
+        );
+    }
+    let (pulses, rays) = pilot_pulses(loaded, plan);
+    let n = pulses.len();
+    if n == 0 {
+        return (
+            ReceiverDepth::Full,
+            "simulation.receiver_depth auto: no pulses to try, full".into(),
+        );
+    }
+    let scores: Vec<(ReceiverDepth, f64)> = [ReceiverDepth::Full, ReceiverDepth::First]
+        .into_iter()
+        .map(|depth| {
+            let mut trial = loaded.clone();
+            trial.campaign.simulation.receiver_depth = depth;
+            (
+                depth,
+                pilot_score(&trial, scene, &pulses, rays, Method::Bdpt),
+            )
+        })
+        .collect();
+    let table = score_table(&scores, depth_name);
+    let with_sun = match loaded.campaign.sun.as_ref() {
+        Some(s) => format!(" with {}", selection_name(s.selection())),
+        None => String::new(),
+    };
+    match cheapest(&scores) {
+        Some(depth) => (
+            depth,
+            format!(
+                "simulation.receiver_depth auto chose {}: laser and solar relative variance x scene queries per pulse over {n} pilot pulses of {rays} rays, bdpt{with_sun} (lower is better): {table}",
+                depth_name(depth)
+            ),
+        ),
+        None => (
+            ReceiverDepth::Full,
+            format!(
+                "simulation.receiver_depth auto: no light found in {n} pilot pulses of {rays} rays, full (all of bdpt's strategies)"
+            ),
+        ),
+    }
 }
 
 /// Both `auto`s at once: each method with each sun selection on the same pilot pulses
@@ -589,11 +668,26 @@ fn choose_jointly(
 pub fn choices_made(chosen: &Loaded, asked: &Loaded) -> String {
     let method = method_name(chosen.campaign.simulation.method);
     let sun_asked = asked.campaign.sun.as_ref().map(|s| s.selection());
-    match (sun_asked, chosen.campaign.sun.as_ref()) {
+    let mut made = match (sun_asked, chosen.campaign.sun.as_ref()) {
         (Some(SunSelection::Auto), Some(s)) => {
             format!("{method}; sun {}", selection_name(s.selection()))
         }
         _ => method.to_string(),
+    };
+    let depth_asked = asked.campaign.simulation.receiver_depth == ReceiverDepth::Auto;
+    if depth_asked && chosen.campaign.simulation.method == Method::Bdpt {
+        let depth = depth_name(chosen.campaign.simulation.receiver_depth);
+        made.push_str(&format!("; receiver depth {depth}"));
+    }
+    made
+}
+
+/// A receiver depth as campaign files spell it.
+pub fn depth_name(d: ReceiverDepth) -> &'static str {
+    match d {
+        ReceiverDepth::Full => "full",
+        ReceiverDepth::First => "first",
+        ReceiverDepth::Auto => "auto",
     }
 }
 

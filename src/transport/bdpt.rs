@@ -364,7 +364,7 @@ fn receiver_subpath(
     acc: &mut Accum,
     b: &mut Buffers,
 ) {
-    let (_, t_cap) = setup.caps();
+    let t_cap = setup.receiver_walk_cap();
     let recv = &setup.receiver;
     b.cam.clear();
     b.cam_r.clear();
@@ -401,6 +401,7 @@ fn receiver_subpath(
 fn connect_to_lights(setup: &PulseSetup, acc: &mut Accum, b: &mut Buffers) {
     let (laser, scene) = (&setup.laser, setup.scene);
     let max_order = setup.max_order as usize;
+    let (_, laser_t) = setup.caps_for(VertexKind::Laser);
     let q_sun = setup.sun.map_or(0.0, |s| s.probability);
     let laser_end = Vertex::endpoint(
         VertexKind::Laser,
@@ -412,7 +413,11 @@ fn connect_to_lights(setup: &PulseSetup, acc: &mut Accum, b: &mut Buffers) {
         let cam = &b.cam[..t];
         let y = &cam[t - 1];
         let laser_light = [laser_end];
-        if let Some((c, length)) = contribution(setup, &laser_light, cam) {
+        let joins_laser = t <= laser_t;
+        if let Some((c, length)) = joins_laser
+            .then(|| contribution(setup, &laser_light, cam))
+            .flatten()
+        {
             acc.tally.queries += 1;
             if !scene.occluded(laser_end.p, y.p, FacetId::NONE, y.facet) {
                 let w = mis_weight(setup, &laser_light, cam, &mut b.scratch);
@@ -457,7 +462,12 @@ fn connect_subpaths(
     b: &mut Buffers,
     is_sun: bool,
 ) {
-    let (_, t_cap) = setup.caps();
+    let light_kind = if is_sun {
+        VertexKind::Sun
+    } else {
+        VertexKind::Laser
+    };
+    let (_, t_cap) = setup.caps_for(light_kind);
     let (recv, scene) = (&setup.receiver, setup.scene);
     let max_order = setup.max_order as usize;
     let mut q = [Vertex::endpoint(
@@ -466,7 +476,7 @@ fn connect_subpaths(
         recv.frame.w,
         1.0 / recv.area,
     )];
-    let t_max = if t_cap > 1 { b.cam.len() } else { 1 };
+    let t_max = if t_cap > 1 { b.cam.len().min(t_cap) } else { 1 };
     for s in 2..=b.light.len() {
         for t in 1..=t_max {
             let order = s + t - 2;

@@ -75,7 +75,7 @@ pub fn mis_weight(
 ) -> f64 {
     let (s, t) = (light.len(), cam.len());
     let nv = s + t;
-    let (s_cap, t_cap) = setup.caps();
+    let (s_cap, t_cap) = setup.caps_for(light[0].kind);
     let lo = nv.saturating_sub(t_cap).max(1);
     // t = 0 with a light sub-path one longer than its cap: see `crossing_after_cap`
     let hi = if setup.crossing_after_cap() && nv == s_cap + 1 {

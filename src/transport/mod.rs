@@ -43,7 +43,7 @@ pub use tally::Tally;
 use bdpt::{trace_ray, Buffers, FirstDims};
 use tally::Accum;
 
-use crate::campaign::{Method, MisHeuristic, Sampler};
+use crate::campaign::{Method, MisHeuristic, ReceiverDepth, Sampler};
 use crate::rng::{Rng, Sobol2};
 use crate::scene::{FacetId, Scene};
 use crate::sensor::{Gate, Laser, Receiver, SunSource};
@@ -81,6 +81,8 @@ pub struct PulseSetup<'a> {
     pub method: Method,
     pub heuristic: MisHeuristic,
     pub sampler: Sampler,
+    /// The receiver sub-path's vertices that join the laser's light (bdpt only).
+    pub receiver_depth: ReceiverDepth,
     /// The sun, when the campaign has one: its paths share the receiver sub-paths.
     pub sun: Option<SunSource>,
     /// The atmosphere at the campaign's wavelength; `None` is vacuum and costs nothing.
@@ -119,6 +121,38 @@ impl PulseSetup<'_> {
             Method::Backward => (1, full),
             // auto is resolved to one of the others before any pulse is traced
             Method::Bdpt | Method::Auto => (full, full),
+        }
+    }
+
+    /// [`PulseSetup::caps`] for the paths of one light (`Laser` or `Sun`): the laser's light
+    /// joins the receiver sub-path's first surface at most with `receiver_depth: first`.
+    /// The paths of the two lights are apart, so each light's strategies are weighed among
+    /// themselves.
+    pub fn caps_for(&self, light: VertexKind) -> (usize, usize) {
+        let (s, t) = self.caps();
+        if light == VertexKind::Laser {
+            (s, t.min(self.laser_receiver_cap()))
+        } else {
+            (s, t)
+        }
+    }
+
+    /// Most receiver sub-path vertices (aperture included) that join the laser's light.
+    fn laser_receiver_cap(&self) -> usize {
+        let bdpt = matches!(self.method, Method::Bdpt | Method::Auto);
+        if bdpt && self.receiver_depth == ReceiverDepth::First {
+            2
+        } else {
+            usize::MAX
+        }
+    }
+
+    /// Most vertices the receiver sub-path is walked to: every light's deepest.
+    pub fn receiver_walk_cap(&self) -> usize {
+        let (_, t) = self.caps();
+        match self.sun {
+            Some(_) => t,
+            None => t.min(self.laser_receiver_cap()),
         }
     }
 }

@@ -83,7 +83,7 @@ fn auto_avoids_the_method_that_cannot_find_the_light() {
         "{resolved}"
     );
     assert!(
-        report.contains("| method choice | simulation.method auto chose"),
+        report.contains("| pilot's choices | simulation.method auto chose"),
         "{report}"
     );
 

@@ -75,7 +75,8 @@ pub(super) fn check(path: &std::path::Path) -> Result<()> {
     let chosen = pipeline::with_method_chosen(&loaded, &scene, &plan);
     let loaded = match &chosen {
         Some(c) => {
-            println!("method: {}", c.method_note.as_deref().unwrap_or_default());
+            // the method's, the sun's selection's and bdpt's receiver depth's choices
+            println!("pilot: {}", c.method_note.as_deref().unwrap_or_default());
             c
         }
         None => &loaded,

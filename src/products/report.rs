@@ -72,7 +72,7 @@ pub fn report(
         if total > 0.0 { 100.0 * multiple / total } else { 0.0 },
     );
     if let Some(note) = &loaded.method_note {
-        text += &format!("| method choice | {note} |\n");
+        text += &format!("| pilot's choices | {note} |\n");
     }
     if c.wavelength_nm.several() {
         text += &format!(

@@ -270,3 +270,68 @@ fn laser_waveform_is_the_same_with_the_sun_on() {
     );
     let _ = PI;
 }
+
+/// report.md compares the sun's simulation noise with the sun's own photon noise (its
+/// photons over the gates, after the quantum efficiency), as it does the laser's: the line
+/// is the waveforms' own figure, and it falls with the rays.
+#[test]
+fn the_solar_noise_line_is_the_waveforms_and_falls_with_rays() {
+    let dir = tmp("sun_noise_line");
+    // leaves over soil: the solar signal differs from ray to ray (over a plane every
+    // receiver vertex sees the same sunlight, and the variance is rounding)
+    let scene = leaf_layer(&dir);
+    let qe = 0.3;
+    let mut printed_by_rays = Vec::new();
+    for rays in [40u64, 160] {
+        let text = format!(
+            "name: pc\nscene: {}\nseed: 3\nwavelength_nm: 1064\ninstrument:\n  kind: photon_counting\n  pulse_energy_j: 1.0e-9\n  pulse_fwhm_ns: 1.0\n  footprint_half_angle_mrad: 0.2\n  fov_half_angle_mrad: 5\n  receiver_area_m2: 0.01\n  bin_ns: 0.5\n  bandwidth_nm: 1.0\n  quantum_efficiency: {qe}\n  dead_time_ns: 0\n  dark_count_hz: 0\nplatform: {{ kind: track, altitude_m: 300, track: {{ start: [-5, 0], end: [5, 0] }}, along_track_step_m: 0.2 }}\nsimulation: {{ method: bdpt, rays_per_pulse: {rays}, max_order: 2 }}\nsun: {{ zenith_deg: 30, azimuth_deg: 180, irradiance_w_m2_um: 640, selection: fixed }}\n",
+            scene.display()
+        );
+        let sub = dir.join(format!("r{rays}"));
+        std::fs::create_dir_all(&sub).unwrap();
+        let out = run_campaign(&sub, &text, None);
+        let mut rows = Vec::new();
+        for k in 0.. {
+            let part = out.join(lidarsim::waveform::file::part_name(k));
+            if !part.is_file() {
+                break;
+            }
+            rows.extend(lidarsim::waveform::file::read_waveforms(&part).unwrap());
+        }
+        assert!(rows.len() > 40, "{} pulses", rows.len());
+        let in_gate = |w: &lidarsim::waveform::Waveform| {
+            w.solar_photons_per_bin as f64 * w.laser_photons.len() as f64
+        };
+        let photons: f64 = rows.iter().map(|w| qe * in_gate(w)).sum();
+        let var: f64 = rows
+            .iter()
+            .map(|w| (qe * in_gate(w) * w.solar_power_se_w / w.solar_power_w).powi(2))
+            .sum();
+        assert!(photons > 0.0 && var > 0.0);
+        let md = std::fs::read_to_string(out.join("report.md")).unwrap();
+        let line = md
+            .lines()
+            .find(|l| l.starts_with("| solar simulation noise against photon noise |"))
+            .unwrap_or_else(|| panic!("no solar noise line in report.md:\n{md}"));
+        let printed: f64 = line
+            .split('|')
+            .nth(2)
+            .unwrap()
+            .split_whitespace()
+            .next()
+            .unwrap()
+            .trim_end_matches(':')
+            .parse()
+            .unwrap();
+        println!("{rays} rays: {line}");
+        let expected = var / photons;
+        assert!(
+            (printed - expected).abs() <= 5e-4 * expected,
+            "{rays} rays: report {printed}, waveforms {expected}"
+        );
+        printed_by_rays.push(printed);
+    }
+    // 4 times the rays: about a quarter of the variance
+    let fall = printed_by_rays[0] / printed_by_rays[1];
+    assert!((2.0..8.0).contains(&fall), "fell by {fall}");
+}

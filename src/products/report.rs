@@ -121,10 +121,21 @@ fn noise_line(c: &crate::campaign::Campaign, totals: &WaveformTotals) -> Option<
         return None;
     }
     let ratio = qe * qe * var / (hv * hv) / photons;
-    Some(format!(
+    let mut text = format!(
         "| simulation noise against photon noise | {ratio:.3e}: the Monte Carlo variance of the pulses' expected photons, summed, over their Poisson variance ({:.3e} photons per pulse after the quantum efficiency, before any dead time); it falls as 1 / rays |\n",
         photons / totals.pulses.max(1) as f64
-    ))
+    );
+    // the sun's photons over the gates, where there are any: a background whose simulation
+    // noise matters against its own photon noise, not against the laser's
+    let solar = totals.solar_photons_in_gates.map(|n| qe * n).unwrap_or(0.0);
+    if let (true, Some(v)) = (solar > 0.0, totals.solar_photons_var) {
+        text += &format!(
+            "| solar simulation noise against photon noise | {:.3e}: the same for the solar photons over the gates ({:.3e} per pulse after the quantum efficiency) |\n",
+            qe * qe * v / solar,
+            solar / totals.pulses.max(1) as f64
+        );
+    }
+    Some(text)
 }
 
 /// The mission-shaped files in a run folder, and what the waveform record holds.

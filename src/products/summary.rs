@@ -42,6 +42,13 @@ pub struct WaveformTotals {
     /// products.json written before it.
     #[serde(default)]
     pub received_energy_var_j2: Option<f64>,
+    /// Σ of each pulse's solar photons over its gate (before the quantum efficiency), and Σ
+    /// of the square of their standard error: the sun's side of the same comparison; null in
+    /// a products.json written before them.
+    #[serde(default)]
+    pub solar_photons_in_gates: Option<f64>,
+    #[serde(default)]
+    pub solar_photons_var: Option<f64>,
 }
 
 impl WaveformTotals {
@@ -55,6 +62,15 @@ impl WaveformTotals {
         self.rays += w.rays as u64;
         self.paths += w.paths_per_ray as f64 * w.rays as f64;
         self.solar_photons_per_bin += w.solar_photons_per_bin as f64;
+        // the gate's solar photons, and their error by the solar power's relative error
+        let in_gate = w.solar_photons_per_bin as f64 * w.laser_photons.len() as f64;
+        let se = if w.solar_power_w > 0.0 {
+            in_gate * w.solar_power_se_w / w.solar_power_w
+        } else {
+            0.0
+        };
+        self.solar_photons_in_gates = Some(self.solar_photons_in_gates.unwrap_or(0.0) + in_gate);
+        self.solar_photons_var = Some(self.solar_photons_var.unwrap_or(0.0) + se * se);
         // null as soon as one pulse has none (no sun): a sum with a gap has no meaning
         let fov = Some(w.brf_fov_solar as f64).filter(|v| v.is_finite());
         self.brf_fov_solar = if self.pulses == 1 {

@@ -407,14 +407,16 @@ fn cheapest<T: Copy>(scores: &[(T, f64)]) -> Option<T> {
 /// this campaign ([`pilot_score`]), and why. Each method traces the same pilot pulses. A
 /// method that finds no energy where another does scores infinity; ties go to bdpt. A sun
 /// whose selection is still `auto` is taken as `fixed` here.
-/// Returns the method and a note for the run log, the resolved campaign and report.md.
-pub fn choose_method(loaded: &Loaded, scene: &Scene, plan: &Plan) -> (Method, String) {
+/// Returns the method, a note for the run log, the resolved campaign and report.md, and the
+/// method's score.
+pub fn choose_method(loaded: &Loaded, scene: &Scene, plan: &Plan) -> (Method, String, Option<f64>) {
     let (pulses, rays) = pilot_pulses(loaded, plan);
     let n = pulses.len();
     if n == 0 {
         return (
             Method::Bdpt,
             "simulation.method auto: no pulses to try, bdpt".into(),
+            None,
         );
     }
     // backward tracing cannot find the paths a smooth water surface makes (laser, specular
@@ -437,20 +439,31 @@ pub fn choose_method(loaded: &Loaded, scene: &Scene, plan: &Plan) -> (Method, St
                 "simulation.method auto chose {}: relative variance x scene queries per pulse over {n} pilot pulses of {rays} rays (lower is better): {table}",
                 method_name(m)
             ),
+            score_of(&scores, m),
         ),
         None => (
             Method::Bdpt,
             format!(
                 "simulation.method auto: no method found energy in {n} pilot pulses of {rays} rays, bdpt (the default)"
             ),
+            None,
         ),
     }
+}
+
+/// The score of candidate `c` in `scores`.
+fn score_of<T: Copy + PartialEq>(scores: &[(T, f64)], c: T) -> Option<f64> {
+    scores.iter().find(|(x, _)| *x == c).map(|&(_, v)| v)
 }
 
 /// `sun.selection: auto`: `fixed` (0.5) or `power`, whichever costs least for the same laser
 /// and solar errors with the campaign's method, on the method's pilot pulses, and why. Ties
 /// go to fixed, the paper's.
-pub fn choose_sun_selection(loaded: &Loaded, scene: &Scene, plan: &Plan) -> (SunSelection, String) {
+pub fn choose_sun_selection(
+    loaded: &Loaded,
+    scene: &Scene,
+    plan: &Plan,
+) -> (SunSelection, String, Option<f64>) {
     let (pulses, rays) = pilot_pulses(loaded, plan);
     let n = pulses.len();
     let method = loaded.campaign.simulation.method;
@@ -458,6 +471,7 @@ pub fn choose_sun_selection(loaded: &Loaded, scene: &Scene, plan: &Plan) -> (Sun
         return (
             SunSelection::Fixed,
             "sun.selection auto: no pulses to try, fixed".into(),
+            None,
         );
     }
     let scores: Vec<(SunSelection, f64)> = [SunSelection::Fixed, SunSelection::Power]
@@ -476,12 +490,14 @@ pub fn choose_sun_selection(loaded: &Loaded, scene: &Scene, plan: &Plan) -> (Sun
                 selection_name(sel),
                 method_name(method)
             ),
+            score_of(&scores, sel),
         ),
         None => (
             SunSelection::Fixed,
             format!(
                 "sun.selection auto: no light found in {n} pilot pulses of {rays} rays, fixed (the paper's)"
             ),
+            None,
         ),
     }
 }
@@ -508,20 +524,27 @@ pub fn with_method_chosen(loaded: &Loaded, scene: &Scene, plan: &Plan) -> Option
         return None;
     }
     let mut c = loaded.clone();
-    let (method, selection, note) = match (method_auto, sun_auto) {
+    // the chosen candidate's score: with bdpt, that of its every strategy, on the pulses the
+    // depth's pilot traces again
+    let (method, selection, note, score) = match (method_auto, sun_auto) {
         (true, true) => {
-            let (method, selection, note) = choose_jointly(&c, scene, plan);
-            (method, selection, Some(note))
+            let (method, selection, note, score) = choose_jointly(&c, scene, plan);
+            (method, selection, Some(note), score)
         }
         (true, false) => {
-            let (method, note) = choose_method(&c, scene, plan);
-            (method, None, Some(note))
+            let (method, note, score) = choose_method(&c, scene, plan);
+            (method, None, Some(note), score)
         }
         (false, true) => {
-            let (selection, note) = choose_sun_selection(&c, scene, plan);
-            (c.campaign.simulation.method, Some(selection), Some(note))
+            let (selection, note, score) = choose_sun_selection(&c, scene, plan);
+            (
+                c.campaign.simulation.method,
+                Some(selection),
+                Some(note),
+                score,
+            )
         }
-        (false, false) => (c.campaign.simulation.method, None, None),
+        (false, false) => (c.campaign.simulation.method, None, None, None),
     };
     c.campaign.simulation.method = method;
     if let Some(selection) = selection {
@@ -530,7 +553,7 @@ pub fn with_method_chosen(loaded: &Loaded, scene: &Scene, plan: &Plan) -> Option
     let mut notes: Vec<String> = note.into_iter().collect();
     if depth_auto {
         if method == Method::Bdpt {
-            let (depth, note) = choose_receiver_depth(&c, scene, plan);
+            let (depth, note) = choose_receiver_depth(&c, scene, plan, score);
             c.campaign.simulation.receiver_depth = depth;
             notes.push(note);
         } else {
@@ -547,10 +570,13 @@ pub const WATER_DEPTH: &str = "as the scene has water: a receiver sub-path's fir
 /// `simulation.receiver_depth: auto` with bdpt: `full` or `first`, whichever costs least
 /// for the same laser and solar errors with the campaign's sun selection, on the pilot
 /// pulses of `simulation.method: auto`, and why. Ties go to full, all of bdpt's strategies.
+/// `full_score`: full's score where a pilot before has it (the same pulses and draws, so the
+/// same number), else it is traced.
 pub fn choose_receiver_depth(
     loaded: &Loaded,
     scene: &Scene,
     plan: &Plan,
+    full_score: Option<f64>,
 ) -> (ReceiverDepth, String) {
     if scene.water.is_some() {
         return (
@@ -568,13 +594,16 @@ pub fn choose_receiver_depth(
     }
     let scores: Vec<(ReceiverDepth, f64)> = [ReceiverDepth::Full, ReceiverDepth::First]
         .into_iter()
-        .map(|depth| {
-            let mut trial = loaded.clone();
-            trial.campaign.simulation.receiver_depth = depth;
-            (
-                depth,
-                pilot_score(&trial, scene, &pulses, rays, Method::Bdpt),
-            )
+        .map(|depth| match (depth, full_score) {
+            (ReceiverDepth::Full, Some(x)) => (depth, x),
+            _ => {
+                let mut trial = loaded.clone();
+                trial.campaign.simulation.receiver_depth = depth;
+                (
+                    depth,
+                    pilot_score(&trial, scene, &pulses, rays, Method::Bdpt),
+                )
+            }
         })
         .collect();
     let table = score_table(&scores, depth_name);
@@ -607,7 +636,7 @@ fn choose_jointly(
     loaded: &Loaded,
     scene: &Scene,
     plan: &Plan,
-) -> (Method, Option<SunSelection>, String) {
+) -> (Method, Option<SunSelection>, String, Option<f64>) {
     let (pulses, rays) = pilot_pulses(loaded, plan);
     let n = pulses.len();
     if n == 0 {
@@ -615,6 +644,7 @@ fn choose_jointly(
             Method::Bdpt,
             Some(SunSelection::Fixed),
             "simulation.method and sun.selection auto: no pulses to try, bdpt and fixed".into(),
+            None,
         );
     }
     let mut candidates = vec![
@@ -652,6 +682,7 @@ fn choose_jointly(
                 method_name(m),
                 selection_name(sel)
             ),
+            score_of(&scores, (m, sel)),
         ),
         None => (
             Method::Bdpt,
@@ -659,6 +690,7 @@ fn choose_jointly(
             format!(
                 "simulation.method and sun.selection auto: no light found in {n} pilot pulses of {rays} rays, bdpt and fixed (the defaults)"
             ),
+            None,
         ),
     }
 }

@@ -509,14 +509,7 @@ fn simulation_noise_against_photon_noise_falls_as_one_over_rays() {
         let sub = dir.join(format!("r{rays}"));
         std::fs::create_dir_all(&sub).unwrap();
         let out = run_campaign(&sub, &text, None);
-        let mut rows = Vec::new();
-        for k in 0.. {
-            let part = out.join(lidarsim::waveform::file::part_name(k));
-            if !part.is_file() {
-                break;
-            }
-            rows.extend(lidarsim::waveform::file::read_waveforms(&part).unwrap());
-        }
+        let rows = all_waveforms(&out);
         assert!(rows.len() > 50, "{} pulses", rows.len());
         let hv = lidarsim::photon_energy_j(1064.0);
         let var: f64 = rows
@@ -524,21 +517,7 @@ fn simulation_noise_against_photon_noise_falls_as_one_over_rays() {
             .map(|w| (qe * w.received_energy_se_j / hv).powi(2))
             .sum();
         let photons: f64 = rows.iter().map(|w| qe * w.received_energy_j / hv).sum();
-        let md = std::fs::read_to_string(out.join("report.md")).unwrap();
-        let line = md
-            .lines()
-            .find(|l| l.starts_with("| simulation noise against photon noise |"))
-            .unwrap_or_else(|| panic!("no noise line in report.md:\n{md}"));
-        let printed: f64 = line
-            .split('|')
-            .nth(2)
-            .unwrap()
-            .split_whitespace()
-            .next()
-            .unwrap()
-            .trim_end_matches(':')
-            .parse()
-            .unwrap();
+        let (line, printed) = report_figure(&out, "simulation noise against photon noise");
         let expected = var / photons;
         println!("{rays} rays: {line}");
         assert!(

@@ -290,14 +290,7 @@ fn the_solar_noise_line_is_the_waveforms_and_falls_with_rays() {
         let sub = dir.join(format!("r{rays}"));
         std::fs::create_dir_all(&sub).unwrap();
         let out = run_campaign(&sub, &text, None);
-        let mut rows = Vec::new();
-        for k in 0.. {
-            let part = out.join(lidarsim::waveform::file::part_name(k));
-            if !part.is_file() {
-                break;
-            }
-            rows.extend(lidarsim::waveform::file::read_waveforms(&part).unwrap());
-        }
+        let rows = all_waveforms(&out);
         assert!(rows.len() > 40, "{} pulses", rows.len());
         let in_gate = |w: &lidarsim::waveform::Waveform| {
             w.solar_photons_per_bin as f64 * w.laser_photons.len() as f64
@@ -308,21 +301,7 @@ fn the_solar_noise_line_is_the_waveforms_and_falls_with_rays() {
             .map(|w| (qe * in_gate(w) * w.solar_power_se_w / w.solar_power_w).powi(2))
             .sum();
         assert!(photons > 0.0 && var > 0.0);
-        let md = std::fs::read_to_string(out.join("report.md")).unwrap();
-        let line = md
-            .lines()
-            .find(|l| l.starts_with("| solar simulation noise against photon noise |"))
-            .unwrap_or_else(|| panic!("no solar noise line in report.md:\n{md}"));
-        let printed: f64 = line
-            .split('|')
-            .nth(2)
-            .unwrap()
-            .split_whitespace()
-            .next()
-            .unwrap()
-            .trim_end_matches(':')
-            .parse()
-            .unwrap();
+        let (line, printed) = report_figure(&out, "solar simulation noise against photon noise");
         println!("{rays} rays: {line}");
         let expected = var / photons;
         assert!(

@@ -113,6 +113,40 @@ pub fn run(dir: &Path, campaign_text: &str, threads: Option<usize>) -> Vec<Wavef
     parquet::read_waveforms(&out.join("waveforms/part-00000.parquet")).unwrap()
 }
 
+/// Every waveform row of a run folder's parts, part after part.
+pub fn all_waveforms(out: &Path) -> Vec<Waveform> {
+    let mut rows = Vec::new();
+    for k in 0.. {
+        let part = out.join(parquet::part_name(k));
+        if !part.is_file() {
+            break;
+        }
+        rows.extend(parquet::read_waveforms(&part).unwrap());
+    }
+    rows
+}
+
+/// The row of a run folder's report.md labelled `label` ("| label | figure: ..."), and the
+/// figure it opens with.
+pub fn report_figure(out: &Path, label: &str) -> (String, f64) {
+    let md = std::fs::read_to_string(out.join("report.md")).unwrap();
+    let line = md
+        .lines()
+        .find(|l| l.starts_with(&format!("| {label} |")))
+        .unwrap_or_else(|| panic!("no '{label}' row in report.md:\n{md}"));
+    let figure = line
+        .split('|')
+        .nth(2)
+        .unwrap()
+        .split_whitespace()
+        .next()
+        .unwrap()
+        .trim_end_matches(':')
+        .parse()
+        .unwrap();
+    (line.to_string(), figure)
+}
+
 /// Runs the binary; returns (exit code, stdout, stderr).
 pub fn lidarsim(args: &[&str]) -> (i32, String, String) {
     let out = Command::new(env!("CARGO_BIN_EXE_lidarsim"))

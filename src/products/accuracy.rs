@@ -3,21 +3,13 @@
 //! under the ground.
 
 use super::points::Point;
-use crate::plan::Plan;
-use crate::scene::{FacetId, Scene};
+use crate::scene::Scene;
 use glam::DVec3;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 /// Farthest distance measured, m: a point farther from every surface counts as this far.
 const REACH_M: f64 = 1.0;
-/// Reach of the first rays along a point's beam, m: just beyond the 5 cm a point within
-/// counts as on its surface.
-const NEAR_M: f64 = 0.051;
-/// Directions tried around a point that is not on a surface along its beam: 64 spread over
-/// the sphere leave no direction more than 19.2° from one of them (the test below), so a
-/// distance to a plane is overestimated by at most 1/cos 19.2° - 1 ≈ 6 %.
-const DIRECTIONS: usize = 64;
 
 /// Distances from the points to the nearest surface, summarised.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
@@ -32,41 +24,11 @@ pub struct SurfaceDistance {
     pub p99_m: f64,
 }
 
-/// Distance from each point to the nearest surface of `scene`, m, at most [`REACH_M`]: first
-/// along the point's beam (both ways), where nearly every point lies, then, for a point more
-/// than 5 cm from a surface that way, over [`DIRECTIONS`] directions.
-pub fn distances(scene: &Scene, points: &[Point], plan: &Plan) -> Vec<f64> {
-    let dirs = sphere_directions(DIRECTIONS);
+/// Distance from each point to the nearest surface of `scene`, m, at most [`REACH_M`].
+pub fn distances(scene: &Scene, points: &[Point]) -> Vec<f64> {
     points
         .par_iter()
-        .map(|p| {
-            let at = DVec3::new(p.x, p.y, p.z);
-            // the nearest surface in direction d if nearer than `best`: each ray reaches only
-            // as far as the nearest surface found so far, which is all the minimum needs and
-            // spares a short ray most of the tree
-            let nearer = |d: DVec3, best: f64| {
-                scene
-                    .intersect(at, d, best, FacetId::NONE)
-                    .map_or(best, |h| h.t)
-            };
-            let axis = if (p.pulse_id as usize) < plan.len() {
-                plan.pulse(p.pulse_id).direction
-            } else {
-                DVec3::Z
-            };
-            // within 5 cm both ways first: nearly every point is, and rays that short leave
-            // most of the tree unvisited; the nearest hit within 5 cm is the nearest within
-            // any reach, so the distance is the same
-            let near = nearer(-axis, nearer(axis, NEAR_M));
-            if near <= 0.05 {
-                return near;
-            }
-            let along = nearer(-axis, nearer(axis, REACH_M));
-            if along <= 0.05 {
-                return along;
-            }
-            dirs.iter().fold(along, |best, &d| nearer(d, best))
-        })
+        .map(|p| scene.nearest_surface(DVec3::new(p.x, p.y, p.z), REACH_M))
         .collect()
 }
 
@@ -152,35 +114,9 @@ impl DistanceHistogram {
     }
 }
 
-/// `n` unit vectors spread evenly over the sphere (a Fibonacci lattice).
-fn sphere_directions(n: usize) -> Vec<DVec3> {
-    let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
-    (0..n)
-        .map(|i| {
-            let z = 1.0 - (2.0 * i as f64 + 1.0) / n as f64;
-            let r = (1.0 - z * z).sqrt();
-            let phi = golden * i as f64;
-            DVec3::new(r * phi.cos(), r * phi.sin(), z)
-        })
-        .collect()
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn directions_cover_the_sphere() {
-        let dirs = sphere_directions(DIRECTIONS);
-        // the worst direction's nearest neighbour in the set, over a fine probe of the sphere
-        let probe = sphere_directions(20_000);
-        let worst = probe
-            .iter()
-            .map(|p| dirs.iter().map(|d| d.dot(*p)).fold(-1.0, f64::max))
-            .fold(1.0, f64::min);
-        let gap = worst.acos().to_degrees();
-        assert!(gap < 19.5, "{gap}°");
-    }
 
     /// The histogram gives summarize's fractions exactly and its quantiles to the micrometre.
     #[test]

@@ -430,10 +430,10 @@ pub fn run(
                         let first_rows: Vec<Waveform> =
                             first.iter().map(|w| (*w).clone()).collect();
                         examples.offer(&first_rows, &first_points);
-                        pass.tally_first_band(scene, plan, &first_points);
+                        pass.tally_first_band(scene, &first_points);
                     } else {
                         examples.offer(&part, &p);
-                        pass.tally_first_band(scene, plan, &p);
+                        pass.tally_first_band(scene, &p);
                     }
                     pass.add(&las_path, &p)?;
                 }
@@ -585,11 +585,11 @@ impl PointsPass {
     }
 
     /// The first band's points, into the summary and the DSM grid.
-    fn tally_first_band(&mut self, scene: &Scene, plan: &Plan, points: &[Point]) {
+    fn tally_first_band(&mut self, scene: &Scene, points: &[Point]) {
         self.tally.add(points);
         self.tally
             .distances
-            .add(&crate::products::accuracy::distances(scene, points, plan));
+            .add(&crate::products::accuracy::distances(scene, points));
         for p in points.iter().filter(|p| p.return_number == 1) {
             let v = DVec3::new(p.x, p.y, p.z);
             let (lo, hi) = self.first.get_or_insert((v, v));

@@ -12,6 +12,7 @@ mod bvh;
 mod config;
 mod load;
 mod mesh;
+mod nearest;
 pub mod rpv;
 mod table;
 #[cfg(test)]

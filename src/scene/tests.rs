@@ -1009,48 +1009,41 @@ fn scene_is_send_and_sync() {
     check::<Scene>();
 }
 
-/// Closest hit by brute force in f64 over every instance and triangle: (t, instance, triangle,
-/// smallest barycentric coordinate).
+/// Closest hit by brute force in f64 over every placed triangle (`per_instance` triangles
+/// each instance): (t, instance, triangle, smallest barycentric coordinate).
 fn brute_force(
-    tris: &[[DVec3; 3]],
-    rows: &[InstanceRow],
+    world: &[[DVec3; 3]],
+    per_instance: usize,
     o: DVec3,
     d: DVec3,
 ) -> Option<(f64, u32, u32, f64)> {
     let mut best: Option<(f64, u32, u32, f64)> = None;
-    for (i, r) in rows.iter().enumerate() {
-        let (s, c) = r.rotation_deg.to_radians().sin_cos();
-        let w = |v: DVec3| {
-            DVec3::new(r.x, r.y, r.z)
-                + DVec3::new(c * v.x - s * v.y, s * v.x + c * v.y, v.z) * r.scale
-        };
-        for (k, t) in tris.iter().enumerate() {
-            let (a, b, cc) = (w(t[0]), w(t[1]), w(t[2]));
-            let e1 = b - a;
-            let e2 = cc - a;
-            let p = d.cross(e2);
-            let det = e1.dot(p);
-            if det.abs() < 1e-14 {
-                continue;
-            }
-            let tv = o - a;
-            let u = tv.dot(p) / det;
-            let q = tv.cross(e1);
-            let v = d.dot(q) / det;
-            let tt = e2.dot(q) / det;
-            let m = u.min(v).min(1.0 - u - v);
-            if m >= 0.0 && tt > 0.0 && best.is_none_or(|bb| tt < bb.0) {
-                best = Some((tt, i as u32, k as u32, m));
-            }
+    for (n, &[a, b, cc]) in world.iter().enumerate() {
+        let e1 = b - a;
+        let e2 = cc - a;
+        let p = d.cross(e2);
+        let det = e1.dot(p);
+        if det.abs() < 1e-14 {
+            continue;
+        }
+        let tv = o - a;
+        let u = tv.dot(p) / det;
+        let q = tv.cross(e1);
+        let v = d.dot(q) / det;
+        let tt = e2.dot(q) / det;
+        let m = u.min(v).min(1.0 - u - v);
+        if m >= 0.0 && tt > 0.0 && best.is_none_or(|bb| tt < bb.0) {
+            let (i, k) = (n / per_instance, n % per_instance);
+            best = Some((tt, i as u32, k as u32, m));
         }
     }
     best
 }
 
-#[test]
-fn two_level_tracing_matches_brute_force() {
-    let d = tmp("bruteforce");
-    let mut rng = Rand::new(12345);
+/// 300 random triangles within 4 m, placed 25 times (rotated, scaled 0.5-2) over 30 m × 30 m:
+/// the scene, its triangles as written and its instance rows as the loader parsed them.
+fn soup_scene(name: &str, rng: &mut Rand) -> (Scene, Vec<[DVec3; 3]>, Vec<InstanceRow>) {
+    let d = tmp(name);
     let mut obj = String::from("o soup\n");
     let mut tris = Vec::new();
     for k in 0..300 {
@@ -1073,7 +1066,6 @@ fn two_level_tracing_matches_brute_force() {
     }
     write(&d, "soup.obj", &obj);
     let mut table = String::new();
-    let mut rows = Vec::new();
     for _ in 0..25 {
         let r = InstanceRow {
             x: rng.range(0.0, 30.0),
@@ -1083,7 +1075,6 @@ fn two_level_tracing_matches_brute_force() {
             scale: rng.range(0.5, 2.0),
         };
         table += &format!("{} {} {} {} {}\n", r.x, r.y, r.z, r.rotation_deg, r.scale);
-        rows.push(r);
     }
     write(&d, "soup.csv", &table);
     let p = write(
@@ -1094,6 +1085,28 @@ fn two_level_tracing_matches_brute_force() {
     let s = Scene::load(&p, 1064.0).unwrap();
     // The rows as parsed back, so the comparison sees the same numbers as the loader.
     let rows = parse_instances(&d.join("soup.csv"), &table).unwrap();
+    (s, tris, rows)
+}
+
+/// The soup's triangles in world coordinates, one instance after another.
+fn placed(tris: &[[DVec3; 3]], rows: &[InstanceRow]) -> Vec<[DVec3; 3]> {
+    let mut out = Vec::new();
+    for r in rows {
+        let (s, c) = r.rotation_deg.to_radians().sin_cos();
+        let w = |v: DVec3| {
+            DVec3::new(r.x, r.y, r.z)
+                + DVec3::new(c * v.x - s * v.y, s * v.x + c * v.y, v.z) * r.scale
+        };
+        out.extend(tris.iter().map(|t| [w(t[0]), w(t[1]), w(t[2])]));
+    }
+    out
+}
+
+#[test]
+fn two_level_tracing_matches_brute_force() {
+    let mut rng = Rand::new(12345);
+    let (s, tris, rows) = soup_scene("bruteforce", &mut rng);
+    let world = placed(&tris, &rows);
     let (mut checked, mut hits) = (0, 0);
     for i in 0..4000 {
         let o = if i % 2 == 0 {
@@ -1115,7 +1128,7 @@ fn two_level_tracing_matches_brute_force() {
             rng.range(0.0, 6.0),
         );
         let dir = (target - o).normalize();
-        let bf = brute_force(&tris, &rows, o, dir);
+        let bf = brute_force(&world, tris.len(), o, dir);
         let got = s.intersect(o, dir, f64::INFINITY, FacetId::NONE);
         match (bf, got) {
             (Some((t, inst, tri, margin)), Some(h)) => {
@@ -1161,6 +1174,98 @@ fn two_level_tracing_matches_brute_force() {
         hits > 500 && checked > 400,
         "hits {hits}, checked {checked}"
     );
+}
+
+/// Distance from `p` to the triangle `t` in f64, by another route than the scene's: the
+/// foot on the plane if it lies inside, else the nearest of the three edges.
+fn distance_to_triangle(p: DVec3, t: &[DVec3; 3]) -> f64 {
+    let segment = |a: DVec3, b: DVec3| {
+        let ab = b - a;
+        let u = ((p - a).dot(ab) / ab.length_squared()).clamp(0.0, 1.0);
+        (p - (a + ab * u)).length()
+    };
+    let edges = segment(t[0], t[1])
+        .min(segment(t[1], t[2]))
+        .min(segment(t[2], t[0]));
+    let n = (t[1] - t[0]).cross(t[2] - t[0]);
+    if n.length_squared() == 0.0 {
+        return edges;
+    }
+    let n = n.normalize();
+    let h = (p - t[0]).dot(n);
+    let foot = p - n * h;
+    let inside = (0..3).all(|k| {
+        let (a, b) = (t[k], t[(k + 1) % 3]);
+        (b - a).cross(foot - a).dot(n) >= 0.0
+    });
+    if inside {
+        h.abs()
+    } else {
+        edges
+    }
+}
+
+/// The nearest facet's distance equals brute force over every placed triangle, for points
+/// among, beside and above rotated and scaled instances, and stops at the reach asked.
+#[test]
+fn nearest_surface_matches_brute_force() {
+    let mut rng = Rand::new(777);
+    let (s, tris, rows) = soup_scene("nearest", &mut rng);
+    let world = placed(&tris, &rows);
+    let (mut near, mut capped) = (0, 0);
+    for i in 0..3000 {
+        let p = DVec3::new(
+            rng.range(-5.0, 35.0),
+            rng.range(-5.0, 35.0),
+            rng.range(-2.0, 10.0),
+        );
+        let reach = if i % 3 == 0 { 0.3 } else { 50.0 };
+        let exact = world
+            .iter()
+            .map(|t| distance_to_triangle(p, t))
+            .fold(f64::INFINITY, f64::min);
+        let got = s.nearest_surface(p, reach);
+        if exact >= reach {
+            assert_eq!(
+                got, reach,
+                "point {i} at {p}: {got} where none is within {reach}"
+            );
+            capped += 1;
+        } else {
+            assert!(
+                (got - exact).abs() < 2e-5 * (1.0 + exact),
+                "point {i} at {p}: {got} against {exact}"
+            );
+            near += (exact < 0.3) as usize;
+        }
+    }
+    assert!(near > 100 && capped > 100, "near {near}, capped {capped}");
+}
+
+/// In a repeated scene the copy across the period's edge is as near as it looks: a wall
+/// 0.1 m inside one edge stands 0.15 m from a point 0.05 m inside the other.
+#[test]
+fn nearest_surface_sees_the_next_copy() {
+    let d = tmp("nearest-repeat");
+    write(
+        &d,
+        "wall.obj",
+        "v 4.9 -1 0\nv 4.9 1 0\nv 4.9 0 2\nf 1 2 3\n",
+    );
+    let p = write(
+        &d,
+        "scene.yaml",
+        "name: walls\nrepeat: true\nmaterials:\n  soil: { reflectance: 0.3 }\nobjects:\n  - plane: { z: 0, extent: [[-5, -5], [5, 5]], material: soil }\n  - mesh: { file: wall.obj, material: soil }\n",
+    );
+    let s = Scene::load(&p, 1064.0).unwrap();
+    let at = DVec3::new(-4.95, 0.0, 0.5);
+    assert!((s.nearest_surface(at, 1.0) - 0.15).abs() < 1e-5);
+    // and the copy two periods on, from the far side
+    let far = at + DVec3::new(20.0, 0.0, 0.0);
+    assert!((s.nearest_surface(far, 1.0) - 0.15).abs() < 1e-5);
+    // over the ground alone, the height
+    let open = DVec3::new(0.0, 3.0, 0.7);
+    assert!((s.nearest_surface(open, 1.0) - 0.7).abs() < 1e-5);
 }
 
 #[test]

@@ -287,14 +287,17 @@ impl Fnv {
     }
 }
 
-/// The checksum of a file's bytes ([`fingerprint`] of them), or None when it cannot be read.
-/// Read a block at a time: run files reach gigabytes, and memory must not grow with them.
+/// The checksum of a file's bytes (XXH64 of its length and bytes, in hex), or None when it
+/// cannot be read. Read a block at a time: run files reach gigabytes, and memory must not
+/// grow with them. XXH64 reads 8 bytes a step where FNV-1a ([`fingerprint`]) reads one:
+/// FNV-1a was 2.7 % of the town survey's products stage, checking its 137 MB of parts.
 pub fn file_checksum(path: &Path) -> Option<String> {
+    use std::hash::Hasher;
     use std::io::Read;
     let mut file = File::open(path).ok()?;
     let len = file.metadata().ok()?.len();
-    let mut h = Fnv::default();
-    h.add(&len.to_le_bytes());
+    let mut h = twox_hash::XxHash64::with_seed(0);
+    h.write(&len.to_le_bytes());
     let mut block = vec![0u8; 1 << 20];
     let mut read = 0u64;
     loop {
@@ -302,27 +305,36 @@ pub fn file_checksum(path: &Path) -> Option<String> {
         if n == 0 {
             break;
         }
-        h.add(&block[..n]);
+        h.write(&block[..n]);
         read += n as u64;
     }
     // a file that changed while it was read has no checksum
-    (read == len).then(|| h.hex())
+    (read == len).then(|| format!("{:016x}", h.finish()))
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
 
-    /// A file's checksum, read a block at a time, is the fingerprint of its bytes.
+    /// A file's checksum, read a block at a time, is XXH64 of its length and bytes in one
+    /// go, and any one byte changed changes it.
     #[test]
-    fn file_checksum_is_the_fingerprint_of_the_bytes() {
+    fn file_checksum_is_the_hash_of_the_bytes() {
         let dir = std::env::temp_dir().join(format!("lidarsim_sum_{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let path = dir.join("f.bin");
         for len in [0usize, 1, (1 << 20) - 1, 1 << 20, (1 << 20) + 7, 3 << 20] {
-            let bytes: Vec<u8> = (0..len).map(|i| (i * 7 + i / 3) as u8).collect();
-            std::fs::write(&path, &bytes).unwrap();
-            assert_eq!(file_checksum(&path), Some(fingerprint(&[&bytes])), "{len}");
+            let mut bytes: Vec<u8> = (len as u64).to_le_bytes().to_vec();
+            bytes.extend((0..len).map(|i| (i * 7 + i / 3) as u8));
+            std::fs::write(&path, &bytes[8..]).unwrap();
+            let whole = format!("{:016x}", twox_hash::XxHash64::oneshot(0, &bytes));
+            let sum = file_checksum(&path);
+            assert_eq!(sum.as_deref(), Some(whole.as_str()), "{len}");
+            if len > 0 {
+                bytes[8 + len / 2] ^= 0x10;
+                std::fs::write(&path, &bytes[8..]).unwrap();
+                assert_ne!(file_checksum(&path), sum, "{len}");
+            }
         }
         assert_eq!(file_checksum(&dir.join("missing")), None);
         let _ = std::fs::remove_dir_all(&dir);

@@ -17,7 +17,7 @@ pub struct StageRecord {
     pub wall_time_s: f64,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub note: Option<String>,
-    /// FNV-1a of each output file as the stage wrote it (waveform parts excepted: each has
+    /// The checksum (`file_checksum`) of each output file as the stage wrote it (waveform parts excepted: each has
     /// its own beside it, written with it, see `waveform::file`), so that `--resume` never
     /// trusts a file damaged or replaced since.
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]

@@ -298,6 +298,24 @@ fn sun_selection_probability_without_fixed_selection() {
     assert_one_message(code, &err, &["campaign.yaml:21:", "sun.selection"]);
 }
 
+/// `sun.share` outside (0, 1], or not a number, is refused at its line.
+#[test]
+fn sun_share_out_of_range() {
+    let base = CAMPAIGN.replace(
+        "  receiver_area_m2: 0.1\n",
+        "  receiver_area_m2: 0.1\n  bandwidth_nm: 1\n",
+    )
+        + "sun:\n  zenith_deg: 30\n  azimuth_deg: 0\n  irradiance_w_m2_um: 600\n  share: SHARE\n";
+    for (k, share) in ["0", "1.5", "-0.25", ".nan", "half"]
+        .into_iter()
+        .enumerate()
+    {
+        let c = base.replace("SHARE", share);
+        let (code, err, _) = check(&format!("sun_share_{k}"), &c, SCENE);
+        assert_one_message(code, &err, &["campaign.yaml:", "sun.share"]);
+    }
+}
+
 /// A swept value the campaign rejects is reported at its entry under `sweep:` (line and
 /// key), before any combination runs.
 #[test]

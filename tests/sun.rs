@@ -17,15 +17,17 @@ fn solar_photons_and_brfs_on_a_plane() {
     // every way of choosing the light is unbiased; by power picks the sun here with
     // probability 0.08 at 0° (a 1 mJ pulse against sunlight on the field of view's 79 m² over a
     // 2.2 µs gate) and 0.02 at 80°, and `auto` picks power here
-    for (zenith, selection) in [
-        (0.0, "fixed"),
-        (50.0, "fixed"),
-        (80.0, "fixed"),
-        (0.0, "power"),
-        (80.0, "power"),
-        (50.0, "auto"),
+    // and with a quarter of the samples tracing the sun (`sun.share`), at four times the rays
+    for (zenith, selection, share, rays) in [
+        (0.0, "fixed", 1.0, 100_000),
+        (50.0, "fixed", 1.0, 100_000),
+        (80.0, "fixed", 1.0, 100_000),
+        (0.0, "power", 1.0, 100_000),
+        (80.0, "power", 1.0, 100_000),
+        (50.0, "auto", 1.0, 100_000),
+        (50.0, "fixed", 0.25, 400_000),
     ] {
-        let dir = tmp(&format!("sun_plane_{zenith}_{selection}"));
+        let dir = tmp(&format!("sun_plane_{zenith}_{selection}_{share}"));
         let scene = plane_scene(&dir, rho, 600.0);
         let c = with_sun_selected(
             &campaign(
@@ -34,19 +36,27 @@ fn solar_photons_and_brfs_on_a_plane() {
                 [10.0, -20.0, 1000.0],
                 [0.0, 0.0, -1.0],
                 "bdpt",
-                100_000,
+                rays,
                 5,
             ),
             zenith,
             180.0,
             selection,
         );
+        let c = if share < 1.0 {
+            c.replace(
+                "selection: fixed }",
+                &format!("selection: fixed, share: {share} }}"),
+            )
+        } else {
+            c
+        };
         let w = run(&dir, &c, None).remove(0);
         let (p_sun, expect) = solar_closed_form(&inst, rho, zenith);
         let got = w.solar_photons_per_bin as f64;
         let se = w.solar_power_se_w / p_sun;
         println!(
-            "sun {zenith}° ({selection}): {got:.5} photons/bin, expect {expect:.5}, rel {:+.5}, se {se:.5}",
+            "sun {zenith}° ({selection}, share {share}): {got:.5} photons/bin, expect {expect:.5}, rel {:+.5}, se {se:.5}",
             got / expect - 1.0
         );
         assert!(
@@ -209,6 +219,78 @@ fn the_first_receiver_surface_leaves_the_solar_signal_as_it_was() {
         se / full.received_energy_j
     );
     assert!(se < 0.02 * full.received_energy_j && z.abs() < 3.0, "z {z}");
+}
+
+/// `sun.share`: a quarter of the samples trace the sun's light, and both estimates stay
+/// unbiased (the plane's closed forms: `solar_photons_and_brfs_on_a_plane`). Over leaves on
+/// soil, with bdpt's receiver sub-path stopping at its first surface in the samples that trace
+/// the laser alone, the solar power and the laser energy agree with those of every sample
+/// tracing the sun (share 1), while the solar standard error grows as a quarter of the samples
+/// leaves it.
+#[test]
+fn a_share_of_the_samples_traces_the_sun() {
+    let with_share = |c: &str, share: f64| {
+        c.replace(
+            "selection: fixed }",
+            &format!("selection: fixed, share: {share} }}"),
+        )
+    };
+    let dir = tmp("sun_share_leaves");
+    let scene = leaf_layer(&dir);
+    let inst = Inst {
+        fp_mrad: 20.0,
+        ..sun_inst(25.0)
+    };
+    let text = with_sun_selected(
+        &campaign(
+            &scene,
+            &inst,
+            [0.0, 0.0, 100.0],
+            [0.0, 0.0, -1.0],
+            "bdpt, receiver_depth: first",
+            50_000,
+            5,
+        ),
+        30.0,
+        180.0,
+        "fixed",
+    );
+    let go = |share: f64| {
+        let sub = dir.join(format!("share{share}"));
+        std::fs::create_dir_all(&sub).unwrap();
+        run(&sub, &with_share(&text, share), None).remove(0)
+    };
+    let (all, quarter) = (go(1.0), go(0.25));
+    assert!(all.solar_power_w > 0.0 && quarter.solar_power_w > 0.0);
+    let z = |a: f64, sa: f64, b: f64, sb: f64| (a - b) / sa.hypot(sb);
+    let z_sun = z(
+        all.solar_power_w,
+        all.solar_power_se_w,
+        quarter.solar_power_w,
+        quarter.solar_power_se_w,
+    );
+    let z_laser = z(
+        all.received_energy_j,
+        all.received_energy_se_j,
+        quarter.received_energy_j,
+        quarter.received_energy_se_j,
+    );
+    let grown = quarter.solar_power_se_w / all.solar_power_se_w;
+    println!(
+        "leaves, share 1 against 0.25: solar z {z_sun:+.2}, laser z {z_laser:+.2}; solar SE x{grown:.2}, laser rel. SE {:.4} and {:.4}",
+        all.received_energy_se_j / all.received_energy_j,
+        quarter.received_energy_se_j / quarter.received_energy_j
+    );
+    assert!(
+        z_sun.abs() < 3.5 && z_laser.abs() < 3.5,
+        "z {z_sun}, {z_laser}"
+    );
+    assert!(
+        quarter.solar_power_se_w < 0.02 * quarter.solar_power_w,
+        "solar SE too large to tell"
+    );
+    // a quarter of the samples: twice the error, give or take the draws
+    assert!(grown > 1.4, "solar SE x{grown}");
 }
 
 #[test]

@@ -448,6 +448,7 @@ fn sun_section(opts: &BenchOptions, b: &Bench, reference: &Waveform) -> String {
         irradiance_w_m2_um: 640.0,
         selection: Some(selection),
         selection_probability: (selection == SunSelection::Fixed).then_some(0.5),
+        share: None,
     };
     let gate_s = b.gate.dt * b.gate.bins as f64;
     let sun_rays = opts.reference_rays / 50;

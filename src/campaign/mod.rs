@@ -314,6 +314,14 @@ pub struct Sun {
     /// Probability of the sun with `selection: fixed`; default 0.5.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub selection_probability: Option<f64>,
+    /// Share of bdpt's samples that trace the sun's light, in (0, 1]; default 1. The others
+    /// trace the laser's alone (their receiver sub-path stops where the laser's joins end, and
+    /// no light sub-path starts at the sun); the sun's contributions are divided by the
+    /// share, so both estimates stay unbiased. Where the solar photons are a small part of
+    /// the waveform (a photon-counting track by day), their simulation noise is a small part
+    /// of its whole, and a share of 1/16 buys the laser's light for half the time.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub share: Option<f64>,
 }
 
 impl Sun {
@@ -794,6 +802,14 @@ impl Campaign {
                     return Err(doc.error(
                         "sun.selection_probability",
                         format!("must lie strictly between 0 and 1, found {q}"),
+                    ));
+                }
+            }
+            if let Some(f) = s.share {
+                if !(f > 0.0 && f <= 1.0) {
+                    return Err(doc.error(
+                        "sun.share",
+                        format!("must lie in (0, 1], the share of samples that trace the sun, found {f}"),
                     ));
                 }
             }

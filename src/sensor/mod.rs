@@ -219,6 +219,7 @@ mod tests {
             irradiance_w_m2_um: 1000.0,
             selection: Some(crate::campaign::SunSelection::Power),
             selection_probability: None,
+            share: None,
         };
         // a 1 nm band: E Δλ = 1 W m⁻²; a disk of radius 50 m (7854 m²)
         let a = 50.0 / 3f64.sqrt();
@@ -239,6 +240,7 @@ mod tests {
         let fixed = crate::campaign::Sun {
             selection: None,
             selection_probability: Some(0.3),
+            share: None,
             ..spec
         };
         let sun = SunSource::new(&fixed, 1.0, bounds);
@@ -395,6 +397,8 @@ pub struct SunSource {
     pub probability: f64,
     /// Pick `probability` per pulse by power (see [`SunSource::for_gate`]).
     pub by_power: bool,
+    /// Share of bdpt's samples that trace the sun's light (`sun.share`).
+    pub share: f64,
 }
 
 impl SunSource {
@@ -413,6 +417,7 @@ impl SunSource {
             probability: sun.selection_probability.unwrap_or(0.5),
             // `auto` is resolved before any pulse is traced; the method's pilot takes it as fixed
             by_power: sun.selection() == crate::campaign::SunSelection::Power,
+            share: sun.share.unwrap_or(1.0),
         }
     }
 

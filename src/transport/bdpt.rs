@@ -273,6 +273,12 @@ impl FirstDims {
 
 /// One sample of the pulse: both sub-paths, then every way of joining them. The order of the
 /// random draws (light, receiver, aperture points of t = 1) is part of the output: keep it.
+///
+/// With a sun whose share f (`sun.share`) is under 1, a sample traces the sun's light with
+/// probability f only (one draw before the others); the others are the laser's alone. Every
+/// strategy of a sun path then has its density times f, which leaves their MIS weights as
+/// they were, and the sun's contributions are divided by f; the laser's light sub-path is
+/// chosen in 1 - f q of the samples (q: the sun's selection probability), its density.
 pub(super) fn trace_ray(
     setup: &PulseSetup,
     first: &FirstDims,
@@ -280,10 +286,21 @@ pub(super) fn trace_ray(
     acc: &mut Accum,
     b: &mut Buffers,
 ) {
-    let is_sun = light_subpath(setup, first, rng, acc, b);
-    receiver_subpath(setup, first, rng, acc, b);
-    connect_to_lights(setup, acc, b);
+    let share = setup.sun.map_or(1.0, |s| s.share.min(1.0));
+    let sun = setup.sun.filter(|_| share >= 1.0 || rng.uniform() < share);
+    let is_sun = light_subpath(setup, first, rng, acc, b, sun.is_some());
+    receiver_subpath(setup, first, rng, acc, b, sun.is_some());
+    connect_to_lights(setup, acc, b, sun.is_some());
     connect_subpaths(setup, rng, acc, b, is_sun);
+}
+
+/// The sun's selection probability and share, and the laser's selection probability
+/// (see [`trace_ray`]).
+fn selection(setup: &PulseSetup) -> (f64, f64, f64) {
+    let (q_sun, share) = setup
+        .sun
+        .map_or((0.0, 1.0), |s| (s.probability, s.share.min(1.0)));
+    (q_sun, share, 1.0 - q_sun * share)
 }
 
 /// The light sub-path into `b.light`; true when it starts at the sun.
@@ -291,13 +308,15 @@ pub(super) fn trace_ray(
 /// It starts at one light, the sun with its selection probability q, else the laser; its
 /// contributions are divided by q, which the light end point keeps as its pdf_fwd for the MIS
 /// weights. A receiver vertex, by contrast, is connected to every light (s = 1 strategies need
-/// no choice), which keeps the laser's variance what it is without the sun.
+/// no choice), which keeps the laser's variance what it is without the sun. `sun_on`: the
+/// sample traces the sun's light (see [`trace_ray`]).
 fn light_subpath(
     setup: &PulseSetup,
     first: &FirstDims,
     rng: &mut Rng,
     acc: &mut Accum,
     b: &mut Buffers,
+    sun_on: bool,
 ) -> bool {
     let (s_cap, _) = setup.caps();
     let laser = &setup.laser;
@@ -306,15 +325,15 @@ fn light_subpath(
     if setup.bands.is_some() {
         b.light_r.push(ONES);
     }
-    let q_sun = setup.sun.map_or(0.0, |s| s.probability);
-    let sun = setup.sun.filter(|_| rng.uniform() < q_sun);
+    let (q_sun, share, q_laser) = selection(setup);
+    let sun = setup.sun.filter(|_| sun_on && rng.uniform() < q_sun);
     if let Some(sun) = sun {
         let [u, v] = first.light(rng);
         let x0 = sun.sample_origin(u, v);
         b.light
             .push(Vertex::endpoint(VertexKind::Sun, x0, sun.dir, q_sun));
         if s_cap > 1 {
-            let beta = sun.band_irradiance * sun.disk_area() / q_sun;
+            let beta = sun.band_irradiance * sun.disk_area() / (q_sun * share);
             walk(
                 setup,
                 &mut b.light,
@@ -329,7 +348,6 @@ fn light_subpath(
             );
         }
     } else {
-        let q_laser = 1.0 - q_sun;
         b.light.push(Vertex::endpoint(
             VertexKind::Laser,
             laser.position,
@@ -356,15 +374,21 @@ fn light_subpath(
     sun.is_some()
 }
 
-/// The receiver sub-path into `b.cam` (empty when the method caps it at its aperture point).
+/// The receiver sub-path into `b.cam` (empty when the method caps it at its aperture point);
+/// in a sample that traces the laser's light alone, only as deep as the laser's joins reach.
 fn receiver_subpath(
     setup: &PulseSetup,
     first: &FirstDims,
     rng: &mut Rng,
     acc: &mut Accum,
     b: &mut Buffers,
+    sun_on: bool,
 ) {
-    let t_cap = setup.receiver_walk_cap();
+    let t_cap = if sun_on {
+        setup.receiver_walk_cap()
+    } else {
+        setup.caps_for(VertexKind::Laser).1
+    };
     let recv = &setup.receiver;
     b.cam.clear();
     b.cam_r.clear();
@@ -397,18 +421,13 @@ fn receiver_subpath(
     }
 }
 
-/// s = 1: every receiver vertex to the laser, and to the sun when there is one.
-fn connect_to_lights(setup: &PulseSetup, acc: &mut Accum, b: &mut Buffers) {
+/// s = 1: every receiver vertex to the laser, and to the sun when the sample traces its light.
+fn connect_to_lights(setup: &PulseSetup, acc: &mut Accum, b: &mut Buffers, sun_on: bool) {
     let (laser, scene) = (&setup.laser, setup.scene);
     let max_order = setup.max_order as usize;
     let (_, laser_t) = setup.caps_for(VertexKind::Laser);
-    let q_sun = setup.sun.map_or(0.0, |s| s.probability);
-    let laser_end = Vertex::endpoint(
-        VertexKind::Laser,
-        laser.position,
-        laser.frame.w,
-        1.0 - q_sun,
-    );
+    let (q_sun, share, q_laser) = selection(setup);
+    let laser_end = Vertex::endpoint(VertexKind::Laser, laser.position, laser.frame.w, q_laser);
     for t in 2..=b.cam.len().min(max_order + 1) {
         let cam = &b.cam[..t];
         let y = &cam[t - 1];
@@ -429,7 +448,7 @@ fn connect_to_lights(setup: &PulseSetup, acc: &mut Accum, b: &mut Buffers) {
                 }
             }
         }
-        if let Some(sun) = setup.sun {
+        if let Some(sun) = setup.sun.filter(|_| sun_on) {
             // the sun's point for this connection is the one up-sun of the vertex
             let sun_light = [Vertex::endpoint(
                 VertexKind::Sun,
@@ -443,9 +462,9 @@ fn connect_to_lights(setup: &PulseSetup, acc: &mut Accum, b: &mut Buffers) {
                     let w = mis_weight(setup, &sun_light, cam, &mut b.scratch);
                     if let Some(bands) = setup.bands {
                         let r = bands.connection(setup, &sun_light, cam, (&ONES, &b.cam_r[t - 1]));
-                        acc.add_solar_bands(c * w, &r);
+                        acc.add_solar_bands(c * w / share, &r);
                     } else {
-                        acc.add_solar(c * w);
+                        acc.add_solar(c * w / share);
                     }
                 }
             }

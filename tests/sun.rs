@@ -293,6 +293,81 @@ fn a_share_of_the_samples_traces_the_sun() {
     assert!(grown > 1.4, "solar SE x{grown}");
 }
 
+/// `sun.share: auto`: the pilot scores 1, 1/4 and 1/16 in photons and the run says which it
+/// kept and why (run log, campaign.resolved.yaml, report.md); the run is the one with that
+/// share written out, to the byte, and a resume redoes nothing.
+#[test]
+fn sun_share_auto_is_chosen_by_the_pilot_and_said() {
+    let dir = tmp("sun_share_auto");
+    let scene = leaf_layer(&dir);
+    let inst = Inst {
+        fp_mrad: 20.0,
+        ..sun_inst(25.0)
+    };
+    let text = with_sun_selected(
+        &campaign(
+            &scene,
+            &inst,
+            [0.0, 0.0, 100.0],
+            [0.0, 0.0, -1.0],
+            "bdpt, receiver_depth: first",
+            20_000,
+            5,
+        ),
+        30.0,
+        180.0,
+        "fixed",
+    );
+    let sub = |name: &str| {
+        let d = dir.join(name);
+        std::fs::create_dir_all(&d).unwrap();
+        d
+    };
+    let auto = text.replace("selection: fixed }", "selection: fixed, share: auto }");
+    let out = run_campaign(&sub("auto"), &auto, None);
+    let resolved = std::fs::read_to_string(out.join("campaign.resolved.yaml")).unwrap();
+    let report = std::fs::read_to_string(out.join("report.md")).unwrap();
+    let note = resolved.lines().next().unwrap_or_default();
+    println!("{note}");
+    let prefix = "# sun.share auto chose ";
+    assert!(note.starts_with(prefix), "{resolved}");
+    for share in ["1 ", "1/4 ", "1/16 "] {
+        assert!(note.contains(&format!(": {share}")) || note.contains(&format!(", {share}")));
+    }
+    assert!(report.contains(&note[2..]), "{report}");
+    let chosen = note[prefix.len()..].split(':').next().unwrap();
+    let fraction = match chosen {
+        "1" => 1.0,
+        "1/4" => 0.25,
+        "1/16" => 0.0625,
+        other => panic!("share {other}"),
+    };
+    assert!(
+        resolved.contains(&format!("share: {fraction}")),
+        "{resolved}"
+    );
+    let again = lidarsim::pipeline::run(
+        &dir.join("auto").join("campaign.yaml"),
+        &lidarsim::pipeline::RunOptions {
+            out: Some(out.clone()),
+            resume: true,
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    assert_eq!(again.parts_done, 0);
+    let written = text.replace(
+        "selection: fixed }",
+        &format!("selection: fixed, share: {fraction} }}"),
+    );
+    let explicit = run_campaign(&sub("written"), &written, Some(1));
+    let part = |o: &std::path::Path| std::fs::read(o.join("waveforms/part-00000.parquet")).unwrap();
+    assert!(
+        part(&out) == part(&explicit),
+        "the share written out made another part"
+    );
+}
+
 #[test]
 fn no_sun_means_no_solar_signal() {
     let dir = tmp("sun_none");

@@ -314,14 +314,51 @@ pub struct Sun {
     /// Probability of the sun with `selection: fixed`; default 0.5.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub selection_probability: Option<f64>,
-    /// Share of bdpt's samples that trace the sun's light, in (0, 1]; default 1. The others
-    /// trace the laser's alone (their receiver sub-path stops where the laser's joins end, and
-    /// no light sub-path starts at the sun); the sun's contributions are divided by the
-    /// share, so both estimates stay unbiased. Where the solar photons are a small part of
-    /// the waveform (a photon-counting track by day), their simulation noise is a small part
-    /// of its whole, and a share of 1/16 buys the laser's light for half the time.
+    /// Share of the samples that trace the sun's light: a number in (0, 1] (default 1) or
+    /// `auto`. The others trace the laser's alone (bdpt's receiver sub-path stops where the
+    /// laser's joins end, and no light sub-path starts at the sun); the sun's contributions
+    /// are divided by the share, so both estimates stay unbiased. Where the solar photons are
+    /// a small part of the waveform (a photon-counting track by day), their simulation noise
+    /// is a small part of its whole, and a share of 1/16 buys the laser's light for half the
+    /// time. `auto` tries 1, 1/4 and 1/16 on the pilot pulses and keeps the cheapest for the
+    /// same noise in photons. Read it through [`Sun::share_fraction`].
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub share: Option<f64>,
+    pub share: Option<SunShare>,
+}
+
+/// `sun.share` as written: a fraction of the samples, or `auto`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum SunShare {
+    Fraction(f64),
+    /// Chosen by the pilot before any pulse is traced.
+    Auto,
+}
+
+impl Serialize for SunShare {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> std::result::Result<S::Ok, S::Error> {
+        match self {
+            SunShare::Fraction(f) => s.serialize_f64(*f),
+            SunShare::Auto => s.serialize_str("auto"),
+        }
+    }
+}
+
+impl<'de> Deserialize<'de> for SunShare {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> std::result::Result<Self, D::Error> {
+        #[derive(Deserialize)]
+        #[serde(untagged)]
+        enum Raw {
+            Number(f64),
+            Word(String),
+        }
+        match Raw::deserialize(d) {
+            Ok(Raw::Number(f)) => Ok(SunShare::Fraction(f)),
+            Ok(Raw::Word(w)) if w == "auto" => Ok(SunShare::Auto),
+            _ => Err(serde::de::Error::custom(
+                "expected a number in (0, 1] (the share of samples that trace the sun) or auto",
+            )),
+        }
+    }
 }
 
 impl Sun {
@@ -332,6 +369,15 @@ impl Sun {
             (Some(s), _) => s,
             (None, Some(_)) => SunSelection::Fixed,
             (None, None) => SunSelection::Auto,
+        }
+    }
+
+    /// The share of samples that trace the sun: as written, 1 when not given or still `auto`
+    /// (a pilot's trials set it before tracing).
+    pub fn share_fraction(&self) -> f64 {
+        match self.share {
+            Some(SunShare::Fraction(f)) => f,
+            _ => 1.0,
         }
     }
 }
@@ -805,7 +851,7 @@ impl Campaign {
                     ));
                 }
             }
-            if let Some(f) = s.share {
+            if let Some(SunShare::Fraction(f)) = s.share {
                 if !(f > 0.0 && f <= 1.0) {
                     return Err(doc.error(
                         "sun.share",

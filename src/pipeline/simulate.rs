@@ -1,7 +1,7 @@
 //! The simulate stage: pulses in [`Parts`], each part written when complete,
 //! with per-pulse timing beside it.
 
-use crate::campaign::{Loaded, Method, ReceiverDepth, SunSelection};
+use crate::campaign::{Loaded, Method, ReceiverDepth, SunSelection, SunShare};
 use crate::error::Result;
 use crate::fsutil::{Committer, Pending};
 use crate::plan::{Plan, Pulse};
@@ -351,26 +351,127 @@ fn pilot_pulses(loaded: &Loaded, plan: &Plan) -> (Vec<Pulse>, u64) {
 /// and thread count, so the choice, and the run's bytes, are too). Infinite where no energy
 /// was found.
 fn pilot_score(loaded: &Loaded, scene: &Scene, pulses: &[Pulse], rays: u64, method: Method) -> f64 {
+    let t = pilot_sums(loaded, scene, pulses, rays, method);
+    let relative = |v: f64, x: f64| if x > 0.0 { v / (x * x) } else { f64::INFINITY };
+    let mut rv = relative(t.laser_var, t.laser);
+    if loaded.campaign.sun.is_some() {
+        rv += relative(t.sun_var, t.sun);
+    }
+    rv * t.queries as f64 / pulses.len().max(1) as f64
+}
+
+/// What a pilot's pulses found, summed over them.
+#[derive(Default)]
+struct PilotSums {
+    /// Laser energy received, J, and its variance.
+    laser: f64,
+    laser_var: f64,
+    /// Solar power, W, and its variance.
+    sun: f64,
+    sun_var: f64,
+    /// Solar energy over each pulse's gate, J, and its variance.
+    sun_in_gate: f64,
+    sun_in_gate_var: f64,
+    queries: u64,
+}
+
+/// Traces `pulses` with `method` as `loaded` asks and sums what they found.
+fn pilot_sums(
+    loaded: &Loaded,
+    scene: &Scene,
+    pulses: &[Pulse],
+    rays: u64,
+    method: Method,
+) -> PilotSums {
     let shared = Shared::new(loaded, scene);
     let tallies: Vec<_> = pulses
         .par_iter()
-        .map(|p| simulate_pulse(&shared.setup(p, method), rays))
+        .map(|p| {
+            let setup = shared.setup(p, method);
+            let gate_s = setup.gate.dt * setup.gate.bins as f64;
+            (simulate_pulse(&setup, rays), gate_s)
+        })
         .collect();
-    let (mut e, mut var, mut sun, mut sun_var, mut queries) = (0.0, 0.0, 0.0, 0.0, 0);
-    for t in &tallies {
-        e += t.total_energy();
-        var += t.total_se().powi(2);
+    let mut sums = PilotSums::default();
+    for (t, gate_s) in &tallies {
+        sums.laser += t.total_energy();
+        sums.laser_var += t.total_se().powi(2);
         let (p, se) = t.solar_power();
-        sun += p;
-        sun_var += se * se;
-        queries += t.queries;
+        sums.sun += p;
+        sums.sun_var += se * se;
+        sums.sun_in_gate += p * gate_s;
+        sums.sun_in_gate_var += (se * gate_s).powi(2);
+        sums.queries += t.queries;
     }
-    let relative = |v: f64, x: f64| if x > 0.0 { v / (x * x) } else { f64::INFINITY };
-    let mut rv = relative(var, e);
-    if loaded.campaign.sun.is_some() {
-        rv += relative(sun_var, sun);
+    sums
+}
+
+/// The shares of samples tracing the sun that `sun.share: auto` tries, the whole first
+/// (ties go to it).
+const SHARES: [f64; 3] = [1.0, 0.25, 0.0625];
+
+/// A share as the run log gives it.
+fn share_name(f: f64) -> String {
+    match f {
+        1.0 => "1".into(),
+        0.25 => "1/4".into(),
+        0.0625 => "1/16".into(),
+        f => format!("{f}"),
     }
-    rv * queries as f64 / pulses.len().max(1) as f64
+}
+
+/// `sun.share: auto`: the share of samples tracing the sun whose estimate of the photons the
+/// receiver counts (the laser's and the sun's over the gate) costs least for a given error,
+/// and why. Unlike the other pilots' scores, which add the two lights' relative variances,
+/// this one weighs them in photons: the sun's 0.05 photons a shot on a MABEL track beside
+/// the laser's 5.5 may be noisier for a much cheaper laser. Score: the simulation variance
+/// of those energies over their sum (the photon noise, in joules) times the scene queries
+/// per pulse, on the method's pilot pulses with everything else as chosen.
+pub fn choose_sun_share(loaded: &Loaded, scene: &Scene, plan: &Plan) -> (f64, String) {
+    let (pulses, rays) = pilot_pulses(loaded, plan);
+    let n = pulses.len();
+    let method = loaded.campaign.simulation.method;
+    if n == 0 || loaded.campaign.sun.is_none() {
+        return (1.0, "sun.share auto: no pulses to try, 1".into());
+    }
+    let hv = crate::photon_energy_j(loaded.campaign.wavelength_nm.first());
+    let scores: Vec<(f64, f64)> = SHARES
+        .iter()
+        .map(|&f| {
+            let mut trial = loaded.clone();
+            if let Some(sun) = trial.campaign.sun.as_mut() {
+                sun.share = Some(SunShare::Fraction(f));
+            }
+            let t = pilot_sums(&trial, scene, &pulses, rays, method);
+            let energy = t.laser + t.sun_in_gate;
+            // photons² over photons: joules² over joules, over a photon's energy
+            let score = if energy > 0.0 {
+                (t.laser_var + t.sun_in_gate_var) / (energy * hv) * t.queries as f64 / n as f64
+            } else {
+                f64::INFINITY
+            };
+            (f, score)
+        })
+        .collect();
+    let table = scores
+        .iter()
+        .map(|&(f, x)| format!("{} {x:.3e}", share_name(f)))
+        .collect::<Vec<_>>()
+        .join(", ");
+    match cheapest(&scores) {
+        Some(f) => (
+            f,
+            format!(
+                "sun.share auto chose {}: simulation variance of the laser's and solar photons over their photon noise x scene queries per pulse over {n} pilot pulses of {rays} rays, {} (lower is better): {table}",
+                share_name(f),
+                method_name(method)
+            ),
+        ),
+        None => (
+            1.0,
+            format!("sun.share auto: no light found in {n} pilot pulses of {rays} rays, 1"),
+        ),
+    }
 }
 
 /// Each candidate's score, as the run log and report.md give them: "bdpt 1.2e0, ...".
@@ -520,7 +621,12 @@ pub fn with_method_chosen(loaded: &Loaded, scene: &Scene, plan: &Plan) -> Option
     let depth_auto = loaded.campaign.simulation.receiver_depth == ReceiverDepth::Auto;
     let bdpt_given = loaded.campaign.simulation.method == Method::Bdpt;
     let depth_to_choose = depth_auto && bdpt_given;
-    if !(method_auto || sun_auto || depth_to_choose) {
+    let share_auto = loaded
+        .campaign
+        .sun
+        .as_ref()
+        .is_some_and(|s| s.share == Some(SunShare::Auto));
+    if !(method_auto || sun_auto || depth_to_choose || share_auto) {
         return None;
     }
     let mut c = loaded.clone();
@@ -559,6 +665,14 @@ pub fn with_method_chosen(loaded: &Loaded, scene: &Scene, plan: &Plan) -> Option
         } else {
             c.campaign.simulation.receiver_depth = ReceiverDepth::Full;
         }
+    }
+    // last: the share weighs the sub-paths the other choices made
+    if share_auto {
+        let (share, note) = choose_sun_share(&c, scene, plan);
+        if let Some(sun) = c.campaign.sun.as_mut() {
+            sun.share = Some(SunShare::Fraction(share));
+        }
+        notes.push(note);
     }
     c.method_note = Some(notes.join("; "));
     Some(c)
@@ -710,6 +824,14 @@ pub fn choices_made(chosen: &Loaded, asked: &Loaded) -> String {
     if depth_asked && chosen.campaign.simulation.method == Method::Bdpt {
         let depth = depth_name(chosen.campaign.simulation.receiver_depth);
         made.push_str(&format!("; receiver depth {depth}"));
+    }
+    let share_asked = asked
+        .campaign
+        .sun
+        .as_ref()
+        .is_some_and(|s| s.share == Some(SunShare::Auto));
+    if let (true, Some(s)) = (share_asked, chosen.campaign.sun.as_ref()) {
+        made.push_str(&format!("; sun share {}", share_name(s.share_fraction())));
     }
     made
 }

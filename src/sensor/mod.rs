@@ -417,7 +417,7 @@ impl SunSource {
             probability: sun.selection_probability.unwrap_or(0.5),
             // `auto` is resolved before any pulse is traced; the method's pilot takes it as fixed
             by_power: sun.selection() == crate::campaign::SunSelection::Power,
-            share: sun.share.unwrap_or(1.0),
+            share: sun.share_fraction(),
         }
     }
 

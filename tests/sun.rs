@@ -221,21 +221,10 @@ fn the_first_receiver_surface_leaves_the_solar_signal_as_it_was() {
     assert!(se < 0.02 * full.received_energy_j && z.abs() < 3.0, "z {z}");
 }
 
-/// `sun.share`: a quarter of the samples trace the sun's light, and both estimates stay
-/// unbiased (the plane's closed forms: `solar_photons_and_brfs_on_a_plane`). Over leaves on
-/// soil, with bdpt's receiver sub-path stopping at its first surface in the samples that trace
-/// the laser alone, the solar power and the laser energy agree with those of every sample
-/// tracing the sun (share 1), while the solar standard error grows as a quarter of the samples
-/// leaves it.
-#[test]
-fn a_share_of_the_samples_traces_the_sun() {
-    let with_share = |c: &str, share: f64| {
-        c.replace(
-            "selection: fixed }",
-            &format!("selection: fixed, share: {share} }}"),
-        )
-    };
-    let dir = tmp("sun_share_leaves");
+/// A campaign over leaves on soil in sunlight (30°, fixed selection; bdpt, receiver depth
+/// first, `rays` rays, order 5) and its folder.
+fn leaves_in_sunlight(name: &str, rays: u64) -> (std::path::PathBuf, String) {
+    let dir = tmp(name);
     let scene = leaf_layer(&dir);
     let inst = Inst {
         fp_mrad: 20.0,
@@ -248,13 +237,33 @@ fn a_share_of_the_samples_traces_the_sun() {
             [0.0, 0.0, 100.0],
             [0.0, 0.0, -1.0],
             "bdpt, receiver_depth: first",
-            50_000,
+            rays,
             5,
         ),
         30.0,
         180.0,
         "fixed",
     );
+    (dir, text)
+}
+
+/// A campaign of [`with_sun_selected`] (fixed) with `sun.share` written out.
+fn with_share(campaign: &str, share: f64) -> String {
+    campaign.replace(
+        "selection: fixed }",
+        &format!("selection: fixed, share: {share} }}"),
+    )
+}
+
+/// `sun.share`: a quarter of the samples trace the sun's light, and both estimates stay
+/// unbiased (the plane's closed forms: `solar_photons_and_brfs_on_a_plane`). Over leaves on
+/// soil, with bdpt's receiver sub-path stopping at its first surface in the samples that trace
+/// the laser alone, the solar power and the laser energy agree with those of every sample
+/// tracing the sun (share 1), while the solar standard error grows as a quarter of the samples
+/// leaves it.
+#[test]
+fn a_share_of_the_samples_traces_the_sun() {
+    let (dir, text) = leaves_in_sunlight("sun_share_leaves", 50_000);
     let go = |share: f64| {
         let sub = dir.join(format!("share{share}"));
         std::fs::create_dir_all(&sub).unwrap();
@@ -298,26 +307,7 @@ fn a_share_of_the_samples_traces_the_sun() {
 /// share written out, to the byte, and a resume redoes nothing.
 #[test]
 fn sun_share_auto_is_chosen_by_the_pilot_and_said() {
-    let dir = tmp("sun_share_auto");
-    let scene = leaf_layer(&dir);
-    let inst = Inst {
-        fp_mrad: 20.0,
-        ..sun_inst(25.0)
-    };
-    let text = with_sun_selected(
-        &campaign(
-            &scene,
-            &inst,
-            [0.0, 0.0, 100.0],
-            [0.0, 0.0, -1.0],
-            "bdpt, receiver_depth: first",
-            20_000,
-            5,
-        ),
-        30.0,
-        180.0,
-        "fixed",
-    );
+    let (dir, text) = leaves_in_sunlight("sun_share_auto", 20_000);
     let sub = |name: &str| {
         let d = dir.join(name);
         std::fs::create_dir_all(&d).unwrap();
@@ -356,10 +346,7 @@ fn sun_share_auto_is_chosen_by_the_pilot_and_said() {
     )
     .unwrap();
     assert_eq!(again.parts_done, 0);
-    let written = text.replace(
-        "selection: fixed }",
-        &format!("selection: fixed, share: {fraction} }}"),
-    );
+    let written = with_share(&text, fraction);
     let explicit = run_campaign(&sub("written"), &written, Some(1));
     let part = |o: &std::path::Path| std::fs::read(o.join("waveforms/part-00000.parquet")).unwrap();
     assert!(

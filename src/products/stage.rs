@@ -186,14 +186,20 @@ struct Examples {
 
 impl Examples {
     fn offer(&mut self, waveforms: &[Waveform], points: &[Point]) {
-        let mut returns: std::collections::BTreeMap<u64, u8> = std::collections::BTreeMap::new();
-        for p in points {
-            returns.insert(p.pulse_id, p.number_of_returns);
-        }
+        // each pulse's count of returns, as its last point gives it (a map of them, one
+        // insertion a point, was a hundredth of the town survey's products stage)
+        let mut returns: Vec<(u64, u8)> = points
+            .iter()
+            .map(|p| (p.pulse_id, p.number_of_returns))
+            .collect();
+        returns.reverse();
+        returns.sort_by_key(|r| r.0);
+        returns.dedup_by_key(|r| r.0);
         for w in waveforms {
-            let Some(&n) = returns.get(&w.pulse_id) else {
+            let Ok(k) = returns.binary_search_by_key(&w.pulse_id, |r| r.0) else {
                 continue;
             };
+            let n = returns[k].1;
             if n == 1 && self.single.is_none() {
                 self.single = Some(w.clone());
             }

@@ -10,6 +10,26 @@ fn with_sun(campaign: &str, zenith: f64, azimuth: f64) -> String {
 
 /// Closed form 4: a Lambertian plane filling the field of view, nadir view:
 /// P_sun = ρ E Δλ cos θ_s A_tel sin²θ_fov, N_SN = P_sun Δt / hν; and both BRFs equal ρ.
+/// A `--resume` of a finished run simulates no part again: what the pilot chose is in the
+/// simulate stage's fingerprint.
+fn assert_resume_redoes_nothing(campaign: &std::path::Path, out: &std::path::Path) {
+    let again = lidarsim::pipeline::run(
+        campaign,
+        &lidarsim::pipeline::RunOptions {
+            out: Some(out.to_path_buf()),
+            resume: true,
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    assert_eq!(again.parts_done, 0);
+}
+
+/// The bytes of a run's first waveform part.
+fn first_part(out: &std::path::Path) -> Vec<u8> {
+    std::fs::read(out.join("waveforms/part-00000.parquet")).unwrap()
+}
+
 #[test]
 fn solar_photons_and_brfs_on_a_plane() {
     let rho = 0.3;
@@ -113,19 +133,12 @@ fn sun_selection_auto_is_chosen_by_the_pilot_and_said() {
     assert!(report.contains("sun.selection auto chose power"));
     // the choice is part of the simulate stage's fingerprint and the same on any thread
     // count: a resume redoes nothing, and one thread writes the same part
-    let again = lidarsim::pipeline::run(
-        &dir.join("auto").join("campaign.yaml"),
-        &lidarsim::pipeline::RunOptions {
-            out: Some(out.clone()),
-            resume: true,
-            ..Default::default()
-        },
-    )
-    .unwrap();
-    assert_eq!(again.parts_done, 0);
+    assert_resume_redoes_nothing(&dir.join("auto").join("campaign.yaml"), &out);
     let one = run_campaign(&sub("auto_one_thread"), &auto, Some(1));
-    let part = |o: &std::path::Path| std::fs::read(o.join("waveforms/part-00000.parquet")).unwrap();
-    assert!(part(&out) == part(&one), "one thread wrote another part");
+    assert!(
+        first_part(&out) == first_part(&one),
+        "one thread wrote another part"
+    );
     // both `auto`s: every method with each selection on the same pilot pulses, and the pair
     // the note names is the pair written in
     let both = with_sun_selected(
@@ -349,21 +362,11 @@ fn sun_share_auto_is_chosen_by_the_pilot_and_said() {
         resolved.contains(&format!("share: {fraction}")),
         "{resolved}"
     );
-    let again = lidarsim::pipeline::run(
-        &dir.join("auto").join("campaign.yaml"),
-        &lidarsim::pipeline::RunOptions {
-            out: Some(out.clone()),
-            resume: true,
-            ..Default::default()
-        },
-    )
-    .unwrap();
-    assert_eq!(again.parts_done, 0);
+    assert_resume_redoes_nothing(&dir.join("auto").join("campaign.yaml"), &out);
     let written = with_share(&text, fraction);
     let explicit = run_campaign(&sub("written"), &written, Some(1));
-    let part = |o: &std::path::Path| std::fs::read(o.join("waveforms/part-00000.parquet")).unwrap();
     assert!(
-        part(&out) == part(&explicit),
+        first_part(&out) == first_part(&explicit),
         "the share written out made another part"
     );
 }

@@ -44,7 +44,9 @@ impl Scene {
     fn nearest_copy(&self, at: DVec3, reach: f64) -> f64 {
         let p = Vec3A::from((at - self.origin).as_vec3());
         let mut best2 = (reach * reach) as f32;
-        descend(&self.tlas, p, &mut best2, |id, best2| {
+        // one stack for the top level, one reused by every instance's descent
+        let (mut top, mut inner) = (Vec::with_capacity(64), Vec::with_capacity(64));
+        descend(&self.tlas, p, &mut best2, &mut top, |id, best2| {
             let inst: &Instance = &self.instances[id];
             let blas = &self.meshes[inst.mesh as usize];
             // instances rotate about z and scale uniformly: a local distance times the
@@ -52,7 +54,7 @@ impl Scene {
             let scale2 = 1.0 / (inst.inv_scale * inst.inv_scale);
             let q = inst.point_to_local(p);
             let mut local2 = *best2 / scale2;
-            descend(&blas.bvh, q, &mut local2, |k, local2| {
+            descend(&blas.bvh, q, &mut local2, &mut inner, |k, local2| {
                 let d2 = distance2_to_triangle(Vec3::from(q), &blas.tris[k]);
                 if d2 < *local2 {
                     *local2 = d2;
@@ -66,12 +68,18 @@ impl Scene {
 
 /// Visits every leaf primitive of `bvh` whose box lies nearer to `p` than `sqrt(best2)`,
 /// nearest boxes first, so that `leaf(index, best2)` can shrink the radius early and spare
-/// most of the tree. `index` is the primitive's place in leaf order.
-fn descend(bvh: &CwBvh, p: Vec3A, best2: &mut f32, mut leaf: impl FnMut(usize, &mut f32)) {
+/// most of the tree. `index` is the primitive's place in leaf order; `stack` is scratch.
+fn descend(
+    bvh: &CwBvh,
+    p: Vec3A,
+    best2: &mut f32,
+    stack: &mut Vec<(u32, f32)>,
+    mut leaf: impl FnMut(usize, &mut f32),
+) {
     if bvh.nodes.is_empty() {
         return;
     }
-    let mut stack: Vec<(u32, f32)> = Vec::with_capacity(64);
+    stack.clear();
     stack.push((0, 0.0));
     while let Some((n, d2)) = stack.pop() {
         if d2 >= *best2 {

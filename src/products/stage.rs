@@ -89,12 +89,18 @@ fn decomposed<'w>(loaded: &Loaded, w: &'w Waveform) -> (Vec<Component>, Cow<'w, 
     let c = &loaded.campaign;
     let inst = &c.instrument;
     let hv = crate::photon_energy_j(band_of(loaded, w));
-    // zero outside the span of bins the light reached, as the waveform holds it
-    let mut mc_se = vec![0.0f32; w.laser_photons.len()];
-    let span = w.span_first_bin.min(mc_se.len())..mc_se.len();
-    for (m, &se) in mc_se[span].iter_mut().zip(&w.impulse_energy_se_j) {
-        *m = (se as f64 / hv) as f32;
-    }
+    // photons per bin of the gate from energies over the span of bins the light reached, as
+    // the waveform holds them (zero outside)
+    let photons_of = |energies: &[f32]| {
+        let mut v = vec![0.0f32; w.laser_photons.len()];
+        let span = w.span_first_bin.min(v.len())..v.len();
+        for (m, &e) in v[span].iter_mut().zip(energies) {
+            *m = (e as f64 / hv) as f32;
+        }
+        v
+    };
+    let mc_se = photons_of(&w.impulse_energy_se_j);
+    let leaves = photons_of(&w.class_energy_j[SurfaceClass::Vegetation.index()]);
     let band = c.wavelength_nm.index_of(w.wavelength_nm);
     let recorder = Recorder::new(inst, SplitMix64::band_seed(c.seed, band));
     let (photons, sigma_s) = if recorder.changes_returns() {
@@ -118,6 +124,7 @@ fn decomposed<'w>(loaded: &Loaded, w: &'w Waveform) -> (Vec<Component>, Cow<'w, 
     let comps = decompose(
         &photons,
         &mc_se,
+        &leaves,
         inst.detection_threshold_photons,
         inst.max_returns as usize,
         Decomposition::Gaussian,

@@ -11,11 +11,13 @@ use crate::waveform::bin_masses_into;
 pub(super) type Params = [f64; 3];
 
 /// Fits every return: seeds grouped where their windows overlap, each group fitted with the
-/// other groups' components held fixed, twice, so that neighbours settle together. One pass
-/// over the groups in time order, which is why it stays one function.
+/// other groups' components and the `fixed` ones (returns kept as they are) held as its
+/// background, twice, so that neighbours settle together. One pass over the groups in time
+/// order, which is why it stays one function.
 pub(super) fn fit_all(
     y: &[f64],
     peaks: &[Component],
+    fixed: &[Component],
     threshold: Threshold,
     hint: f64,
     noise: &Noise,
@@ -58,6 +60,11 @@ pub(super) fn fit_all(
             g
         })
         .collect();
+    // `fixed` components (a comb's light, see `resolve`) are background to every group
+    let fixed: Vec<Params> = fixed
+        .iter()
+        .map(|c| [c.centre_bin, c.sigma_bins, c.area_photons])
+        .collect();
     // A return found in a group's residual may reach into the next group's window, so each
     // group sees the components fitted so far as a fixed background; a second pass then
     // gives every group the background of all the others.
@@ -67,6 +74,7 @@ pub(super) fn fit_all(
             .enumerate()
             .filter(|(j, _)| *j != k)
             .flat_map(|(_, g)| g.iter().copied())
+            .chain(fixed.iter().copied())
             .filter(|p| p[0] + 8.0 * p[1] > lo as f64 && p[0] - 8.0 * p[1] < hi as f64)
             .collect()
     };

@@ -153,7 +153,11 @@ pub fn place_on_summits(comps: &mut [Component], photons: &[f32], pulse_sigma_bi
 /// pulse over its range, which no number of Gaussians makes several surfaces).
 /// `mc_se_photons` is the Monte Carlo standard error of each bin's photons before the pulse
 /// convolution (empty: an exact waveform): the simulation's own noise, which a few-ray pulse
-/// has plenty of, besides the photon noise a real detector has.
+/// has plenty of, besides the photon noise a real detector has. `leaves_photons` are the
+/// photons of each bin, likewise before the convolution, whose first surface was a leaf (the
+/// vegetation class; empty: none known): a few rays' comb of spikes is one surface's
+/// sampling where the light is a hard surface's, and leaves at many ranges where it is a
+/// canopy's.
 ///
 /// `threshold_photons` is both the minimum peak height (photons per bin) for detection and
 /// the minimum area (photons) of a reported component; `receiver` the return's width, the
@@ -164,6 +168,7 @@ pub fn place_on_summits(comps: &mut [Component], photons: &[f32], pulse_sigma_bi
 pub fn decompose(
     photons: &[f32],
     mc_se_photons: &[f32],
+    leaves_photons: &[f32],
     threshold_photons: f64,
     max_returns: usize,
     method: Decomposition,
@@ -214,6 +219,20 @@ pub fn decompose(
             }
         })
         .collect();
+    // photons of one ray: Σ se² / Σ photons, the photon-weighted mean of the rays' shares
+    // (a bin one ray lit has the error of its whole value)
+    let light: f64 = y.iter().sum();
+    let quantum = if light > 0.0 {
+        mc_se.iter().map(|s| s * s).sum::<f64>() / light
+    } else {
+        0.0
+    };
+    let leaves: Vec<f64> = leaves_photons
+        .get(lo.min(leaves_photons.len())..hi.min(leaves_photons.len()))
+        .unwrap_or_default()
+        .iter()
+        .map(|&v| if signal(v) { v as f64 } else { 0.0 })
+        .collect();
     let shifted = |c: Component| Component {
         centre_bin: c.centre_bin + lo as f64,
         ..c
@@ -223,54 +242,48 @@ pub fn decompose(
             per_bin: threshold,
             area: threshold,
         };
-        return decompose_bins(
-            &y,
-            &mc_se,
-            threshold,
-            max_returns,
-            method,
-            &Receiver {
-                sigma_bins: hint,
-                footprint_edge_sigmas: edge,
-                noise_floor: floor,
-            },
-        )
-        .into_iter()
-        .map(shifted)
-        .collect();
+        let noise = Noise {
+            mc_se: &mc_se,
+            pulse_sigma: hint,
+            footprint_edge_sigmas: edge,
+            floor,
+            quantum,
+            leaves: &leaves,
+        };
+        return decompose_bins(&y, threshold, max_returns, method, &noise)
+            .into_iter()
+            .map(shifted)
+            .collect();
     }
     // bin k of the coarse waveform is bins [f k, f k + f): its photons and (correlated, as
     // `Noise::mc_var` adds them) Monte Carlo errors are their sums
     let sum = |v: &[f64]| -> Vec<f64> { v.chunks(f).map(|c| c.iter().sum()).collect() };
-    let (coarse, coarse_se) = (sum(&y), sum(&mc_se));
+    let (coarse, coarse_se, coarse_leaves) = (sum(&y), sum(&mc_se), sum(&leaves));
     let threshold = Threshold {
         per_bin: threshold * f as f64,
         area: threshold,
     };
     let k = f as f64;
-    decompose_bins(
-        &coarse,
-        &coarse_se,
-        threshold,
-        max_returns,
-        method,
+    let noise = Noise {
+        mc_se: &coarse_se,
+        pulse_sigma: hint / k,
+        footprint_edge_sigmas: edge,
         // a coarse bin's noise floor is that of f bins
-        &Receiver {
-            sigma_bins: hint / k,
-            footprint_edge_sigmas: edge,
-            noise_floor: floor * k,
-        },
-    )
-    .into_iter()
-    .map(|c| Component {
-        centre_bin: c.centre_bin * k,
-        sigma_bins: c.sigma_bins * k,
-        area_photons: c.area_photons,
-        amplitude: c.amplitude / k,
-        one_surface: c.one_surface,
-    })
-    .map(shifted)
-    .collect()
+        floor: floor * k,
+        quantum,
+        leaves: &coarse_leaves,
+    };
+    decompose_bins(&coarse, threshold, max_returns, method, &noise)
+        .into_iter()
+        .map(|c| Component {
+            centre_bin: c.centre_bin * k,
+            sigma_bins: c.sigma_bins * k,
+            area_photons: c.area_photons,
+            amplitude: c.amplitude / k,
+            one_surface: c.one_surface,
+        })
+        .map(shifted)
+        .collect()
 }
 
 /// Whether a bin holds signal: photons, finite and above zero.
@@ -308,31 +321,29 @@ fn signal_span(photons: &[f32]) -> Option<(usize, usize)> {
 /// [`decompose`] on bins as given (see [`coarsening`]).
 fn decompose_bins(
     y: &[f64],
-    mc_se: &[f64],
     threshold: Threshold,
     max_returns: usize,
     method: Decomposition,
-    receiver: &Receiver,
+    noise: &Noise,
 ) -> Vec<Component> {
-    let hint = receiver.sigma_bins;
-    let noise = Noise {
-        mc_se,
-        pulse_sigma: hint,
-        footprint_edge_sigmas: receiver.footprint_edge_sigmas,
-        floor: receiver.noise_floor,
-    };
+    let hint = noise.pulse_sigma;
     let peaks = detect_peaks(y, threshold.per_bin, hint);
-    let peaks = resolve(peaks, y, threshold.per_bin, &noise, false);
-    let comps = match method {
+    // a comb's return is its rays' light, which no Gaussian's fit would describe better: it
+    // is kept as gathered, the light the fit must leave to it
+    let mut combs = Vec::new();
+    let peaks = resolve(peaks, y, threshold.per_bin, noise, false, Some(&mut combs));
+    let mut comps = match method {
         Decomposition::PeakDetection => peaks,
-        Decomposition::Gaussian => fit_all(y, &peaks, threshold, hint, &noise),
+        Decomposition::Gaussian => fit_all(y, &peaks, &combs, threshold, hint, noise),
     };
+    comps.extend(combs);
     let comps = resolve(
         comps,
         y,
         threshold.per_bin,
-        &noise,
+        noise,
         method == Decomposition::Gaussian,
+        None,
     );
     select(comps, threshold.area, max_returns)
 }
@@ -380,6 +391,14 @@ pub(super) struct Noise<'a> {
     pub(super) footprint_edge_sigmas: Option<f64>,
     /// Variance of each bin besides shot noise (see [`Receiver::noise_floor`]).
     pub(super) floor: f64,
+    /// Photons one ray brings, on average over the waveform's light: a few-ray waveform is
+    /// made of such quanta, and where it shows a gap, a smooth surface's light could have
+    /// left one as well (see [`Noise::compound_var`]); 0 for an exact waveform.
+    pub(super) quantum: f64,
+    /// Photons of each bin whose first surface was a leaf (impulse, before the pulse
+    /// convolution; empty: none known): a canopy's light, whose comb of few rays is leaves
+    /// at many ranges rather than one surface's sampling.
+    pub(super) leaves: &'a [f64],
 }
 
 impl Noise<'_> {
@@ -409,6 +428,29 @@ impl Noise<'_> {
             }
         }
         var.max(0.0)
+    }
+
+    /// Whether most of a component's light (within its sigma) came first off leaves.
+    pub(super) fn leafy(&self, c: &Component) -> bool {
+        let (lo, hi) = light_bins(c);
+        let hi = hi.min(self.leaves.len());
+        let leaves: f64 = self
+            .leaves
+            .get(lo.min(hi)..hi)
+            .map_or(0.0, |l| l.iter().sum());
+        leaves >= 0.5 * c.area_photons
+    }
+
+    /// Monte Carlo variance of a level of `level` photons per bin, the pulse-convolved
+    /// waveform averaged by a Gaussian of `sigma` bins besides the pulse's, were the light
+    /// smooth there: rays arrive as a Poisson process of quanta ([`Noise::quantum`]) of
+    /// level / quantum per bin, each spread by the pulse and the average, so the level's
+    /// variance is quantum · level · Σ k² for their kernel k (Σ k² = 1 / (2√π σ) for a
+    /// Gaussian of σ bins). The error the bins' own estimates give is zero in a gap between
+    /// rays, which is a gap of the sampling, not of the light, where rays are few.
+    pub(super) fn compound_var(&self, level: f64, sigma: f64) -> f64 {
+        let width = (self.pulse_sigma.powi(2) + sigma * sigma).sqrt().max(0.5);
+        self.quantum * level.max(0.0) / (2.0 * std::f64::consts::PI.sqrt() * width)
     }
 
     /// Monte Carlo standard error of the pulse-convolved photons in bin `k`, at most: the
@@ -454,19 +496,24 @@ impl Noise<'_> {
 ///    simulation's noise joins its nearest neighbour that does (all join into one if none
 ///    does): the rays of a few-ray pulse on a steep surface make a comb of spikes whose sum
 ///    is one return;
-/// 2. a run with no significant component is dropped, unless it is the first: the first
-///    return is light scattered once by the nearest surface the rays met (any longer path
-///    arrives later), a surface however few rays found it, as in any first-hit simulator,
-///    where a later run may be one rare multiple-scattering path;
+/// 2. runs with no significant component before the first return that has one are a comb
+///    ([`flush_comb`]): together, where they are a hard surface's and stand out, one return
+///    (a wide seed, before the fit); within [`JOIN_SIGMAS`] of the first significant
+///    return, part of it; else only the first run is kept: the first return is
+///    light scattered once by the nearest surface the rays met (any longer path arrives
+///    later), a surface however few rays found it, as in any first-hit simulator, where a
+///    later run may be one rare multiple-scattering path;
 /// 3. with `by_shape` (fitted widths), neighbours less than [`BLENDED_SIGMAS`] apart are one
 ///    return unless the waveform dips between them by more than its noise (Sparrow's
-///    criterion, the noise setting the depth a detector can see).
+///    criterion, the noise setting the depth a detector can see, and a few rays' comb
+///    leaving gaps no surface has: [`Noise::compound_var`]).
 pub(super) fn resolve(
     mut comps: Vec<Component>,
     y: &[f64],
     threshold: f64,
     noise: &Noise,
     by_shape: bool,
+    mut combs: Option<&mut Vec<Component>>,
 ) -> Vec<Component> {
     // a component the waveform cannot hold (a fit that wandered off) is no return
     let n = y.len() as f64;
@@ -485,6 +532,7 @@ pub(super) fn resolve(
         y[lo..hi].iter().all(|&v| v > threshold)
     };
     let mut out = Vec::new();
+    let mut comb: Vec<Vec<Component>> = Vec::new();
     let mut start = 0;
     while start < close.len() {
         let mut end = start + 1;
@@ -503,8 +551,9 @@ pub(super) fn resolve(
             .filter(|&k| noise.significant(&run[k], true))
             .collect();
         if strong.is_empty() {
-            if out.is_empty() && !run.is_empty() {
-                out.push(merged(run));
+            // gathered as a comb (see `flush_comb`)
+            if !run.is_empty() {
+                comb.push(run.to_vec());
             }
         } else {
             // each weak component joins the significant one nearest in time
@@ -522,10 +571,24 @@ pub(super) fn resolve(
                     .unwrap_or(0);
                 parts[nearest].push(*c);
             }
+            // light of a hard surface before the first return, within its spread, is its
+            // own (a leaf there is the canopy's first surface)
+            if let Some(first) = parts.first_mut() {
+                let m = merged(first);
+                let within = |c: &Component| {
+                    m.centre_bin - c.centre_bin <= JOIN_SIGMAS * m.sigma_bins && !noise.leafy(c)
+                };
+                for r in comb.iter().filter(|r| within(&merged(r))) {
+                    first.extend_from_slice(r);
+                }
+                comb.retain(|r| !within(&merged(r)));
+            }
+            flush_comb(&mut comb, &mut out, combs.as_deref_mut(), noise);
             out.extend(parts.iter().map(|p| merged(p)));
         }
         start = end;
     }
+    flush_comb(&mut comb, &mut out, combs, noise);
     if !by_shape {
         return out;
     }
@@ -550,6 +613,124 @@ pub(super) fn resolve(
     out
 }
 
+/// Sigmas of a return within which light before it is its own.
+const JOIN_SIGMAS: f64 = 3.0;
+
+/// Tail probability below which a gap in a comb parts it (see [`flush_comb`]).
+const COMB_GAP_TAIL: f64 = 1e-3;
+
+/// Bins [lo, hi) holding a component's light, as [`Noise::significant`] counts them.
+fn light_bins(c: &Component) -> (usize, usize) {
+    let half = c.sigma_bins.max(1.0);
+    (
+        (c.centre_bin - half).floor().max(0.0) as usize,
+        (c.centre_bin + half).ceil().max(0.0) as usize,
+    )
+}
+
+/// Runs of light none of which stands out from the simulation's noise, in time order, as
+/// the returns they make together. A few rays over a steep surface leave a comb of spikes,
+/// each one ray's light: alone none is a return, together they are the surface's. The comb
+/// is parted at any gap longer than its rays' spacing makes likely (a homogeneous Poisson
+/// process of the comb's rays leaves a gap of g bins with probability e^{-λg}, below
+/// [`COMB_GAP_TAIL`] over all its gaps), and a run mostly of leaves' light stands alone:
+/// leaves at many ranges are many surfaces, whose first is the first return. A part whose
+/// sum stands out is one return, wide, so placed like any wide return of unknown shape (at
+/// its summit, [`place_on_summits`]) unless its shape shows one surface; before the fit it is
+/// one wide seed, which the fit widens to all the comb's light. Of the parts that do not
+/// stand out, only a first one is kept, as for a lone run.
+fn flush_comb(
+    runs: &mut Vec<Vec<Component>>,
+    out: &mut Vec<Component>,
+    mut combs: Option<&mut Vec<Component>>,
+    noise: &Noise,
+) {
+    // a hard surface's light just after a return, within its spread, is its own
+    if let Some(prev) = out.last_mut() {
+        let m = *prev;
+        let within = |c: &Component| {
+            c.centre_bin - m.centre_bin <= JOIN_SIGMAS * m.sigma_bins && !noise.leafy(c)
+        };
+        let mut all = vec![m];
+        for r in runs.iter().filter(|r| within(&merged(r))) {
+            all.extend_from_slice(r);
+        }
+        *prev = merged(&all);
+        runs.retain(|r| !within(&merged(r)));
+    }
+    if runs.is_empty() {
+        return;
+    }
+    let comb: Vec<Component> = runs.iter().map(|r| merged(r)).collect();
+    // rays of each run: its area over its Monte Carlo standard error, squared
+    let rays: Vec<f64> = comb
+        .iter()
+        .map(|c| {
+            let (lo, hi) = light_bins(c);
+            let var = noise.mc_var(lo, hi);
+            if var > 0.0 {
+                (c.area_photons.powi(2) / var).max(1.0)
+            } else {
+                1.0
+            }
+        })
+        .collect();
+    // a run mostly of leaves' light stands alone: leaves at many ranges are many surfaces
+    let mut parts: Vec<std::ops::Range<usize>> = Vec::new();
+    let mut todo = Vec::new();
+    let mut from = 0;
+    for (k, c) in comb.iter().enumerate() {
+        if noise.leafy(c) {
+            todo.extend([from..k, k..k + 1]);
+            from = k + 1;
+        }
+    }
+    todo.push(from..comb.len());
+    todo.retain(|r| !r.is_empty());
+    while let Some(r) = todo.pop() {
+        if r.len() < 2 {
+            parts.push(r);
+            continue;
+        }
+        let n: f64 = rays[r.clone()].iter().sum();
+        // a run's light reaches from its first component to its last
+        let first = |k: usize| runs[k].first().map_or(comb[k].centre_bin, |c| c.centre_bin);
+        let last = |k: usize| runs[k].last().map_or(comb[k].centre_bin, |c| c.centre_bin);
+        let span = last(r.end - 1) - first(r.start);
+        let (at, gap) = (r.start..r.end - 1)
+            .map(|k| (k, first(k + 1) - last(k)))
+            .fold(
+                (r.start, f64::NEG_INFINITY),
+                |m, g| if g.1 > m.1 { g } else { m },
+            );
+        let rate = (n - 1.0).max(1.0) / span.max(1e-9);
+        if (r.len() - 1) as f64 * (-rate * gap).exp() < COMB_GAP_TAIL {
+            todo.push(at + 1..r.end);
+            todo.push(r.start..at + 1);
+        } else {
+            parts.push(r);
+        }
+    }
+    parts.sort_by_key(|r| r.start);
+    for r in parts {
+        let part = &comb[r.clone()];
+        let sum = merged(part);
+        let lo = part.iter().map(|c| light_bins(c).0).min().unwrap_or(0);
+        let hi = part.iter().map(|c| light_bins(c).1).max().unwrap_or(0);
+        let matched = 2.0 * std::f64::consts::PI.sqrt() * sum.sigma_bins.max(0.5);
+        let var = sum.area_photons + noise.floor * matched + noise.mc_var(lo, hi);
+        if sum.area_photons >= MIN_SIGNIFICANCE * var.sqrt() {
+            match combs.as_deref_mut() {
+                Some(combs) => combs.push(sum),
+                None => out.push(sum),
+            }
+        } else if out.is_empty() {
+            out.push(part[0]);
+        }
+    }
+    runs.clear();
+}
+
 /// Time-ordered components merged into the returns a detector makes of them. Neighbours with
 /// no dip between them ([`dips`]) form a chain; with `surfaces` (the level of signal per bin),
 /// a chain joined by light ([`lit`]) that one surface explains as well
@@ -567,7 +748,10 @@ pub(super) fn blend(
     let mut start = 0;
     while start < comps.len() {
         let mut end = start + 1;
-        while end < comps.len() && !dips(&comps[end - 1], &comps[end], y, noise) {
+        while end < comps.len()
+            && !dips(&comps[end - 1], &comps[end], y, noise)
+            && lit(&comps[end - 1], &comps[end], y, noise)
+        {
             end += 1;
         }
         let chain = &comps[start..end];
@@ -628,7 +812,21 @@ pub(super) fn blend(
 /// the threshold: a faint slope's bins hover about it.
 fn lit(a: &Component, b: &Component, y: &[f64], noise: &Noise) -> bool {
     let at = |c: &Component| (c.centre_bin.max(0.0) as usize).min(y.len());
-    let longest = (8.0 * noise.pulse_sigma).max(1.0) as usize;
+    // rays per bin of the weaker end's light (its level over the photons of a ray): a gap
+    // without rays longer than e^{-λ g} = [`COMB_GAP_TAIL`] allows is a gap of the light
+    let rate = if noise.quantum > 0.0 {
+        a.amplitude.min(b.amplitude).max(0.0) / noise.quantum
+    } else {
+        f64::INFINITY
+    };
+    let sampled = if rate > 0.0 {
+        (1.0 / COMB_GAP_TAIL).ln() / rate
+    } else {
+        f64::INFINITY
+    };
+    let longest = (8.0 * noise.pulse_sigma)
+        .max(sampled.min(y.len() as f64))
+        .max(1.0) as usize;
     let mut gap = 0;
     y[at(a)..at(b).max(at(a))].iter().all(|&v| {
         gap = if v > 0.0 { 0 } else { gap + 1 };
@@ -690,7 +888,14 @@ fn dips(a: &Component, b: &Component, y: &[f64], noise: &Noise) -> bool {
         .unwrap_or(i);
     let (trough, vt) = level(k);
     // the depth's error: photon and detector noise of both ends and the simulation's at each
-    let var = vs + vt + noise.mc_se_convolved(s_bin).powi(2) + noise.mc_se_convolved(k).powi(2);
+    // were there no dip the trough would hold the lower end's level, made of as few rays
+    let var = vs
+        + vt
+        + noise.mc_se_convolved(s_bin).powi(2)
+        + noise
+            .mc_se_convolved(k)
+            .powi(2)
+            .max(noise.compound_var(ys, s));
     ys - trough > MIN_SIGNIFICANCE * var.sqrt()
 }
 

@@ -44,11 +44,11 @@ pub fn measure(name: &str, path: &Path, max_pulses: usize) -> Result<TraversalRo
     let loaded = chosen.as_ref().unwrap_or(&loaded);
     let hidden = ProgressBar::hidden();
     let t = Instant::now();
-    let (_, traced_s) = simulate(loaded, &scene, &pulses, &hidden);
+    let (_, traced_s) = simulate(loaded, &scene, &pulses, &hidden, true);
     let inside_s = t.elapsed().as_secs_f64();
     let tracing_s = traced_s.iter().sum::<f64>() / rayon::current_num_threads() as f64;
     scene.start_ray_log();
-    let _ = simulate(loaded, &scene, &pulses, &hidden);
+    let _ = simulate(loaded, &scene, &pulses, &hidden, true);
     let log = scene.take_ray_log();
     let closest: Vec<LoggedRay> = log
         .iter()

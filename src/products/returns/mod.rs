@@ -574,14 +574,8 @@ pub(super) fn resolve(
             // light of a hard surface before the first return, within its spread, is its
             // own (a leaf there is the canopy's first surface)
             if let Some(first) = parts.first_mut() {
-                let m = merged(first);
-                let within = |c: &Component| {
-                    m.centre_bin - c.centre_bin <= JOIN_SIGMAS * m.sigma_bins && !noise.leafy(c)
-                };
-                for r in comb.iter().filter(|r| within(&merged(r))) {
-                    first.extend_from_slice(r);
-                }
-                comb.retain(|r| !within(&merged(r)));
+                let claimed = claim(&merged(first), &mut comb, noise);
+                first.extend(claimed);
             }
             flush_comb(&mut comb, &mut out, combs.as_deref_mut(), noise);
             out.extend(parts.iter().map(|p| merged(p)));
@@ -613,8 +607,21 @@ pub(super) fn resolve(
     out
 }
 
-/// Sigmas of a return within which light before it is its own.
+/// Sigmas of a return within which light beside it is its own.
 const JOIN_SIGMAS: f64 = 3.0;
+
+/// The components of the `runs` that are a hard surface's light (see [`Noise::leafy`])
+/// within [`JOIN_SIGMAS`] of `ret`'s centre, taken out of `runs` in their order.
+fn claim(ret: &Component, runs: &mut Vec<Vec<Component>>, noise: &Noise) -> Vec<Component> {
+    let within = |r: &[Component]| {
+        let c = merged(r);
+        (c.centre_bin - ret.centre_bin).abs() <= JOIN_SIGMAS * ret.sigma_bins && !noise.leafy(&c)
+    };
+    let (claimed, kept): (Vec<_>, Vec<_>) =
+        std::mem::take(runs).into_iter().partition(|r| within(r));
+    *runs = kept;
+    claimed.into_iter().flatten().collect()
+}
 
 /// Tail probability below which a gap in a comb parts it (see [`flush_comb`]).
 const COMB_GAP_TAIL: f64 = 1e-3;
@@ -647,16 +654,10 @@ fn flush_comb(
 ) {
     // a hard surface's light just after a return, within its spread, is its own
     if let Some(prev) = out.last_mut() {
-        let m = *prev;
-        let within = |c: &Component| {
-            c.centre_bin - m.centre_bin <= JOIN_SIGMAS * m.sigma_bins && !noise.leafy(c)
-        };
-        let mut all = vec![m];
-        for r in runs.iter().filter(|r| within(&merged(r))) {
-            all.extend_from_slice(r);
-        }
+        let all: Vec<Component> = std::iter::once(*prev)
+            .chain(claim(prev, runs, noise))
+            .collect();
         *prev = merged(&all);
-        runs.retain(|r| !within(&merged(r)));
     }
     if runs.is_empty() {
         return;

@@ -287,9 +287,11 @@ fn sobol_samples_cut_the_error_at_few_rays() {
     }
 }
 
+// 5·10^6 rays: at 4·10^6 the 5th order's standard error is 0.66-0.67 % depending on the
+// random streams, on the edge of the 3σ < 2 % this test needs to mean anything
 #[test]
 fn integrating_sphere_albedo_05_forward() {
-    sphere_case("sphere_05", 0.5, "forward", 300.0, 4_000_000);
+    sphere_case("sphere_05", 0.5, "forward", 300.0, 5_000_000);
 }
 
 #[test]

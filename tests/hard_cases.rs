@@ -131,12 +131,16 @@ fn two_leaves_one_micrometre_apart() {
             order1,
             0.01,
         );
-        // (connections between two points of the same leaf run in its plane: G rounds to ~1e-17)
-        assert!(
-            w.order_energy_j[1] < 1e-6 * order1,
-            "{method}: order 2 cannot exist: {:e}",
-            w.order_energy_j[1]
-        );
+        // no even order exists: light leaves upwards after an odd number of reflections and
+        // crosses each leaf an even number of times (bdpt's connections between two points of
+        // one leaf run in its plane, where G rounds to ~1e-17: 1e-11 of order 1 at most seen)
+        for k in (2..=8).step_by(2) {
+            assert!(
+                w.order_energy_j[k - 1] < 1e-6 * order1,
+                "{method}: order {k} cannot exist: {:e}",
+                w.order_energy_j[k - 1]
+            );
+        }
         unbiased(
             &format!("stacked leaves {method} order 3"),
             w.order_energy_j[2],
@@ -145,8 +149,9 @@ fn two_leaves_one_micrometre_apart() {
             0.01,
         );
     }
-    // and the three methods agree on every order the soil makes too
-    for k in 0..8 {
+    // and the three methods agree on every order the soil makes too (the odd ones: the even
+    // ones' rounding has no standard error to be judged by)
+    for k in (0..8).step_by(2) {
         for (a, b) in [(0, 1), (0, 2), (1, 2)] {
             let (x, y) = (&results[a], &results[b]);
             let se = x.order_energy_se_j[k].hypot(y.order_energy_se_j[k]);

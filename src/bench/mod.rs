@@ -759,7 +759,7 @@ fn report(
         match r.rays {
             Some(n) => {
                 // a pulse's chunks are its parallel tasks: under two chunks, one thread works
-                let chunks = n.div_ceil(crate::transport::chunk_rays(r.sampler));
+                let chunks = n.div_ceil(crate::transport::CHUNK_RAYS);
                 let busy = chunks.min(threads as u64);
                 let _ = writeln!(
                     s,

@@ -48,23 +48,15 @@ use crate::rng::{Rng, Sobol2};
 use crate::scene::{FacetId, Scene};
 use crate::sensor::{Gate, Laser, Receiver, SunSource};
 use glam::DVec3;
-use rayon::prelude::*;
+use std::sync::Mutex;
 
-/// Rays per independent random stream and per unit of parallel work, with independent draws.
-pub const CHUNK_RAYS: u64 = 2048;
-/// The same with `sampler: sobol`, whose first dimensions do not come from the stream: a
-/// single pulse of a few thousand rays (the GEDI ladder's 2000) is then split between the
-/// threads instead of being one serial task. Independent draws keep 2048, which keeps their
-/// files byte for byte what earlier versions wrote.
-pub const SOBOL_CHUNK_RAYS: u64 = 256;
+/// Rays per random stream and per unit of parallel work. Small enough that one pulse of a few
+/// thousand rays (the GEDI ladder's 2000, the orchard's 20000) is split evenly between the
+/// threads: at 2048 the orchard's pulse was 10 tasks, and the thread that finished its share
+/// first sat idle for most of a task (189 % CPU on 2 threads). A chunk's cost beyond its rays
+/// is one tally to fill and merge.
+pub const CHUNK_RAYS: u64 = 256;
 
-/// Rays per chunk of a pulse traced with `sampler`.
-pub fn chunk_rays(sampler: Sampler) -> u64 {
-    match sampler {
-        Sampler::Independent => CHUNK_RAYS,
-        Sampler::Sobol => SOBOL_CHUNK_RAYS,
-    }
-}
 /// Surface interactions before Russian roulette may stop a sub-path.
 const ROULETTE_AFTER: usize = 3;
 
@@ -215,11 +207,7 @@ pub struct Scratch {
     bufs: Buffers,
 }
 
-/// Chunks of a many-chunk pulse traced at once per thread (see [`simulate_pulse_in`]): enough
-/// that a slow chunk at the end of a batch leaves the other threads a few chunks to take.
-const CHUNKS_PER_THREAD: u64 = 16;
-
-/// Traces `rays` samples of one pulse, in chunks of [`chunk_rays`] run in parallel; each
+/// Traces `rays` samples of one pulse, in chunks of [`CHUNK_RAYS`] run in parallel; each
 /// chunk has its own random stream and the chunks are merged in order, so the result is the
 /// same whatever the number of threads.
 pub fn simulate_pulse(setup: &PulseSetup, rays: u64) -> Tally {
@@ -237,10 +225,44 @@ impl Scratch {
     }
 }
 
+/// The sum of `chunks` of one pulse traced by `trace` (see [`simulate_pulse_in`]), with the
+/// buffers that traced its last chunk. The tallies and buffers of chunks already added wait in
+/// `pool` for the next chunk.
+fn sum_chunks<F>(
+    chunks: std::ops::Range<u64>,
+    trace: &F,
+    setup: &PulseSetup,
+    pool: &Mutex<Vec<(Accum, Buffers)>>,
+) -> (Accum, Buffers)
+where
+    F: Fn(u64, &mut Accum, &mut Buffers) + Sync,
+{
+    let n = chunks.end - chunks.start;
+    if n <= 1 {
+        let reused = pool.lock().ok().and_then(|mut p| p.pop());
+        let (mut acc, mut bufs) = reused.unwrap_or_else(|| (Accum::new(setup), Buffers::default()));
+        acc.reset(setup);
+        if n == 1 {
+            trace(chunks.start, &mut acc, &mut bufs);
+        }
+        return (acc, bufs);
+    }
+    let mid = chunks.start + n / 2;
+    let (mut a, b) = rayon::join(
+        || sum_chunks(chunks.start..mid, trace, setup, pool),
+        || sum_chunks(mid..chunks.end, trace, setup, pool),
+    );
+    a.0.merge(&b.0);
+    if let Ok(mut p) = pool.lock() {
+        p.push(b);
+    }
+    a
+}
+
 /// [`simulate_pulse`] in a worker's scratch: the tally returned (the first band's) lives
 /// there until its next pulse, with the other bands' ([`Scratch::band`]).
 pub fn simulate_pulse_in<'s>(setup: &PulseSetup, rays: u64, scratch: &'s mut Scratch) -> &'s Tally {
-    let chunk = chunk_rays(setup.sampler);
+    let chunk = CHUNK_RAYS;
     let chunks = rays.div_ceil(chunk);
     let acc = scratch.acc.get_or_insert_with(|| Accum::new(setup));
     acc.reset(setup);
@@ -259,25 +281,14 @@ pub fn simulate_pulse_in<'s>(setup: &PulseSetup, rays: u64, scratch: &'s mut Scr
         trace(0, acc, &mut scratch.bufs);
         return &acc.tally;
     }
-    // the chunks in batches of a few per thread, each batch's merged in chunk order: the sums
-    // of all chunks at once, in memory that does not grow with the rays (a tally per chunk
-    // of 10^19 rays asked for 4·10^18 bytes)
-    let batch = CHUNKS_PER_THREAD * rayon::current_num_threads() as u64;
-    let mut first = 0;
-    while first < chunks {
-        let last = first.saturating_add(batch).min(chunks);
-        let parts: Vec<Accum> = (first..last)
-            .into_par_iter()
-            .map(|c| {
-                let mut part = Accum::new(setup);
-                trace(c, &mut part, &mut Buffers::default());
-                part
-            })
-            .collect();
-        for p in &parts {
-            acc.merge(p);
-        }
-        first = last;
+    // the chunks summed over a tree of fixed shape, each half traced in parallel and the
+    // halves added: the additions' order, so every bit, is the same on any number of threads,
+    // no thread waits at a barrier between batches of chunks, and the tallies alive are a
+    // tree's depth per thread (a tally per chunk of 10^19 rays asked for 4·10^18 bytes)
+    if chunks > 1 {
+        let pool = Mutex::new(Vec::new());
+        let (total, _) = sum_chunks(0..chunks, &trace, setup, &pool);
+        acc.merge(&total);
     }
     &acc.tally
 }

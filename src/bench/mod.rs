@@ -522,7 +522,7 @@ fn campaigns_section(opts: &BenchOptions) -> Result<String> {
                 }
                 if name.starts_with("als_") {
                     traversals.push(traversal::measure(&name, &path, 2000)?);
-                    eprintln!("lidarsim bench: campaign {name} on one thread");
+                    eprintln!("lidarsim bench: campaign {name} on one thread and on all, 3 pairs");
                     scaling.push(campaigns::scaling(&opts.dir, &row, &text)?);
                 }
                 rows.push(row);

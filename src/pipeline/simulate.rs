@@ -264,25 +264,29 @@ impl<'a> Shared<'a> {
 }
 
 /// Tasks each thread's share of pulses is cut into where they are cut finely (see
-/// [`leaf_pulses`]).
+/// [`leaf_pulses`]), and otherwise.
 const TASKS_PER_THREAD: usize = 64;
+const TASKS_PER_THREAD_BESIDE_A_WRITE: usize = 8;
 
-/// Pulses a task of a parallel loop over pulses holds at most: all of them, left to rayon,
-/// or with `finely`, a [`TASKS_PER_THREAD`]th of a thread's share. Rayon cuts a slice into
-/// about as many pieces as threads and cuts a piece again only when a thread steals it. Where
-/// nothing runs beside the loop no thread steals until its piece is done: on 2 threads the
-/// quick MABEL track's one part of 692 pulses went 346 to each thread, one idle for the last
-/// 80 ms of the other's 0.85 s (the simulate stage at 186-189 % CPU; 195-198 % cut finely,
-/// 0.96 times the whole run's wall time in 9 alternating pairs). A part written beside the
-/// next is stolen from at once and cut as it goes; cut finely too, the town survey's 267
-/// parts took 1.02-1.03 times the CPU time (two series of alternating pairs), so the
-/// simulate stage cuts finely only its first part.
+/// Pulses a task of a parallel loop over pulses holds at most: a [`TASKS_PER_THREAD`]th of a
+/// thread's share with `finely`, else a [`TASKS_PER_THREAD_BESIDE_A_WRITE`]th. Rayon cuts a
+/// slice into about as many pieces as threads and cuts a piece again only when a thread
+/// steals it. Where nothing runs beside the loop no thread steals until its piece is done: on
+/// 2 threads the quick MABEL track's one part of 692 pulses went 346 to each thread, one idle
+/// for the last 80 ms of the other's 0.85 s (the simulate stage at 186-189 % CPU; 195-198 %
+/// cut finely, 0.96 times the whole run's wall time in 9 alternating pairs). A part written
+/// beside the next is stolen from as soon as the write ends, but its last pieces could still
+/// leave a thread idle at the part's end: the quick forest ALS row's 17 parts of 40 ms gave
+/// 186-193 % (median 189.5 %, 6 runs) left whole and 189-193 % (median 192.6 %) in 8 tasks per
+/// thread. Cut in 64, the town survey's 267 parts took 1.02-1.03 times the CPU time (two
+/// series of alternating pairs); in 8, 0.994 (0.93-1.07, 6 pairs).
 fn leaf_pulses(pulses: usize, finely: bool) -> usize {
-    if finely {
-        (pulses / (rayon::current_num_threads() * TASKS_PER_THREAD)).max(1)
+    let tasks = if finely {
+        TASKS_PER_THREAD
     } else {
-        pulses.max(1)
-    }
+        TASKS_PER_THREAD_BESIDE_A_WRITE
+    };
+    (pulses / (rayon::current_num_threads() * tasks)).max(1)
 }
 
 /// Simulates pulses: pulses and each pulse's ray chunks run in parallel, the pulses cut

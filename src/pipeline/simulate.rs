@@ -279,7 +279,8 @@ const TASKS_PER_THREAD_BESIDE_A_WRITE: usize = 8;
 /// leave a thread idle at the part's end: the quick forest ALS row's 17 parts of 40 ms gave
 /// 186-193 % (median 189.5 %, 6 runs) left whole and 189-193 % (median 192.6 %) in 8 tasks per
 /// thread. Cut in 64, the town survey's 267 parts took 1.02-1.03 times the CPU time (two
-/// series of alternating pairs); in 8, 0.994 (0.93-1.07, 6 pairs).
+/// series of alternating pairs); in 8, 0.994 (0.93-1.07, 6 pairs), and the paper's forest
+/// campaign's 161 parts 1.019 (0.84-1.05, 4 pairs, wall 0.989): within the machine's noise.
 fn leaf_pulses(pulses: usize, finely: bool) -> usize {
     let tasks = if finely {
         TASKS_PER_THREAD

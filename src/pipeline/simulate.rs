@@ -363,11 +363,11 @@ pub fn simulate(
 }
 
 /// The pilot of `simulation.method: auto`: at most 2048 rays per pulse (so the pilot's draws
-/// are those of the run's first eight chunks, traced in parallel), and pulses enough for [`PILOT_RAY_BUDGET`] rays
-/// per method, but no more than a tenth of the campaign's rays (so at most 30 % of a small
-/// campaign's cost over the three methods, under 1 % of a survey's), and at least one pulse:
-/// a few-ray campaign's score rests on hundreds of pulses, not on the 8 × 19 rays that left
-/// the town survey's pilot with no energy at all.
+/// are those of the run's first eight chunks, traced in parallel), and pulses enough for
+/// [`PILOT_RAY_BUDGET`] rays per method, but no more than a tenth of the campaign's rays (so
+/// at most 30 % of a small campaign's cost over the three methods, under 1 % of a survey's),
+/// and at least one pulse: a few-ray campaign's score rests on hundreds of pulses, not on the
+/// 8 × 19 rays that left the town survey's pilot with no energy at all.
 const PILOT_RAYS: u64 = 8 * crate::transport::CHUNK_RAYS;
 const PILOT_RAY_BUDGET: u64 = 8 * PILOT_RAYS;
 

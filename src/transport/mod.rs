@@ -208,8 +208,8 @@ pub struct Scratch {
 }
 
 /// Traces `rays` samples of one pulse, in chunks of [`CHUNK_RAYS`] run in parallel; each
-/// chunk has its own random stream and the chunks are merged in order, so the result is the
-/// same whatever the number of threads.
+/// chunk has its own random stream and the chunks are added over a tree of fixed shape
+/// ([`sum_chunks`]), so the result is the same whatever the number of threads.
 pub fn simulate_pulse(setup: &PulseSetup, rays: u64) -> Tally {
     simulate_pulse_in(setup, rays, &mut Scratch::default()).clone()
 }

@@ -44,26 +44,37 @@ impl Scene {
     fn nearest_copy(&self, at: DVec3, reach: f64) -> f64 {
         let p = Vec3A::from((at - self.origin).as_vec3());
         let mut best2 = (reach * reach) as f32;
-        // one stack for the top level, one reused by every instance's descent
-        let (mut top, mut inner) = (Vec::with_capacity(64), Vec::with_capacity(64));
-        descend(&self.tlas, p, &mut best2, &mut top, |id, best2| {
-            let inst: &Instance = &self.instances[id];
-            let blas = &self.meshes[inst.mesh as usize];
-            // instances rotate about z and scale uniformly: a local distance times the
-            // scale is the scene's
-            let scale2 = 1.0 / (inst.inv_scale * inst.inv_scale);
-            let q = inst.point_to_local(p);
-            let mut local2 = *best2 / scale2;
-            descend(&blas.bvh, q, &mut local2, &mut inner, |k, local2| {
-                let d2 = distance2_to_triangle(Vec3::from(q), &blas.tris[k]);
-                if d2 < *local2 {
-                    *local2 = d2;
-                }
+        // one stack for the top level, one reused by every instance's descent, both kept by
+        // the thread from query to query rather than allocated for each point
+        STACKS.with_borrow_mut(|(top, inner)| {
+            descend(&self.tlas, p, &mut best2, top, |id, best2| {
+                let inst: &Instance = &self.instances[id];
+                let blas = &self.meshes[inst.mesh as usize];
+                // instances rotate about z and scale uniformly: a local distance times the
+                // scale is the scene's
+                let scale2 = 1.0 / (inst.inv_scale * inst.inv_scale);
+                let q = inst.point_to_local(p);
+                let mut local2 = *best2 / scale2;
+                descend(&blas.bvh, q, &mut local2, inner, |k, local2| {
+                    let d2 = distance2_to_triangle(Vec3::from(q), &blas.tris[k]);
+                    if d2 < *local2 {
+                        *local2 = d2;
+                    }
+                });
+                *best2 = best2.min(local2 * scale2);
             });
-            *best2 = best2.min(local2 * scale2);
         });
         (best2 as f64).sqrt().min(reach)
     }
+}
+
+/// A thread's scratch stacks for [`Scene::nearest_surface`].
+type Stack = Vec<(u32, f32)>;
+
+thread_local! {
+    static STACKS: std::cell::RefCell<(Stack, Stack)> = const {
+        std::cell::RefCell::new((Vec::new(), Vec::new()))
+    };
 }
 
 /// Visits every leaf primitive of `bvh` whose box lies nearer to `p` than `sqrt(best2)`,

@@ -368,9 +368,14 @@ fn read_waveforms_with(
         };
         let bands =
             optional("wavelength_nm", &f64t)?.map(|c| c.as_primitive::<Float64Type>().clone());
+        // a row's values straight from the list's buffers: `value(i)` makes an array (two
+        // allocations) a row
         let f64s = |l: &arrow_array::ListArray, i: usize, mut into: Vec<f64>| {
+            let offsets = l.value_offsets();
+            let (a, b) = (offsets[i] as usize, offsets[i + 1] as usize);
+            let values = l.values().as_primitive::<Float64Type>().values();
             into.clear();
-            into.extend_from_slice(l.value(i).as_primitive::<Float64Type>().values());
+            into.extend_from_slice(values.get(a..b).unwrap_or_default());
             into
         };
         // parts written before the spans (0304098) hold the whole gate in every bin column

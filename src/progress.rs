@@ -86,6 +86,22 @@ pub fn peak_rss_bytes() -> Option<u64> {
     Some(kb * 1024)
 }
 
+/// ", CPU x % of y %" for a stage that took `secs` of wall time since the process CPU time
+/// was `cpu` ([`process_cpu_seconds`]): the share of the cores it kept busy. Empty without a
+/// CPU clock.
+pub fn busy_since(cpu: Option<f64>, secs: f64) -> String {
+    cpu.zip(process_cpu_seconds())
+        .map(|(a, b)| {
+            let threads = rayon::current_num_threads();
+            format!(
+                ", CPU {:.0} % of {} %",
+                100.0 * (b - a) / secs.max(1e-9),
+                100 * threads
+            )
+        })
+        .unwrap_or_default()
+}
+
 /// CPU time of this process so far, user and system, all threads, s: the process CPU clock,
 /// to the nanosecond (/proc/self/stat counts 10 ms ticks: ±6 % on the bench's 0.16 s
 /// single-pulse stages), else /proc/self/stat's ticks; None where neither exists.

@@ -479,12 +479,14 @@ fn products_stage(
     parts: Parts,
     fp: &str,
 ) -> Result<()> {
-    let t = Instant::now();
+    let (t, cpu) = (Instant::now(), crate::progress::process_cpu_seconds());
     let (outputs, note) = products::stage::run(loaded, scene, run.out, plan, parts)?;
+    let secs = t.elapsed().as_secs_f64();
+    // the share of the cores kept busy, as the simulate stage reports it
+    let busy = crate::progress::busy_since(cpu, secs);
     log(&format!(
-        "products: {} in {:.2} s",
+        "products: {} in {secs:.2} s{busy}",
         outputs.join(", "),
-        t.elapsed().as_secs_f64()
     ));
     let note = (!note.is_empty()).then_some(note);
     run.finish(Stage::Products, fp, outputs, t, note, "done")

@@ -110,17 +110,7 @@ pub(super) fn simulate_parts(
     let secs = t.elapsed().as_secs_f64();
     if done_pulses > 0 {
         // the share of the cores kept busy: what a serial step or a slow writer costs
-        let busy = cpu
-            .zip(crate::progress::process_cpu_seconds())
-            .map(|(a, b)| {
-                let threads = rayon::current_num_threads();
-                format!(
-                    ", CPU {:.0} % of {} %",
-                    100.0 * (b - a) / secs,
-                    100 * threads
-                )
-            })
-            .unwrap_or_default();
+        let busy = crate::progress::busy_since(cpu, secs);
         log(&format!(
             "simulated {done_pulses} pulses, {rays} rays in {secs:.2} s ({:.1} pulses/s, {:.3e} rays/s{busy})",
             done_pulses as f64 / secs,

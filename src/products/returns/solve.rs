@@ -3,12 +3,23 @@
 
 use super::fit::{pdf, Params, Window};
 
+/// Steps a fit may take: far more than a fit that converges needs (one or two from a
+/// window's moments, ten to twenty for several components).
+pub(super) const MAX_ITERATIONS: usize = 100;
+
 impl Window<'_> {
     /// Levenberg-Marquardt on the Poisson deviance: gradient Σ (1 - y/m) ∂m/∂θ and the
     /// Fisher information Σ ∂m/∂θ ∂m/∂θᵀ / m as the curvature. Returns the parameters
     /// and the deviance, or None if nothing finite came out.
-    pub(super) fn fit(&self, params: Vec<Params>, floor: f64) -> Option<(Vec<Params>, f64)> {
-        BUFFERS.with_borrow_mut(|b| self.fit_in(params, floor, b))
+    /// At most `iterations` steps: the third value says whether the fit stopped at that
+    /// limit rather than converged.
+    pub(super) fn fit(
+        &self,
+        params: Vec<Params>,
+        floor: f64,
+        iterations: usize,
+    ) -> Option<(Vec<Params>, f64, bool)> {
+        BUFFERS.with_borrow_mut(|b| self.fit_in(params, floor, iterations, b))
     }
 
     /// [`Window::fit`] in a thread's buffers.
@@ -16,8 +27,9 @@ impl Window<'_> {
         &self,
         mut params: Vec<Params>,
         floor: f64,
+        iterations: usize,
         b: &mut Buffers,
-    ) -> Option<(Vec<Params>, f64)> {
+    ) -> Option<(Vec<Params>, f64, bool)> {
         let np = 3 * params.len();
         let Buffers {
             edges,
@@ -45,7 +57,8 @@ impl Window<'_> {
             &mut h[..np * np],
             &mut g[..np],
         );
-        for _ in 0..100 {
+        let mut capped = true;
+        for _ in 0..iterations {
             self.jacobian(&params, edges, jac);
             self.scoring(jac, m, h, g);
             let dmax = (0..np).map(|a| h[a * np + a]).fold(0.0, f64::max);
@@ -56,6 +69,7 @@ impl Window<'_> {
             // (a minimum within float precision)
             let Some(td) = self.damped_step(&params, h, g, (dev, dmax, floor), &mut lambda, trial)
             else {
+                capped = false;
                 break;
             };
             let gain = dev - td;
@@ -70,10 +84,11 @@ impl Window<'_> {
             // 0.1 % of that excess, further steps change nothing the fit can mean.
             let excess = dev - self.y.len() as f64;
             if gain < 1e-6 || gain < 1e-3 * excess {
+                capped = false;
                 break;
             }
         }
-        Some((params, dev))
+        Some((params, dev, capped))
     }
 
     /// ∂m_i/∂(centre, sigma, area) of every component over the bins it reaches (row-major,

@@ -86,6 +86,32 @@ pub fn peak_rss_bytes() -> Option<u64> {
     Some(kb * 1024)
 }
 
+/// When a stage started, by the wall clock and by the process CPU clock.
+#[derive(Clone, Copy, Debug)]
+pub struct StageClock {
+    pub wall: std::time::Instant,
+    pub cpu: Option<f64>,
+}
+
+impl StageClock {
+    pub fn start() -> StageClock {
+        StageClock {
+            wall: std::time::Instant::now(),
+            cpu: process_cpu_seconds(),
+        }
+    }
+
+    /// Wall time since the start, s.
+    pub fn wall_s(&self) -> f64 {
+        self.wall.elapsed().as_secs_f64()
+    }
+
+    /// Process CPU time since the start, all threads, s (None without a CPU clock).
+    pub fn cpu_s(&self) -> Option<f64> {
+        self.cpu.zip(process_cpu_seconds()).map(|(a, b)| b - a)
+    }
+}
+
 /// ", CPU x % of y %" for a stage that took `secs` of wall time since the process CPU time
 /// was `cpu` ([`process_cpu_seconds`]): the share of the cores it kept busy. Empty without a
 /// CPU clock.

@@ -87,21 +87,33 @@ fn campaign_rows_are_measured_and_missing_data_is_skipped() {
         e.to_string().contains("seed.x: `seed` is not a section"),
         "{e}"
     );
-    let row = bc::run_row(&dir, "mabel_plane", "plane track", &text).unwrap();
-    assert_eq!(row.pulses, 20);
-    assert_eq!(row.rays_per_pulse, 50);
-    assert!(row.simulate_s > 0.0 && row.pulses_per_s > 0.0);
-    assert!(row.run_pulses_per_s > 0.0 && row.run_pulses_per_s <= row.pulses_per_s);
-    if std::path::Path::new("/proc/self/stat").exists() {
-        // CPU time over wall time and threads: a fraction of the cores, never above all of
-        // them (two 10 ms ticks of slack: a run this short may read as 0)
-        let u = row.cpu_utilisation.unwrap();
-        assert!((0.0..=1.0 + 0.02 / row.simulate_s).contains(&u), "{u}");
+    // in this process, and in one of its own as `lidarsim bench` runs it: the same run, the
+    // same figures read from its files
+    let exe = std::path::PathBuf::from(env!("CARGO_BIN_EXE_lidarsim"));
+    let mut rows = Vec::new();
+    for runner in [None, Some(exe.as_path())] {
+        let row = bc::run_row(&dir, runner, "mabel_plane", "plane track", &text).unwrap();
+        assert_eq!(row.pulses, 20, "{runner:?}");
+        assert_eq!(row.rays_per_pulse, 50);
+        assert!(row.simulate_s > 0.0 && row.pulses_per_s > 0.0);
+        assert!(row.run_pulses_per_s > 0.0 && row.run_pulses_per_s <= row.pulses_per_s);
+        if std::path::Path::new("/proc/self/stat").exists() {
+            // CPU time over wall time and threads: a fraction of the cores, never above all
+            // of them (a millisecond of slack each way: the manifest rounds both to it)
+            let u = row.cpu_utilisation.unwrap();
+            assert!(
+                (0.0..=1.0 + 0.002 / row.simulate_s).contains(&u),
+                "{runner:?}: {u}"
+            );
+        }
+        assert!(row.result.contains("laser") && row.result.contains("photons per shot"));
+        if std::path::Path::new("/proc/self/status").exists() {
+            assert!(row.peak_mb.unwrap() > 1.0, "{runner:?}");
+        }
+        rows.push(row);
     }
-    assert!(row.result.contains("laser") && row.result.contains("photons per shot"));
-    if std::path::Path::new("/proc/self/status").exists() {
-        assert!(row.peak_mb.unwrap() > 1.0);
-    }
+    assert_eq!(rows[0].result, rows[1].result);
+    let row = rows.swap_remove(1);
     // the traversal figures of the same campaign: every query counted, replayed and timed
     let tr = lidarsim::bench::traversal::measure(
         "mabel_plane",
@@ -131,7 +143,7 @@ fn campaign_rows_are_measured_and_missing_data_is_skipped() {
     assert!(bc::bands_table(&[bands]).contains("| mabel_plane | 20 | 1 |"));
     // the same campaign on one thread and on all, for the serial share: its own folder for
     // one thread, a table row
-    let sc = bc::scaling(&dir, &row, &text).unwrap();
+    let sc = bc::scaling(&dir, Some(&exe), &row, &text).unwrap();
     assert!(dir.join("mabel_plane_1thread/run/report.md").is_file());
     assert!(sc.one.0 > 0.0 && sc.one.1 > 0.0 && sc.all.0 > 0.0 && sc.all.1 > 0.0);
     assert!(

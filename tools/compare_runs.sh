@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # Compares two folders of runs (from tools/run_bundled.sh, or two run folders) file by file.
-# Every file must be byte-identical, except that in manifest.json (`wall_time_s`, and the
-# checksum of report.md, which holds a wall time) and report.md (`simulation wall time`) the
-# lines that hold wall times are masked before comparing, and
+# Every file must be byte-identical, except that in manifest.json (`wall_time_s`,
+# `cpu_time_s`, `peak_memory_mib`, and the checksum of report.md, which holds a wall time)
+# and report.md (`simulation wall time`) the lines that hold times and memory are masked
+# before comparing, and
 # waveforms/*.stats.csv (seconds per pulse) and *.log are not compared at all.
 # Exit 0 when all compared files are identical, 1 otherwise.
 set -uo pipefail
@@ -17,10 +18,10 @@ timed() {
   esac
   return 1
 }
-# the file with its wall-time lines masked
+# the file with its time and memory lines masked
 masked() {
   case "$1" in
-    *manifest.json) sed -E 's/"wall_time_s": [0-9.e+-]+/"wall_time_s": _/; s/"report.md": "[0-9a-f]+"/"report.md": _/' "$1" ;;
+    *manifest.json) sed -E 's/"(wall_time_s|cpu_time_s|peak_memory_mib)": [0-9.e+-]+/"\1": _/; s/"report.md": "[0-9a-f]+"/"report.md": _/' "$1" ;;
     *report.md) sed -E 's/^\| simulation wall time \|.*$/| simulation wall time | _ |/' "$1" ;;
     *) cat "$1" ;;
   esac
@@ -41,6 +42,6 @@ while IFS= read -r rel; do
   timed "$rel" && continue
   [ -e "$a/$rel" ] || { echo "only in $b: $rel"; status=1; }
 done < <(cd "$b" && find . -type f | sed 's|^\./||' | sort)
-echo "$same files identical (wall-time lines masked in manifest.json and report.md), $skipped timing files not compared"
+echo "$same files identical (time and memory lines masked in manifest.json and report.md), $skipped timing files not compared"
 [ $status -eq 0 ] && echo "identical" || echo "DIFFERENT"
 exit $status

@@ -46,6 +46,9 @@ pub struct BenchOptions {
     pub rami_scene: PathBuf,
     /// Folder of the campaign rows' files (`pipelines/bench/`).
     pub campaigns_dir: PathBuf,
+    /// The lidarsim executable that runs each campaign row in a process of its own, as a
+    /// user runs a campaign; None: in this process (see `campaigns::run_row`).
+    pub runner: Option<PathBuf>,
 }
 
 impl Default for BenchOptions {
@@ -64,6 +67,7 @@ impl Default for BenchOptions {
             full: false,
             rami_scene: PathBuf::from("scenes/rami_wco.yaml"),
             campaigns_dir: PathBuf::from("pipelines/bench"),
+            runner: None,
         }
     }
 }
@@ -508,7 +512,8 @@ fn campaigns_section(opts: &BenchOptions) -> Result<String> {
         match p {
             campaigns::Planned::Run { name, what, text } => {
                 eprintln!("lidarsim bench: campaign {name}");
-                let row = campaigns::run_row_settled(&opts.dir, &name, &what, &text)?;
+                let runner = opts.runner.as_deref();
+                let row = campaigns::run_row_settled(&opts.dir, runner, &name, &what, &text)?;
                 if name == "mabel_1064" {
                     eprintln!("lidarsim bench: campaign {name} in one band and in three");
                     bands.push(campaigns::bands_row(&opts.dir, &name, &text, 3)?);
@@ -523,7 +528,7 @@ fn campaigns_section(opts: &BenchOptions) -> Result<String> {
                 if name.starts_with("als_") {
                     traversals.push(traversal::measure(&name, &path, 2000)?);
                     eprintln!("lidarsim bench: campaign {name} on one thread and on all, 3 pairs");
-                    scaling.push(campaigns::scaling(&opts.dir, &row, &text)?);
+                    scaling.push(campaigns::scaling(&opts.dir, runner, &row, &text)?);
                 }
                 rows.push(row);
             }

@@ -298,6 +298,9 @@ fn bench(args: BenchArgs) -> Result<()> {
     }
     opts.rami_scene = args.rami;
     opts.campaigns = !args.no_campaigns;
+    // each campaign row in a process of its own, as a user runs it (in this one where the
+    // executable cannot be found)
+    opts.runner = std::env::current_exe().ok();
     opts.campaigns_dir = args.campaigns;
     opts.fov_mrad = fov;
     opts.canopy.trees = usize::try_from(args.trees)

@@ -4,10 +4,10 @@
 use super::Stage;
 use crate::error::Result;
 use crate::fsutil::write_text_atomic;
+use crate::progress::StageClock;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::path::Path;
-use std::time::Instant;
 
 #[derive(Clone, Debug, Default, Serialize, Deserialize, PartialEq)]
 pub struct StageRecord {
@@ -15,6 +15,16 @@ pub struct StageRecord {
     pub fingerprint: String,
     pub outputs: Vec<String>,
     pub wall_time_s: f64,
+    /// Process CPU time over the stage, all threads, s: over `wall_time_s` and the threads,
+    /// the share of the cores it kept busy (absent where the OS does not tell, and in
+    /// manifests written before it was recorded).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cpu_time_s: Option<f64>,
+    /// Peak resident memory of the process that ran the stage, from its start to the
+    /// stage's end, MiB: the last stage's is the run's peak (absent where the OS does not
+    /// tell).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub peak_memory_mib: Option<f64>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub note: Option<String>,
     /// The checksum (`file_checksum`) of each output file as the stage wrote it (waveform parts excepted: each has
@@ -52,7 +62,7 @@ pub(super) fn record(
     stage: Stage,
     fp: &str,
     outputs: Vec<String>,
-    t: Instant,
+    clock: StageClock,
     note: Option<String>,
 ) {
     let checksums = outputs
@@ -66,7 +76,10 @@ pub(super) fn record(
             status: "done".into(),
             fingerprint: fp.into(),
             outputs,
-            wall_time_s: (t.elapsed().as_secs_f64() * 1000.0).round() / 1000.0,
+            wall_time_s: (clock.wall_s() * 1000.0).round() / 1000.0,
+            cpu_time_s: clock.cpu_s().map(|c| (c * 1000.0).round() / 1000.0),
+            peak_memory_mib: crate::progress::peak_rss_bytes()
+                .map(|b| (b as f64 / (1024.0 * 102.4)).round() / 10.0),
             note,
             checksums,
         },

@@ -25,7 +25,7 @@ use crate::error::{Error, Result};
 use crate::fsutil::write_text_atomic;
 use crate::plan::{self, Plan};
 use crate::products;
-use crate::progress::log;
+use crate::progress::{log, StageClock};
 use crate::scene::Scene;
 use crate::waveform::file::{part_is_whole, part_name, Parts};
 use std::path::{Path, PathBuf};
@@ -73,10 +73,6 @@ pub struct RunSummary {
     pub parts_done: usize,
     /// Whether every stage asked for is complete.
     pub complete: bool,
-    /// Wall and process CPU time of this invocation's simulate stage, s (None where it did
-    /// not run or the OS does not tell): CPU / wall / threads is how busy the cores were.
-    pub simulate_wall_s: Option<f64>,
-    pub simulate_cpu_s: Option<f64>,
 }
 
 /// Runs a campaign file into its run folder (each combination of a sweep into a sub-folder).
@@ -336,13 +332,21 @@ impl<'a> RunFolder<'a> {
         stage: Stage,
         fp: &str,
         outputs: Vec<String>,
-        t: Instant,
+        clock: StageClock,
         note: Option<String>,
         status: &str,
     ) -> Result<()> {
         // what the stage freed goes back to the system before the next stage allocates
         crate::progress::release_free_memory();
-        record(&mut self.manifest, self.out, stage, fp, outputs, t, note);
+        record(
+            &mut self.manifest,
+            self.out,
+            stage,
+            fp,
+            outputs,
+            clock,
+            note,
+        );
         if let Some(r) = self.manifest.stages.get_mut(stage.name()) {
             r.status = status.into();
         }
@@ -379,8 +383,6 @@ fn run_single(
         seconds: 0.0,
         parts_done: 0,
         complete: true,
-        simulate_wall_s: None,
-        simulate_cpu_s: None,
     };
     let later = [Stage::Simulate, Stage::Products, Stage::Report];
     if !later.iter().any(|s| run.wanted(*s)) {
@@ -434,12 +436,7 @@ fn run_single(
         }
     }
     if run.wanted(Stage::Simulate) && !run.done(Stage::Simulate, &fp_sim) {
-        let (t, cpu) = (Instant::now(), crate::progress::process_cpu_seconds());
         let (rays, parts_done) = simulate_stage(&mut run, loaded, scene, &plan, parts, &fp_sim)?;
-        summary.simulate_wall_s = Some(t.elapsed().as_secs_f64());
-        summary.simulate_cpu_s = cpu
-            .zip(crate::progress::process_cpu_seconds())
-            .map(|(a, b)| b - a);
         summary.rays = rays;
         summary.parts_done = parts_done;
     } else if run.done(Stage::Simulate, &fp_sim) {
@@ -479,17 +476,17 @@ fn products_stage(
     parts: Parts,
     fp: &str,
 ) -> Result<()> {
-    let (t, cpu) = (Instant::now(), crate::progress::process_cpu_seconds());
+    let clock = StageClock::start();
     let (outputs, note) = products::stage::run(loaded, scene, run.out, plan, parts)?;
-    let secs = t.elapsed().as_secs_f64();
+    let secs = clock.wall_s();
     // the share of the cores kept busy, as the simulate stage reports it
-    let busy = crate::progress::busy_since(cpu, secs);
+    let busy = crate::progress::busy_since(clock.cpu, secs);
     log(&format!(
         "products: {} in {secs:.2} s{busy}",
         outputs.join(", "),
     ));
     let note = (!note.is_empty()).then_some(note);
-    run.finish(Stage::Products, fp, outputs, t, note, "done")
+    run.finish(Stage::Products, fp, outputs, clock, note, "done")
 }
 
 /// The report stage: report.md, quoting the simulate stage's wall time.
@@ -500,7 +497,7 @@ fn report_stage(
     parts: Parts,
     fp: &str,
 ) -> Result<()> {
-    let t = Instant::now();
+    let clock = StageClock::start();
     let simulate_s = run
         .manifest
         .stages
@@ -509,14 +506,21 @@ fn report_stage(
         .unwrap_or(0.0);
     let text = products::report::report(loaded, scene, parts, run.out, simulate_s)?;
     write_text_atomic(&run.out.join("report.md"), &text)?;
-    run.finish(Stage::Report, fp, vec!["report.md".into()], t, None, "done")
+    run.finish(
+        Stage::Report,
+        fp,
+        vec!["report.md".into()],
+        clock,
+        None,
+        "done",
+    )
 }
 
 /// The plan stage. Planning is cheap and deterministic, so every stage makes the pulses it
 /// needs from the [`Plan`], a part at a time; `pulses.parquet` is written only when the stage
 /// is not already done.
 fn plan_stage(run: &mut RunFolder, c: &Campaign, fp: &str) -> Result<Plan> {
-    let t = Instant::now();
+    let clock = StageClock::start();
     let pulses = Plan::new(c)?;
     if pulses.is_empty() {
         return Err(Error::msg("the platform plans no pulses"));
@@ -527,14 +531,14 @@ fn plan_stage(run: &mut RunFolder, c: &Campaign, fp: &str) -> Result<Plan> {
             Stage::Plan,
             fp,
             vec!["pulses.parquet".into()],
-            t,
+            clock,
             None,
             "done",
         )?;
         log(&format!(
             "plan: {} pulses in {:.2} s",
             pulses.len(),
-            t.elapsed().as_secs_f64()
+            clock.wall_s()
         ));
     } else if !run.done(Stage::Plan, fp) {
         let why = if run.manifest.stages.contains_key(Stage::Plan.name()) {
@@ -599,7 +603,7 @@ fn simulate_stage(
     fp: &str,
 ) -> Result<(u64, usize)> {
     let (out, shard) = (run.out, run.opts.shard);
-    let t = Instant::now();
+    let clock = StageClock::start();
     let parts = cut.count();
     let part_files: Vec<String> = (0..parts).map(part_name).collect();
     let wf_dir = out.join("waveforms");
@@ -624,11 +628,18 @@ fn simulate_stage(
     todo[..done].iter().for_each(|&k| written_now[k] = true);
     let missing = (0..parts).filter(|&k| !written_now[k] && !whole(k)).count();
     if missing == 0 {
-        run.finish(Stage::Simulate, fp, part_files, t, None, "done")?;
+        run.finish(Stage::Simulate, fp, part_files, clock, None, "done")?;
     } else {
         let note = format!("{missing} of {parts} parts missing: run again with --resume to finish");
         log(&format!("simulate: {note}"));
-        run.finish(Stage::Simulate, fp, part_files, t, Some(note), "partial")?;
+        run.finish(
+            Stage::Simulate,
+            fp,
+            part_files,
+            clock,
+            Some(note),
+            "partial",
+        )?;
     }
     if let Some(signal) = stopped {
         return Err(Error::interrupted(

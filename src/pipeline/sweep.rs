@@ -30,8 +30,6 @@ pub(super) fn run_sweep(
         seconds: 0.0,
         parts_done: 0,
         complete: true,
-        simulate_wall_s: None,
-        simulate_cpu_s: None,
     };
     let mut runs = Vec::new();
     let mut rows: Vec<(Vec<serde_yaml::Value>, RunTotals)> = Vec::new();

@@ -137,7 +137,7 @@ pub(super) fn fit_all(
 /// Steps a trial of the residual search may take before it is judged against the others.
 /// Most of those that converge do so in fewer; the rest crawl along a valley (a shape no
 /// sum of Gaussians describes), and on the town survey over a third of the multi-component
-/// fits' steps came after their tenth, in trials most of which lost to another anyway. The
+/// fits' steps came after their tenth, in trials of which one a round at most is kept. The
 /// trial kept is fitted on to convergence. Against trials of up to 100 steps, a rerun of the
 /// town's products took 0.93 of the time (whole process, alternating pairs) for 1 point fewer
 /// in 623,827 (99.450 % of them within 5 cm of a surface either way, the DSM's bias and RMSE

@@ -110,22 +110,21 @@ impl StageClock {
     pub fn cpu_s(&self) -> Option<f64> {
         self.cpu.zip(process_cpu_seconds()).map(|(a, b)| b - a)
     }
-}
 
-/// ", CPU x % of y %" for a stage that took `secs` of wall time since the process CPU time
-/// was `cpu` ([`process_cpu_seconds`]): the share of the cores it kept busy. Empty without a
-/// CPU clock.
-pub fn busy_since(cpu: Option<f64>, secs: f64) -> String {
-    cpu.zip(process_cpu_seconds())
-        .map(|(a, b)| {
-            let threads = rayon::current_num_threads();
-            format!(
-                ", CPU {:.0} % of {} %",
-                100.0 * (b - a) / secs.max(1e-9),
-                100 * threads
-            )
-        })
-        .unwrap_or_default()
+    /// ", CPU x % of y %" for the stage, `secs` of wall time since the start: the share of
+    /// the cores it kept busy. Empty without a CPU clock.
+    pub fn busy(&self, secs: f64) -> String {
+        self.cpu_s()
+            .map(|cpu| {
+                let threads = rayon::current_num_threads();
+                format!(
+                    ", CPU {:.0} % of {} %",
+                    100.0 * cpu / secs.max(1e-9),
+                    100 * threads
+                )
+            })
+            .unwrap_or_default()
+    }
 }
 
 /// CPU time of this process so far, user and system, all threads, s: the process CPU clock,

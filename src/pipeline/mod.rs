@@ -480,7 +480,7 @@ fn products_stage(
     let (outputs, note) = products::stage::run(loaded, scene, run.out, plan, parts)?;
     let secs = clock.wall_s();
     // the share of the cores kept busy, as the simulate stage reports it
-    let busy = crate::progress::busy_since(clock.cpu, secs);
+    let busy = clock.busy(secs);
     log(&format!(
         "products: {} in {secs:.2} s{busy}",
         outputs.join(", "),

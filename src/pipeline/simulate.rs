@@ -38,7 +38,7 @@ pub(super) fn simulate_parts(
 ) -> Result<(u64, usize, Option<i32>)> {
     let total: usize = todo.iter().map(|&k| parts.range(k).len()).sum();
     let bar = progress(total as u64, "simulating");
-    let (t, cpu) = (Instant::now(), crate::progress::process_cpu_seconds());
+    let clock = crate::progress::StageClock::start();
     let mut rays = 0u64;
     let mut done_pulses = 0usize;
     let terminal = std::io::stderr().is_terminal();
@@ -83,7 +83,7 @@ pub(super) fn simulate_parts(
             .map(|w| w.rays as u64)
             .sum::<u64>();
         done_pulses += pulses.len();
-        let elapsed = t.elapsed().as_secs_f64();
+        let elapsed = clock.wall_s();
         let rate = done_pulses as f64 / elapsed;
         // a log, not a terminal: a line per tenth of the work, or per minute if slower
         let tenth = (i + 1) % todo.len().div_ceil(10).max(1) == 0;
@@ -107,10 +107,10 @@ pub(super) fn simulate_parts(
     }
     committer.finish()?;
     bar.finish_and_clear();
-    let secs = t.elapsed().as_secs_f64();
+    let secs = clock.wall_s();
     if done_pulses > 0 {
         // the share of the cores kept busy: what a serial step or a slow writer costs
-        let busy = crate::progress::busy_since(cpu, secs);
+        let busy = clock.busy(secs);
         log(&format!(
             "simulated {done_pulses} pulses, {rays} rays in {secs:.2} s ({:.1} pulses/s, {:.3e} rays/s{busy})",
             done_pulses as f64 / secs,

@@ -13,16 +13,20 @@ struct Flags {
 
 static FLAGS: OnceLock<Flags> = OnceLock::new();
 
+fn flags() -> &'static Flags {
+    FLAGS.get_or_init(|| Flags {
+        signal: Arc::new(AtomicUsize::new(0)),
+        seen: Arc::new(AtomicBool::new(false)),
+    })
+}
+
 /// Starts listening for SIGINT and SIGTERM, and turns SIGXFSZ into a failed write (on Unix;
 /// elsewhere nothing is installed). Safe to call more than once.
 pub fn install() {
     #[cfg(unix)]
     {
         use signal_hook::consts::{SIGINT, SIGTERM};
-        let flags = FLAGS.get_or_init(|| Flags {
-            signal: Arc::new(AtomicUsize::new(0)),
-            seen: Arc::new(AtomicBool::new(false)),
-        });
+        let flags = flags();
         static INSTALLED: OnceLock<()> = OnceLock::new();
         INSTALLED.get_or_init(|| {
             // a file-size limit (RLIMIT_FSIZE, `ulimit -f`) would otherwise kill the process
@@ -46,6 +50,22 @@ pub fn install() {
             }
         });
     }
+}
+
+/// Asks the work to stop at its next boundary, as `signal` would: for a host that watches
+/// signals itself (the Python package polls the interpreter's, and installs no handler).
+pub fn request(signal: i32) {
+    flags()
+        .signal
+        .store(signal.max(1) as usize, Ordering::Relaxed);
+}
+
+/// Forgets a stop asked for earlier, before new work starts in a process that outlives it
+/// (a Python session runs one campaign after another; the CLI runs one and exits).
+pub fn clear() {
+    let f = flags();
+    f.signal.store(0, Ordering::Relaxed);
+    f.seen.store(false, Ordering::Relaxed);
 }
 
 /// The signal that asked for a stop, if one did.

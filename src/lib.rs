@@ -27,6 +27,9 @@ pub mod waveform;
 
 pub use error::{Error, Result};
 
+/// This build's version, as `lidarsim --version` and run manifests give it.
+pub const VERSION: &str = env!("CARGO_PKG_VERSION");
+
 /// Speed of light in vacuum, m/s.
 pub const C: f64 = 299_792_458.0;
 /// Planck constant, J s.

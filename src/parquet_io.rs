@@ -542,6 +542,44 @@ pub fn read_f32_lists(
     Ok(())
 }
 
+/// Picks the rows of a batch to keep (None: all of them).
+pub type RowFilter<'a> = dyn Fn(&RecordBatch) -> Option<arrow_array::BooleanArray> + 'a;
+
+/// Every row of a Parquet file as Arrow batches, with the schema (the whole file: tables the
+/// user asks for, not the stages' streaming reads). `keep` picks rows from each batch when
+/// given.
+pub fn read_batches(
+    path: &Path,
+    keep: Option<&RowFilter>,
+) -> Result<(arrow_schema::SchemaRef, Vec<RecordBatch>)> {
+    use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
+    let bad = |e: &dyn std::fmt::Display| {
+        Error::data(path, format!("not a readable Parquet file: {e}"))
+            .advise("run the stage that writes it again")
+    };
+    let file = std::fs::File::open(path).map_err(|e| Error::io(path, "cannot open", e))?;
+    let reader = ParquetRecordBatchReaderBuilder::try_new(file)
+        .map_err(|e| bad(&e))?
+        .with_batch_size(65_536)
+        .build()
+        .map_err(|e| bad(&e))?;
+    let schema = arrow_array::RecordBatchReader::schema(&reader);
+    let mut batches = Vec::new();
+    for b in reader {
+        let b = b.map_err(|e| bad(&e))?;
+        let b = match keep.and_then(|k| k(&b)) {
+            Some(mask) => {
+                arrow_select::filter::filter_record_batch(&b, &mask).map_err(|e| bad(&e))?
+            }
+            None => b,
+        };
+        if b.num_rows() > 0 {
+            batches.push(b);
+        }
+    }
+    Ok((schema, batches))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

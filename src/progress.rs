@@ -3,10 +3,32 @@
 
 use indicatif::{ProgressBar, ProgressStyle};
 use std::io::IsTerminal;
+use std::sync::{Arc, RwLock};
+
+/// Where log lines go instead of stderr: a host's own logging (the Python package hands
+/// them to its `lidarsim` logger).
+pub type Sink = Arc<dyn Fn(&str) + Send + Sync>;
+
+static SINK: RwLock<Option<Sink>> = RwLock::new(None);
+
+/// Sends every later log line to `sink` (None: back to stderr). Progress bars are then not
+/// drawn: their news comes as log lines, as in a batch job's log.
+pub fn set_sink(sink: Option<Sink>) {
+    *SINK.write().unwrap_or_else(|e| e.into_inner()) = sink;
+}
+
+fn sink() -> Option<Sink> {
+    SINK.read().unwrap_or_else(|e| e.into_inner()).clone()
+}
+
+/// Whether progress is shown as a bar redrawn on a terminal, rather than as log lines.
+pub fn interactive() -> bool {
+    std::io::stderr().is_terminal() && sink().is_none()
+}
 
 /// A progress bar on a terminal; hidden otherwise (stages then log plain lines).
 pub fn progress(len: u64, what: &str) -> ProgressBar {
-    if !std::io::stderr().is_terminal() {
+    if !interactive() {
         return ProgressBar::hidden();
     }
     let bar = ProgressBar::new(len);
@@ -20,7 +42,10 @@ pub fn progress(len: u64, what: &str) -> ProgressBar {
 }
 
 pub fn log(line: &str) {
-    eprintln!("lidarsim: {line}");
+    match sink() {
+        Some(f) => f(line),
+        None => eprintln!("lidarsim: {line}"),
+    }
 }
 
 /// Gives the memory the allocator holds free back to the system. glibc keeps the blocks a

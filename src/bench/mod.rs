@@ -8,13 +8,14 @@
 pub mod campaigns;
 pub mod traversal;
 
-use crate::campaign::{Instrument, Method, MisHeuristic, Sampler, SunSelection};
+use crate::campaign::{Campaign, Instrument, Method, Sampler, SunSelection};
 use crate::error::{Error, Result};
 use crate::generate::{canopy, Canopy};
+use crate::plan::Pulse;
 use crate::scene::Scene;
-use crate::sensor::{pulse_sigma_s, Gate, Laser, Receiver, SunSource};
-use crate::transport::{simulate_pulse, PulseSetup};
-use crate::waveform::{self, Waveform};
+use crate::transport::Scratch;
+use crate::waveform::pulse::PulseSimulator;
+use crate::waveform::Waveform;
 use glam::DVec3;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -119,7 +120,7 @@ pub struct LadderRow {
 fn gedi(footprint_diameter_m: f64, fov_mrad: f64, altitude: f64) -> Instrument {
     let half_angle_mrad = (footprint_diameter_m / 2.0 / altitude).atan() * 1e3;
     serde_yaml::from_str(&format!(
-        "pulse_energy_j: 0.0105\npulse_fwhm_ns: 14\nfootprint_half_angle_mrad: {half_angle_mrad}\nfov_half_angle_mrad: {fov_mrad}\nreceiver_area_m2: 0.5\nbin_ns: 1"
+        "pulse_energy_j: 0.0105\npulse_fwhm_ns: 14\nfootprint_half_angle_mrad: {half_angle_mrad}\nfov_half_angle_mrad: {fov_mrad}\nreceiver_area_m2: 0.5\nbin_ns: 1\nbandwidth_nm: 0.8"
     ))
     .expect("a fixed instrument parses")
 }
@@ -166,24 +167,33 @@ pub fn r_squared(w: &[f32], reference: &[f32]) -> f64 {
     1.0 - ss_res / ss_tot
 }
 
+/// The bench's GEDI-like pulse: a one-pulse campaign (the one way a pulse is set up), whose
+/// method, sampler, rays, seed and sun each measurement sets.
 struct Bench<'a> {
     scene: &'a Scene,
-    inst: Instrument,
-    origin: DVec3,
-    gate: Gate,
-    sub_bins: usize,
-    sigma: f64,
-    hv: f64,
+    campaign: Campaign,
+    pulse: Pulse,
 }
 
-impl Bench<'_> {
-    fn radiometry(&self) -> waveform::Radiometry {
-        waveform::Radiometry {
-            pulse_energy_j: self.inst.pulse_energy_j,
-            receiver_area_m2: self.inst.receiver_area_m2,
-            fov_half_angle: self.inst.fov_half_angle_mrad * 1e-3,
+impl<'a> Bench<'a> {
+    fn new(scene: &'a Scene, scene_path: &Path, inst: &Instrument, origin: DVec3) -> Result<Self> {
+        let simulation = "{ method: bdpt, max_order: 100, mis: power, receiver_depth: full }";
+        let request = crate::plan::OnePulse {
+            instrument: serde_yaml::to_value(inst).map_err(|e| Error::msg(e.to_string()))?,
+            origin: origin.to_array(),
+            direction: [0.0, 0.0, -1.0],
+            wavelength_nm: 1064.0.into(),
+            simulation: serde_yaml::from_str(simulation).map_err(|e| Error::msg(e.to_string()))?,
+            seed: 1,
             sun: None,
-        }
+            atmosphere: None,
+        };
+        let (loaded, pulse) = request.campaign(scene_path, "bench pulse")?;
+        Ok(Bench {
+            scene,
+            campaign: loaded.campaign,
+            pulse,
+        })
     }
 
     fn run(&self, method: Method, sampler: Sampler, rays: u64, seed: u64) -> (Waveform, f64) {
@@ -196,41 +206,18 @@ impl Bench<'_> {
         sampler: Sampler,
         rays: u64,
         seed: u64,
-        sun: Option<SunSource>,
+        sun: Option<crate::campaign::Sun>,
     ) -> (Waveform, f64) {
-        let axis = -DVec3::Z;
-        let setup = PulseSetup {
-            scene: self.scene,
-            laser: Laser::new(&self.inst, self.origin, axis),
-            receiver: Receiver::new(&self.inst, self.origin, axis),
-            gate: self.gate,
-            atmosphere: None,
-            bands: None,
-            sub_bins: self.sub_bins,
-            method,
-            heuristic: MisHeuristic::Power,
-            sampler,
-            receiver_depth: crate::campaign::ReceiverDepth::Full,
-            sun,
-            max_order: 100,
-            seed,
-            pulse_id: 0,
-        };
+        let mut c = self.campaign.clone();
+        c.simulation.method = method;
+        c.simulation.sampler = sampler;
+        c.simulation.rays_per_pulse = rays;
+        c.seed = seed;
+        c.sun = sun;
+        let sim = PulseSimulator::new(&c, self.scene);
         let t = Instant::now();
-        let tally = simulate_pulse(&setup, rays);
-        let secs = t.elapsed().as_secs_f64();
-        (
-            waveform::waveform(
-                0,
-                &tally,
-                &self.gate,
-                self.sub_bins,
-                self.sigma,
-                self.hv,
-                &self.radiometry(),
-            ),
-            secs,
-        )
+        let (w, _) = sim.simulate(&self.pulse, &mut Scratch::default());
+        (w, t.elapsed().as_secs_f64())
     }
 }
 
@@ -245,19 +232,9 @@ pub fn run(opts: &BenchOptions) -> Result<String> {
     let origin = DVec3::new(size / 2.0, size / 2.0, altitude);
     let bench_for = |footprint: f64| {
         let inst = gedi(footprint, opts.fov_mrad, altitude);
-        let sigma = pulse_sigma_s(&inst);
-        let gate = Gate::for_pulse(&inst, origin, -DVec3::Z, scene.bounds());
-        Bench {
-            scene: &scene,
-            sub_bins: waveform::sub_bins_per_bin(gate.dt, sigma),
-            inst,
-            origin,
-            gate,
-            sigma,
-            hv: crate::photon_energy_j(1064.0),
-        }
+        Bench::new(&scene, &scene_path, &inst, origin)
     };
-    let b = bench_for(opts.footprint_diameter_m);
+    let b = bench_for(opts.footprint_diameter_m)?;
     eprintln!(
         "lidarsim bench: reference waveform, bdpt, {} rays",
         opts.reference_rays
@@ -289,7 +266,7 @@ pub fn run(opts: &BenchOptions) -> Result<String> {
     if !opts.table2_footprints.is_empty() {
         let mut t2 = Vec::new();
         for &d in &opts.table2_footprints {
-            let bd = bench_for(d);
+            let bd = bench_for(d)?;
             let reference = if d == opts.footprint_diameter_m {
                 reference.clone()
             } else {
@@ -454,9 +431,8 @@ fn sun_section(opts: &BenchOptions, b: &Bench, reference: &Waveform) -> String {
         selection_probability: (selection == SunSelection::Fixed).then_some(0.5),
         share: None,
     };
-    let gate_s = b.gate.dt * b.gate.bins as f64;
     let sun_rays = opts.reference_rays / 50;
-    let fixed = SunSource::new(&sun_spec(SunSelection::Fixed), 0.8, b.scene.bounds());
+    let fixed = sun_spec(SunSelection::Fixed);
     let (mut off, mut on) = (Vec::new(), Vec::new());
     let mut photons = 0.0;
     for seed in 0..opts.seeds {
@@ -475,7 +451,7 @@ fn sun_section(opts: &BenchOptions, b: &Bench, reference: &Waveform) -> String {
             Sampler::Independent,
             sun_rays,
             40 + seed,
-            Some(fixed),
+            Some(fixed.clone()),
         );
         on.push(t);
         photons = w.solar_photons_per_bin as f64;
@@ -489,14 +465,7 @@ fn sun_section(opts: &BenchOptions, b: &Bench, reference: &Waveform) -> String {
     );
     let selections: Vec<SelectionRow> = [SunSelection::Fixed, SunSelection::Power]
         .into_iter()
-        .map(|sel| {
-            let sun = SunSource::new(&sun_spec(sel), 0.8, b.scene.bounds()).for_gate(
-                b.inst.pulse_energy_j,
-                gate_s,
-                b.gate.view_area_m2(&b.inst),
-            );
-            selection_row(b, reference, sun, sel, sun_rays, opts.seeds)
-        })
+        .map(|sel| selection_row(b, reference, sun_spec(sel), sel, sun_rays, opts.seeds))
         .collect();
     text += &selection_table(&selections, sun_rays);
     text
@@ -596,11 +565,19 @@ impl SelectionRow {
 fn selection_row(
     b: &Bench,
     reference: &Waveform,
-    sun: SunSource,
+    sun: crate::campaign::Sun,
     selection: SunSelection,
     rays: u64,
     seeds: u64,
 ) -> SelectionRow {
+    // the probability of tracing the sun that the pulse's setup gives it
+    let q = {
+        let mut c = b.campaign.clone();
+        c.sun = Some(sun.clone());
+        let sim = PulseSimulator::new(&c, b.scene);
+        let setup = sim.setup(&b.pulse, Method::Bdpt);
+        setup.sun.map_or(0.0, |s| s.probability)
+    };
     let (mut e, mut se, mut t) = (Vec::new(), Vec::new(), Vec::new());
     for seed in 0..seeds {
         let (w, secs) = b.run_with_sun(
@@ -608,7 +585,7 @@ fn selection_row(
             Sampler::Independent,
             rays,
             60 + seed,
-            Some(sun),
+            Some(sun.clone()),
         );
         e.push(rrmse(&w.laser_photons, &reference.laser_photons));
         se.push(w.solar_power_se_w / w.solar_power_w);
@@ -616,7 +593,7 @@ fn selection_row(
     }
     SelectionRow {
         selection,
-        q: sun.probability,
+        q,
         laser_rrmse: median(&mut e),
         solar_rel_se: median(&mut se),
         seconds: median(&mut t),

@@ -139,7 +139,7 @@ pub struct GenerateArgs {
 /// Why this build cannot run on this CPU, if it cannot: `.cargo/config.toml` builds for
 /// x86-64-v3, and a CPU without its instructions would otherwise stop on the first one it
 /// meets, with no message.
-fn unsupported_cpu() -> Option<String> {
+pub fn unsupported_cpu() -> Option<String> {
     #[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
     {
         let lacks = |f: bool, name: &str| (!f).then(|| name.to_string());
@@ -163,12 +163,22 @@ fn unsupported_cpu() -> Option<String> {
 }
 
 pub fn main() -> i32 {
+    main_with(std::env::args_os())
+}
+
+/// [`main`] with the arguments given (the first is the program's name): the Python
+/// package's `lidarsim` command calls it with its own.
+pub fn main_with<I, T>(args: I) -> i32
+where
+    I: IntoIterator<Item = T>,
+    T: Into<std::ffi::OsString> + Clone,
+{
     if let Some(why) = unsupported_cpu() {
         eprintln!("error: {why}");
         return 1;
     }
     crate::progress::tune_allocator();
-    let cli = match Cli::try_parse() {
+    let cli = match Cli::try_parse_from(args) {
         Ok(c) => c,
         Err(e) => {
             let code = if e.use_stderr() { 1 } else { 0 };
@@ -323,10 +333,7 @@ fn parse_shard(s: &str) -> Result<(usize, usize)> {
         k.trim().parse().map_err(|_| bad())?,
         n.trim().parse().map_err(|_| bad())?,
     );
-    if n == 0 || k >= n {
-        return Err(bad());
-    }
-    Ok((k, n))
+    pipeline::check_shard((k, n)).map_err(|_| bad())
 }
 
 pub(crate) fn require_file(path: &std::path::Path) -> Result<()> {

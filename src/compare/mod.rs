@@ -145,27 +145,65 @@ pub fn markdown(rows: &[RunRow]) -> String {
     s
 }
 
+/// The columns of the CSV table, in order.
+pub const CSV_COLUMNS: [&str; 16] = [
+    "run",
+    "altitude_m",
+    "prf_hz",
+    "pulses",
+    "points",
+    "points_per_pulse",
+    "pulse_density_per_m2",
+    "dsm_bias_m",
+    "dsm_rmse_m",
+    "dsm_coverage",
+    "run_time_s",
+    "rays_per_pulse",
+    "sampler",
+    "within_5cm",
+    "within_25cm",
+    "median_distance_m",
+];
+
+/// The CSV table's columns as an Arrow table: text, unsigned counts and floats, null where
+/// the CSV cell is empty.
+pub fn table(rows: &[RunRow]) -> arrow_array::RecordBatch {
+    use arrow_array::{ArrayRef, Float64Array, StringArray, UInt64Array};
+    use std::sync::Arc;
+    let f = |g: fn(&RunRow) -> Option<f64>| -> ArrayRef {
+        Arc::new(Float64Array::from_iter(rows.iter().map(g)))
+    };
+    let u = |g: fn(&RunRow) -> Option<u64>| -> ArrayRef {
+        Arc::new(UInt64Array::from_iter(rows.iter().map(g)))
+    };
+    let t = |g: fn(&RunRow) -> Option<String>| -> ArrayRef {
+        Arc::new(StringArray::from_iter(rows.iter().map(g)))
+    };
+    let columns: [ArrayRef; 16] = [
+        t(|r| Some(r.run.clone())),
+        f(|r| r.altitude_m),
+        f(|r| r.prf_hz),
+        u(|r| Some(r.pulses)),
+        u(|r| r.points),
+        f(|r| r.points_per_pulse),
+        f(|r| r.pulse_density_m2),
+        f(|r| r.dsm_bias_m),
+        f(|r| r.dsm_rmse_m),
+        f(|r| r.dsm_coverage),
+        f(|r| Some(r.run_time_s)),
+        u(|r| r.rays_per_pulse),
+        t(|r| r.sampler.clone()),
+        f(|r| r.within_5cm),
+        f(|r| r.within_25cm),
+        f(|r| r.median_distance_m),
+    ];
+    crate::parquet_io::batch(CSV_COLUMNS.iter().copied().zip(columns).collect())
+}
+
 /// Writes the table as CSV (run names quoted when they need it).
 pub fn write_csv(path: &Path, rows: &[RunRow]) -> Result<()> {
     let o = |v: Option<f64>| v.map(|x| x.to_string()).unwrap_or_default();
-    let header = [
-        "run",
-        "altitude_m",
-        "prf_hz",
-        "pulses",
-        "points",
-        "points_per_pulse",
-        "pulse_density_per_m2",
-        "dsm_bias_m",
-        "dsm_rmse_m",
-        "dsm_coverage",
-        "run_time_s",
-        "rays_per_pulse",
-        "sampler",
-        "within_5cm",
-        "within_25cm",
-        "median_distance_m",
-    ];
+    let header = CSV_COLUMNS;
     let table = rows.iter().map(|r| {
         vec![
             r.run.clone(),

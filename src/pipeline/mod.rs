@@ -8,15 +8,17 @@
 //! file already written: a run killed at any moment and resumed gives the same files as an
 //! uninterrupted one, since every random draw derives from (seed, pulse, chunk).
 
+pub mod check;
 pub mod manifest;
 pub mod memory;
+pub mod open;
 pub mod simulate;
 pub mod sweep;
 
 pub use manifest::StageRecord;
 use manifest::{fingerprint, forget_damaged, invalidate_after, record, save, Manifest};
 use simulate::simulate_parts;
-pub use simulate::{probe_rays_per_second, simulate, with_method_chosen};
+pub use simulate::{probe_rays_per_second, simulate, simulate_in_memory, with_method_chosen};
 use sweep::run_sweep;
 pub use sweep::RunTotals;
 
@@ -50,6 +52,30 @@ impl Stage {
             Stage::Report => "report",
         }
     }
+
+    /// The stage of a name as [`Stage::name`] gives it, with the names there are when not.
+    pub fn from_name(name: &str) -> Result<Stage> {
+        Stage::ALL
+            .into_iter()
+            .find(|s| s.name() == name.trim())
+            .ok_or_else(|| {
+                let names: Vec<&str> = Stage::ALL.iter().map(|s| s.name()).collect();
+                Error::msg(format!(
+                    "stage {name:?}: expected one of {}",
+                    names.join(", ")
+                ))
+            })
+    }
+}
+
+/// `K/N` with 0 ≤ K < N, checked: the parts a shard simulates.
+pub fn check_shard((k, n): (usize, usize)) -> Result<(usize, usize)> {
+    if n == 0 || k >= n {
+        return Err(Error::msg(format!(
+            "shard {k}/{n}: expected K/N with 0 <= K < N, e.g. 0/4"
+        )));
+    }
+    Ok((k, n))
 }
 
 #[derive(Clone, Debug, Default)]
@@ -77,14 +103,18 @@ pub struct RunSummary {
 
 /// Runs a campaign file into its run folder (each combination of a sweep into a sub-folder).
 pub fn run(campaign_path: &Path, opts: &RunOptions) -> Result<RunSummary> {
-    let loaded = plan::read_campaign(campaign_path)?;
+    run_loaded(&plan::read_campaign(campaign_path)?, opts)
+}
+
+/// [`run`] for a campaign already read and checked (a host's mapping, overrides applied).
+pub fn run_loaded(loaded: &Loaded, opts: &RunOptions) -> Result<RunSummary> {
     let out = opts
         .out
         .clone()
         .unwrap_or_else(|| PathBuf::from("runs").join(&loaded.campaign.name));
     with_threads(opts.threads, || match &loaded.campaign.sweep {
-        Some(sweep) => run_sweep(&loaded, sweep, &out, opts),
-        None => run_single(&loaded, &out, opts, &mut SceneCache::default()),
+        Some(sweep) => run_sweep(loaded, sweep, &out, opts),
+        None => run_single(loaded, &out, opts, &mut SceneCache::default()),
     })
 }
 

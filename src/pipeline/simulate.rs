@@ -7,16 +7,12 @@ use crate::fsutil::{Committer, Pending};
 use crate::plan::{Plan, Pulse};
 use crate::progress::{log, progress};
 use crate::scene::Scene;
-use crate::sensor::{pulse_sigma_s, Gate, Laser, Receiver, SunSource};
-use crate::transport::atmosphere::Atmosphere;
-use crate::transport::bands::Bands;
-use crate::transport::{simulate_pulse, simulate_pulse_in, PulseSetup, Scratch};
+use crate::transport::{simulate_pulse, Scratch};
 use crate::waveform::file::{part_name, waveforms_pending, Parts};
-use crate::waveform::{self, Radiometry, Waveform};
-use glam::DVec3;
+use crate::waveform::pulse::PulseSimulator;
+use crate::waveform::Waveform;
 use indicatif::ProgressBar;
 use rayon::prelude::*;
-use std::io::IsTerminal;
 use std::path::Path;
 use std::sync::Mutex;
 use std::time::Instant;
@@ -41,7 +37,7 @@ pub(super) fn simulate_parts(
     let clock = crate::progress::StageClock::start();
     let mut rays = 0u64;
     let mut done_pulses = 0usize;
-    let terminal = std::io::stderr().is_terminal();
+    let terminal = crate::progress::interactive();
     let mut last_log = 0.0;
     let mut written = 0usize;
     let mut stopped = None;
@@ -146,113 +142,6 @@ pub(super) fn pulse_stats_pending<'w>(
     crate::fsutil::csv_pending(path, &header, rows)
 }
 
-/// In a repeated scene, the box of the landscape a pulse sees: the copy of the scene's box
-/// under its beam grown sideways by the wider of its cones at the bottom of the scene (at
-/// most ten periods), which the sun's disk must cover for its light sub-paths to reach every
-/// point in view.
-fn viewed_box(
-    inst: &crate::campaign::Instrument,
-    p: &Pulse,
-    (lo, hi): (DVec3, DVec3),
-) -> (DVec3, DVec3) {
-    let half = inst.fov_half_angle_mrad.max(inst.footprint_half_angle_mrad) * 1e-3;
-    let down = (p.origin.z - lo.z).max(0.0) / p.direction.z.abs().max(1e-9);
-    let grow = (down * half.tan()).min(10.0 * (hi - lo).truncate().max_element());
-    let g = DVec3::new(grow, grow, 0.0);
-    (lo - g, hi + g)
-}
-
-/// What every pulse of a campaign shares: its instrument, sun, atmosphere and bands.
-struct Shared<'a> {
-    loaded: &'a Loaded,
-    scene: &'a Scene,
-    sun: Option<SunSource>,
-    /// The first band's atmosphere, which paths are weighted with.
-    atmosphere: Option<Atmosphere>,
-    /// With several bands, what turns a path's throughput into each band's.
-    bands: Option<Bands>,
-    sigma: f64,
-}
-
-impl<'a> Shared<'a> {
-    fn new(loaded: &'a Loaded, scene: &'a Scene) -> Shared<'a> {
-        let c = &loaded.campaign;
-        let inst = &c.instrument;
-        let sun = c
-            .sun
-            .as_ref()
-            .map(|s| SunSource::new(s, inst.bandwidth_nm.unwrap_or(0.0), scene.bounds()));
-        // every layer has an optical depth at each wavelength: the campaign's validation says so
-        let per_band: Vec<Atmosphere> = c
-            .atmosphere
-            .as_ref()
-            .map(|a| {
-                let bands = c.wavelength_nm.all().iter();
-                bands.filter_map(|&w| Atmosphere::new(a, w).ok()).collect()
-            })
-            .unwrap_or_default();
-        let bands = c
-            .wavelength_nm
-            .several()
-            .then(|| Bands::new(scene, &per_band));
-        Shared {
-            loaded,
-            scene,
-            sun,
-            atmosphere: per_band.into_iter().next(),
-            bands,
-            sigma: pulse_sigma_s(inst),
-        }
-    }
-
-    /// Pulse `p`'s setup, traced with `method`.
-    fn setup(&self, p: &Pulse, method: Method) -> PulseSetup<'_> {
-        let (c, scene) = (&self.loaded.campaign, self.scene);
-        let inst = &c.instrument;
-        let mut near = scene.bounds_near(p.origin, p.direction);
-        if let Some(w) = &scene.water {
-            // light is slower in the water column: the gate reaches as far as a path down to
-            // the bottom of the box takes, as if the box were deeper by (n - 1) × depth
-            near.0.z -= (w.n - 1.0) * (w.z - near.0.z).max(0.0);
-        }
-        let gate = Gate::for_pulse(inst, p.origin, p.direction, near);
-        let sun = self.sun.map(|s| {
-            let s = if scene.is_repeated() {
-                let (lo, hi) = viewed_box(inst, p, near);
-                s.covering(lo, hi)
-            } else {
-                s
-            };
-            s.for_gate(
-                inst.pulse_energy_j,
-                gate.dt * gate.bins as f64,
-                gate.view_area_m2(inst),
-            )
-        });
-        PulseSetup {
-            scene,
-            laser: Laser::new(inst, p.origin, p.direction),
-            receiver: Receiver::new(
-                inst,
-                p.origin + p.platform_to_scene(inst.receiver_offset_m.unwrap_or_default()),
-                p.direction,
-            ),
-            gate,
-            sub_bins: waveform::sub_bins_per_bin(gate.dt, self.sigma),
-            method,
-            heuristic: c.simulation.mis,
-            sampler: c.simulation.sampler,
-            receiver_depth: c.simulation.receiver_depth,
-            sun,
-            atmosphere: self.atmosphere.as_ref(),
-            bands: self.bands.as_ref(),
-            max_order: c.simulation.max_order,
-            seed: c.seed,
-            pulse_id: p.id,
-        }
-    }
-}
-
 /// Tasks each thread's share of pulses is cut into where they are cut finely (see
 /// [`leaf_pulses`]), and otherwise.
 const TASKS_PER_THREAD: usize = 64;
@@ -292,15 +181,7 @@ pub fn simulate(
     finely: bool,
 ) -> (Vec<Waveform>, Vec<f64>) {
     let c = &loaded.campaign;
-    let inst = &c.instrument;
-    let shared = Shared::new(loaded, scene);
-    let radiometry = Radiometry {
-        pulse_energy_j: inst.pulse_energy_j,
-        receiver_area_m2: inst.receiver_area_m2,
-        fov_half_angle: inst.fov_half_angle_mrad * 1e-3,
-        sun: shared.sun.map(|s| (s.band_irradiance, s.cos_zenith)),
-    };
-    let several = c.wavelength_nm.several();
+    let sim = PulseSimulator::new(c, scene);
     // a scratch per thread, not per task: the tasks can be many (see `leaf_pulses`), and
     // each new scratch allocates its tally and buffers again
     let scratches: Vec<Mutex<Scratch>> = (0..rayon::current_num_threads())
@@ -319,27 +200,11 @@ pub fn simulate(
                 .and_then(|k| scratches.get(k))
                 .and_then(|m| m.try_lock().ok());
             let scratch = held.as_deref_mut().unwrap_or(&mut own);
-            let setup = shared.setup(p, c.simulation.method);
             let t = Instant::now();
-            simulate_pulse_in(&setup, c.simulation.rays_per_pulse, scratch);
+            let (first, others) = sim.simulate(p, scratch);
             let secs = t.elapsed().as_secs_f64();
             bar.inc(1);
-            let (gate, sub_bins) = (&setup.gate, setup.sub_bins);
-            let row = |b: usize, nm: f64| {
-                let hv = crate::photon_energy_j(nm);
-                let tally = scratch.band(b);
-                let mut w =
-                    waveform::waveform(p.id, tally, gate, sub_bins, shared.sigma, hv, &radiometry);
-                w.wavelength_nm = several.then_some(nm);
-                w
-            };
-            let bands = c.wavelength_nm.all();
-            let others = bands.iter().enumerate().skip(1);
-            (
-                row(0, bands[0]),
-                others.map(|(b, &nm)| row(b, nm)).collect(),
-                secs,
-            )
+            (first, others, secs)
         })
         .collect();
     let mut rows = Vec::with_capacity(per_pulse.len() * c.wavelength_nm.all().len());
@@ -350,6 +215,28 @@ pub fn simulate(
         secs.push(s);
     }
     (rows, secs)
+}
+
+/// The pulses of a small campaign simulated in memory as a run simulates them (the `auto`
+/// choices made by the same pilots), one after another in `scratch`: their waveform rows,
+/// one per pulse and band. What a single pulse asked for from Python is: pulse 0 of a
+/// one-pulse campaign ([`crate::plan::OnePulse`]).
+pub fn simulate_in_memory(
+    loaded: &Loaded,
+    scene: &Scene,
+    scratch: &mut Scratch,
+) -> Result<Vec<Waveform>> {
+    let plan = Plan::new(&loaded.campaign)?;
+    let chosen = with_method_chosen(loaded, scene, &plan);
+    let c = &chosen.as_ref().unwrap_or(loaded).campaign;
+    let sim = PulseSimulator::new(c, scene);
+    let mut rows = Vec::new();
+    for p in plan.pulses(0..plan.len()) {
+        let (first, others) = sim.simulate(&p, scratch);
+        rows.push(first);
+        rows.extend(others);
+    }
+    Ok(rows)
 }
 
 /// The pilot of `simulation.method: auto`: at most 2048 rays per pulse (so the pilot's draws
@@ -417,12 +304,12 @@ fn pilot_sums(
     rays: u64,
     method: Method,
 ) -> PilotSums {
-    let shared = Shared::new(loaded, scene);
+    let sim = PulseSimulator::new(&loaded.campaign, scene);
     let tallies: Vec<_> = pulses
         .par_iter()
         .with_max_len(leaf_pulses(pulses.len(), true))
         .map(|p| {
-            let setup = shared.setup(p, method);
+            let setup = sim.setup(p, method);
             let gate_s = setup.gate.dt * setup.gate.bins as f64;
             (simulate_pulse(&setup, rays), gate_s)
         })

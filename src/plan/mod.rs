@@ -111,10 +111,110 @@ pub fn is_multiple(extent: f64, step: f64) -> bool {
 
 /// Reads a campaign file and checks all of it: its own keys, its platform, its scene file.
 pub fn read_campaign(path: &std::path::Path) -> Result<Loaded> {
-    let doc = Doc::read(path)?;
-    let campaign: Campaign = doc.parse()?;
-    check_campaign(&doc, &campaign)?;
+    load_campaign(Doc::read(path)?, &[])
+}
+
+/// Checks a campaign's text (a file read, or a host's mapping written as YAML) with
+/// `overrides` (dotted keys, as in a sweep) applied before validation. An error at an
+/// overridden key names the override.
+pub fn load_campaign(doc: Doc, overrides: &[(String, serde_yaml::Value)]) -> Result<Loaded> {
+    if overrides.is_empty() {
+        let campaign: Campaign = doc.parse()?;
+        check_campaign(&doc, &campaign)?;
+        return Loaded::new(doc, campaign);
+    }
+    let mut tree: serde_yaml::Value = doc.parse()?;
+    let named = |k: &str, v: &serde_yaml::Value, m: &dyn std::fmt::Display| {
+        let value = serde_yaml::to_string(v).unwrap_or_default();
+        Error::at(
+            &doc.path,
+            None,
+            k,
+            format!("override {}: {m}", value.trim()),
+        )
+    };
+    for (k, v) in overrides {
+        crate::campaign::yaml::set_path(&mut tree, k, v.clone()).map_err(|m| named(k, v, &m))?;
+    }
+    let campaign: Campaign = serde_yaml::from_value(tree).map_err(|e| {
+        let e = e.to_string();
+        match overrides
+            .iter()
+            .find(|(k, _)| e.contains(k.rsplit('.').next().unwrap_or(k)))
+        {
+            Some((k, v)) => named(k, v, &e),
+            None => doc.error("", format!("with the overrides: {e}")),
+        }
+    })?;
+    check_campaign(&doc, &campaign).map_err(|e| {
+        let ek = e.key.clone().unwrap_or_default();
+        match overrides
+            .iter()
+            .find(|(k, _)| ek == *k || ek.starts_with(&format!("{k}.")))
+        {
+            Some((k, v)) => named(k, v, &e.message),
+            None => e,
+        }
+    })?;
     Loaded::new(doc, campaign)
+}
+
+/// A one-pulse static campaign over a scene, given as the sections of a campaign file
+/// (YAML values), and its pulse 0. A single pulse simulated in memory is defined as this
+/// campaign's pulse (spec: python.md), and the bench traces its pulses so.
+#[derive(Clone, Debug)]
+pub struct OnePulse {
+    pub instrument: serde_yaml::Value,
+    pub origin: [f64; 3],
+    pub direction: [f64; 3],
+    pub wavelength_nm: serde_yaml::Value,
+    /// The `simulation:` section (method, rays_per_pulse, max_order, ...).
+    pub simulation: serde_yaml::Value,
+    pub seed: u64,
+    pub sun: Option<serde_yaml::Value>,
+    pub atmosphere: Option<serde_yaml::Value>,
+}
+
+impl OnePulse {
+    /// The campaign, checked as a file is; `label` names it in error messages.
+    pub fn campaign(&self, scene: &std::path::Path, label: &str) -> Result<(Loaded, Pulse)> {
+        use serde_yaml::Value;
+        let scene = std::path::absolute(scene)
+            .map_err(|e| Error::io(scene, "cannot resolve the scene's path", e))?;
+        let xyz = |v: [f64; 3]| Value::Sequence(v.iter().map(|&x| Value::from(x)).collect());
+        let mut pulse = serde_yaml::Mapping::new();
+        pulse.insert("position".into(), xyz(self.origin));
+        pulse.insert("direction".into(), xyz(self.direction));
+        let mut platform = serde_yaml::Mapping::new();
+        platform.insert("kind".into(), "static".into());
+        platform.insert(
+            "pulses".into(),
+            Value::Sequence(vec![Value::Mapping(pulse)]),
+        );
+        let mut m = serde_yaml::Mapping::new();
+        m.insert("name".into(), "pulse".into());
+        m.insert("scene".into(), scene.display().to_string().into());
+        m.insert("seed".into(), self.seed.into());
+        m.insert("wavelength_nm".into(), self.wavelength_nm.clone());
+        m.insert("instrument".into(), self.instrument.clone());
+        m.insert("platform".into(), Value::Mapping(platform));
+        m.insert("simulation".into(), self.simulation.clone());
+        if let Some(sun) = &self.sun {
+            m.insert("sun".into(), sun.clone());
+        }
+        if let Some(a) = &self.atmosphere {
+            m.insert("atmosphere".into(), a.clone());
+        }
+        let text = serde_yaml::to_string(&Value::Mapping(m))
+            .map_err(|e| Error::msg(format!("{label}: {e}")))?;
+        let doc = Doc {
+            path: std::path::PathBuf::from(label),
+            text,
+        };
+        let loaded = load_campaign(doc, &[])?;
+        let pulse = Plan::new(&loaded.campaign)?.pulse(0);
+        Ok((loaded, pulse))
+    }
 }
 
 /// Checks a campaign's own keys, then its platform.

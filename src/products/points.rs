@@ -140,6 +140,55 @@ pub fn points_on_axis(
         .collect()
 }
 
+/// Points as an Arrow table, one row each: x, y, z, gps_time (f64), return_number,
+/// number_of_returns, classification (u8), intensity (u16), apparent_reflectance (f32),
+/// pulse_id (u64), scan_angle_deg (f32), point_source_id (u16), and wavelength_nm (f32)
+/// when any point has a band (a run of several).
+pub fn points_table(points: &[Point]) -> arrow_array::RecordBatch {
+    use arrow_array::{ArrayRef, Float32Array, Float64Array, UInt16Array, UInt64Array, UInt8Array};
+    use std::sync::Arc;
+    let f64s = |f: fn(&Point) -> f64| -> ArrayRef {
+        Arc::new(Float64Array::from_iter_values(points.iter().map(f)))
+    };
+    let u8s = |f: fn(&Point) -> u8| -> ArrayRef {
+        Arc::new(UInt8Array::from_iter_values(points.iter().map(f)))
+    };
+    let u16s = |f: fn(&Point) -> u16| -> ArrayRef {
+        Arc::new(UInt16Array::from_iter_values(points.iter().map(f)))
+    };
+    let f32s = |f: fn(&Point) -> f32| -> ArrayRef {
+        Arc::new(Float32Array::from_iter_values(points.iter().map(f)))
+    };
+    let mut columns = vec![
+        ("x", f64s(|p| p.x)),
+        ("y", f64s(|p| p.y)),
+        ("z", f64s(|p| p.z)),
+        ("gps_time", f64s(|p| p.gps_time)),
+        ("return_number", u8s(|p| p.return_number)),
+        ("number_of_returns", u8s(|p| p.number_of_returns)),
+        ("classification", u8s(|p| p.classification)),
+        ("intensity", u16s(|p| p.intensity)),
+        ("apparent_reflectance", f32s(|p| p.apparent_reflectance)),
+        (
+            "pulse_id",
+            Arc::new(UInt64Array::from_iter_values(
+                points.iter().map(|p| p.pulse_id),
+            )) as ArrayRef,
+        ),
+        ("scan_angle_deg", f32s(|p| p.scan_angle_deg)),
+        ("point_source_id", u16s(|p| p.point_source_id)),
+    ];
+    if points.iter().any(|p| p.wavelength_nm.is_some()) {
+        columns.push((
+            "wavelength_nm",
+            Arc::new(Float32Array::from_iter(
+                points.iter().map(|p| p.wavelength_nm),
+            )),
+        ));
+    }
+    crate::parquet_io::batch(columns)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -196,6 +196,46 @@ fn water_body(doc: &Doc, file: &SceneFile, wavelengths_nm: &[f64]) -> Result<Opt
     Ok(body)
 }
 
+/// A wavelength at which every material of the scene file has its values: the first of the
+/// first table's that every other table also gives, 1064 nm when no value is a table. For a
+/// host that loads a scene before it knows the bands it will trace.
+pub(crate) fn common_wavelength(path: &Path) -> Result<f64> {
+    use crate::campaign::spectral::Spectral;
+    let doc = Doc::read(path)?;
+    let file: SceneFile = doc.parse()?;
+    let tables: Vec<&Vec<(f64, f64)>> = file
+        .materials
+        .values()
+        .flat_map(|m| {
+            [
+                Some(&m.reflectance),
+                m.back_reflectance.as_ref(),
+                m.transmittance.as_ref(),
+            ]
+        })
+        .flatten()
+        .filter_map(|s| match s {
+            Spectral::Table(t) => Some(t),
+            Spectral::Single(_) => None,
+        })
+        .collect();
+    let Some(first) = tables.first() else {
+        return Ok(1064.0);
+    };
+    first
+        .iter()
+        .map(|&(w, _)| w)
+        .find(|&w| {
+            tables
+                .iter()
+                .all(|t| Spectral::Table((*t).clone()).at(w).is_ok())
+        })
+        .ok_or_else(|| {
+            Error::file(path, "no wavelength is given by every material's table")
+                .advise("name the wavelengths to load the scene at")
+        })
+}
+
 /// Reads a scene file and builds its scene: the objects checked against the file, every
 /// distinct mesh loaded once, materials given to each slot, instances placed, the top level
 /// built.

@@ -323,6 +323,12 @@ impl Scene {
         load::load(path, &[wavelength_nm])
     }
 
+    /// A wavelength every material of the scene file gives a value at (see
+    /// [`load::common_wavelength`]): where a host loads a scene before it knows its bands.
+    pub fn common_wavelength(path: &Path) -> Result<f64> {
+        load::common_wavelength(path)
+    }
+
     /// [`Scene::load`] with materials resolved in each of several bands.
     pub fn load_bands(path: &Path, wavelengths_nm: &[f64]) -> Result<Scene> {
         load::load(path, wavelengths_nm)

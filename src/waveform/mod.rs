@@ -6,6 +6,7 @@
 //! depend on where a path's time falls inside its bin.
 
 pub mod file;
+pub mod pulse;
 pub mod record;
 
 use crate::sensor::Gate;

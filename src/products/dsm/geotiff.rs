@@ -88,6 +88,66 @@ fn geokeys(frame: Option<&Frame>) -> Vec<u16> {
     out
 }
 
+/// A raster read back from a GeoTIFF [`write`] wrote.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Raster {
+    pub width: usize,
+    pub height: usize,
+    /// Row-major from the north-west cell, NaN where there is no data.
+    pub values: Vec<f32>,
+    /// GDAL's geotransform: west, cell width, 0, north, 0, -cell height.
+    pub transform: [f64; 6],
+    /// The CRS's EPSG code; None for local metres.
+    pub epsg: Option<u16>,
+}
+
+/// Reads a raster [`write`] wrote (float32, one band, the tags it writes).
+pub fn read(path: &Path) -> Result<Raster> {
+    use tiff::decoder::{Decoder, DecodingResult};
+    let bad = |e: &dyn std::fmt::Display| {
+        Error::data(path, format!("not a GeoTIFF lidarsim wrote: {e}"))
+            .advise("run the products stage again")
+    };
+    let file = std::fs::File::open(path).map_err(|e| Error::io(path, "cannot open", e))?;
+    let mut d = Decoder::new(std::io::BufReader::new(file)).map_err(|e| bad(&e))?;
+    let (w, h) = d.dimensions().map_err(|e| bad(&e))?;
+    let tie = d
+        .get_tag_f64_vec(Tag::ModelTiepointTag)
+        .map_err(|e| bad(&e))?;
+    let scale = d
+        .get_tag_f64_vec(Tag::ModelPixelScaleTag)
+        .map_err(|e| bad(&e))?;
+    let keys = d
+        .get_tag_u16_vec(Tag::GeoKeyDirectoryTag)
+        .map_err(|e| bad(&e))?;
+    if tie.len() < 6 || scale.len() < 2 {
+        return Err(bad(&"its tiepoint or pixel scale is short"));
+    }
+    let epsg = keys
+        .chunks_exact(4)
+        .skip(1)
+        .find(|k| k[0] == 3072 && k[1] == 0)
+        .map(|k| k[3])
+        .filter(|&c| c != 32767);
+    let DecodingResult::F32(values) = d.read_image().map_err(|e| bad(&e))? else {
+        return Err(bad(&"its cells are not float32"));
+    };
+    if values.len() != w as usize * h as usize {
+        return Err(bad(&"its size does not match its cells"));
+    }
+    let values = values
+        .into_iter()
+        .map(|v| if v == NODATA { f32::NAN } else { v })
+        .collect();
+    Ok(Raster {
+        width: w as usize,
+        height: h as usize,
+        values,
+        transform: [tie[3], scale[0], 0.0, tie[4], 0.0, -scale[1]],
+        epsg,
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -136,6 +196,11 @@ mod tests {
             panic!("not float32");
         };
         assert_eq!(v[0], 4.0);
+        let r = read(&path).unwrap();
+        assert_eq!((r.width, r.height, r.epsg), (3, 2, None));
+        assert_eq!(r.transform, [10.0, 2.0, 0.0, 24.0, 0.0, -2.0]);
+        assert_eq!(&r.values[..5], &[4.0, 5.0, 6.0, 1.0, 2.0]);
+        assert!(r.values[5].is_nan());
         let _ = std::fs::remove_dir_all(&dir);
     }
 }

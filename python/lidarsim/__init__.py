@@ -1,0 +1,370 @@
+"""lidarsim: physically based LiDAR simulation, from Python.
+
+Two ways in:
+
+* campaigns, as the ``lidarsim`` command runs them: :func:`run` writes a run folder and
+  returns a :class:`Run`, whose tables come back as ``pyarrow.Table`` (:func:`open_run` opens
+  an existing folder; :func:`check` and :func:`compare` are the commands of the same names);
+* single pulses in memory, for retrieval loops: :meth:`Scene.load` builds a scene once and
+  :meth:`Scene.simulate_pulse` returns a :class:`Waveform` of numpy arrays.
+
+Every name here is a thin layer over the compiled core (``lidarsim._lidarsim``), which is
+the same library the command line runs: the same campaigns give the same files. Progress goes
+to the ``lidarsim`` logger of :mod:`logging`; errors are :class:`LidarsimError` subclasses.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+from pathlib import Path
+from typing import Any, Dict, Iterable, List, Mapping, Optional, Sequence, Tuple, Union
+
+from . import _lidarsim
+from .errors import DataError, InputError, IoError, LidarsimError
+
+__all__ = [
+    "__version__",
+    "run",
+    "open_run",
+    "check",
+    "compare",
+    "Run",
+    "Scene",
+    "Waveform",
+    "LidarsimError",
+    "InputError",
+    "DataError",
+    "IoError",
+]
+
+#: The version of the compiled core (the Rust crate's).
+__version__: str = _lidarsim.version()
+
+# a library's logger stays quiet until the application configures logging
+logging.getLogger("lidarsim").addHandler(logging.NullHandler())
+
+PathLike = Union[str, "os.PathLike[str]"]
+
+
+def _table(stream: Any) -> "pyarrow.Table":  # noqa: F821
+    """A ``pyarrow.Table`` from the core's Arrow C stream (no copy of the columns)."""
+    import pyarrow as pa
+
+    return pa.RecordBatchReader.from_stream(stream).read_all()
+
+
+def _array(data: bytearray, dtype: str = "<f8") -> "numpy.ndarray":  # noqa: F821
+    """A writable numpy array over the bytes the core made (no copy)."""
+    import numpy as np
+
+    return np.frombuffer(data, dtype=dtype)
+
+
+def run(
+    campaign: Union[PathLike, Mapping[str, Any]],
+    out: Optional[PathLike] = None,
+    threads: Optional[int] = None,
+    resume: bool = False,
+    stages: Optional[Sequence[str]] = None,
+    shard: Optional[Tuple[int, int]] = None,
+    overrides: Optional[Mapping[str, Any]] = None,
+    base_dir: Optional[PathLike] = None,
+) -> "Run":
+    """Runs a campaign into its run folder, as ``lidarsim run`` does, and returns the run.
+
+    Args:
+        campaign: a campaign file, or a mapping holding the campaign's YAML (its relative
+            paths resolve against ``base_dir``, else the current directory).
+        out: the run folder; default ``runs/<name>``, as the command line.
+        threads: worker threads; default all cores. The files do not depend on it.
+        resume: keep completed stages and the waveform parts whose inputs are unchanged.
+        stages: the stages to run (``"plan"``, ``"simulate"``, ``"products"``,
+            ``"report"``); default all.
+        shard: ``(k, n)``: simulate only the parts whose index is k modulo n.
+        overrides: dotted keys and values applied before validation, as in a sweep:
+            ``{"platform.altitude_m": 500}``.
+        base_dir: where a mapping's relative paths resolve.
+
+    The interpreter is released while the run works, and its progress goes to the
+    ``lidarsim`` logger. Ctrl-C stops it at the next part boundary, with every finished part
+    kept, and then raises ``KeyboardInterrupt``: run again with ``resume=True`` to finish.
+
+    Raises:
+        InputError: the campaign or an argument is wrong (``err.file``, ``err.line``,
+            ``err.key`` say where).
+        IoError, DataError: a file could not be written, or one read back is damaged.
+    """
+    kwargs: Dict[str, Any] = dict(
+        out=None if out is None else os.fspath(out),
+        threads=threads,
+        resume=bool(resume),
+        stages=None if stages is None else [str(s) for s in stages],
+        shard=None if shard is None else (int(shard[0]), int(shard[1])),
+        overrides=None if overrides is None else json.dumps(dict(overrides)),
+    )
+    if isinstance(campaign, Mapping):
+        base = Path(base_dir) if base_dir is not None else Path.cwd()
+        summary = _lidarsim.run(
+            text=json.dumps(campaign, indent=2),
+            label=os.fspath(base / "<campaign>"),
+            **kwargs,
+        )
+    else:
+        summary = _lidarsim.run(path=os.fspath(campaign), **kwargs)
+    r = Run(summary["out"])
+    r.summary = summary
+    return r
+
+
+def open_run(folder: PathLike) -> "Run":
+    """An existing run folder (one ``lidarsim run`` or :func:`run` wrote)."""
+    r = Run(folder)
+    _lidarsim.read_run(os.fspath(r.folder), "manifest")  # checks that it is a run folder
+    return r
+
+
+def check(campaign: PathLike) -> Dict[str, Any]:
+    """What ``lidarsim check`` prints, as a dict: the campaign validated, its scene loaded
+    and measured, the run's memory and time estimated. Keys include ``pulses``,
+    ``instances``, ``triangles`` (instanced), ``distinct_triangles``, ``memory_bound_mib``,
+    ``estimated_time_s`` and ``warnings``."""
+    return json.loads(_lidarsim.check(os.fspath(campaign)))
+
+
+def compare(runs: Iterable[PathLike]) -> "pyarrow.Table":  # noqa: F821
+    """The table of ``lidarsim compare`` (the columns of its ``--csv``), one row per run; a
+    sweep's folder stands for its sub-runs."""
+    return _table(_lidarsim.compare([os.fspath(r) for r in runs]))
+
+
+class Run:
+    """A run folder: its files as tables, dicts and text.
+
+    Tables are ``pyarrow.Table``; every read goes to the files, so a run resumed elsewhere
+    is seen as it is now.
+    """
+
+    def __init__(self, folder: PathLike) -> None:
+        #: The run folder.
+        self.folder: Path = Path(folder)
+        #: What :func:`run` returned for this run (None for :func:`open_run`): ``pulses``,
+        #: ``rays``, ``seconds``, ``parts_done``, ``complete``.
+        self.summary: Optional[Dict[str, Any]] = None
+
+    def __repr__(self) -> str:
+        return f"lidarsim.Run({str(self.folder)!r})"
+
+    def _read(self, what: str, pulse_ids: Optional[List[int]] = None) -> Any:
+        return _lidarsim.read_run(os.fspath(self.folder), what, pulse_ids)
+
+    @property
+    def campaign(self) -> Dict[str, Any]:
+        """``campaign.resolved.yaml``: the campaign with every default filled in."""
+        return json.loads(self._read("campaign"))
+
+    @property
+    def manifest(self) -> Dict[str, Any]:
+        """``manifest.json``: per stage, its status, inputs' fingerprint, outputs, times."""
+        return json.loads(self._read("manifest"))
+
+    @property
+    def report(self) -> str:
+        """``report.md``: the human summary."""
+        return self._read("report")
+
+    def pulses(self) -> "pyarrow.Table":  # noqa: F821
+        """``pulses.parquet``: the planned pulses."""
+        return _table(self._read("pulses"))
+
+    def waveforms(self, pulse_ids: Optional[Iterable[int]] = None) -> "pyarrow.Table":  # noqa: F821
+        """The waveform parts' rows, in pulse order: all of them, or those of ``pulse_ids``
+        (one row per pulse and band)."""
+        ids = None if pulse_ids is None else [int(i) for i in pulse_ids]
+        return _table(self._read("waveforms", ids))
+
+    def points(self) -> "pyarrow.Table":  # noqa: F821
+        """The discrete returns of ``points.las`` or ``points.laz``: x, y, z (in the frame's
+        CRS when the campaign has one), gps_time, return_number, number_of_returns,
+        classification, intensity, apparent_reflectance, pulse_id, scan_angle_deg,
+        point_source_id (+ wavelength_nm with several bands)."""
+        return _table(self._read("points"))
+
+    def photons(self) -> "pyarrow.Table":  # noqa: F821
+        """``photons.parquet``: the photon-counting events."""
+        return _table(self._read("photons"))
+
+    def dsm(self) -> Dict[str, Any]:
+        """The DSM rasters: ``dsm``, ``reference`` and ``difference`` (2-D float32 numpy
+        arrays, north row first, NaN where there is no data), ``transform`` (GDAL's
+        geotransform) and ``crs`` (``"EPSG:N"``, or None in local metres)."""
+        rasters = _lidarsim.read_dsm(os.fspath(self.folder))
+        out: Dict[str, Any] = {}
+        for name, (cells, height, width, transform, epsg) in rasters.items():
+            out[name] = _array(cells, "<f4").reshape(height, width)
+            if name == "dsm":
+                out["transform"] = tuple(transform)
+                out["crs"] = None if epsg is None else f"EPSG:{epsg}"
+        return out
+
+
+class Waveform:
+    """One pulse's waveform, simulated in memory (:meth:`Scene.simulate_pulse`).
+
+    Attributes:
+        t0_ns: time of the start of bin 0 after emission, ns.
+        bin_ns: bin width, ns.
+        wavelength_nm: the band.
+        energy_j: received laser energy per bin before pulse convolution (the impulse
+            response), J.
+        energy_se_j: its standard error per bin, J.
+        photons: mean laser photons per bin at the detector, pulse-convolved, no noise.
+        order_energy_j: received energy by scattering order (index 0 = order 1), J; and
+            ``order_energy_se_j`` its standard errors.
+        received_energy_j: total received laser energy, all orders, in or out of the gate;
+            ``received_energy_se_j`` its standard error; ``outside_gate_energy_j`` the part
+            outside the gate.
+        solar_photons_per_bin: mean solar photons per bin (0 without a sun).
+        rays: ray samples traced.
+        record: with ``record=True``, what the detector records: the instrument's shot and
+            electronic noise, detector response and digitiser applied (counts with a
+            digitiser, photoelectrons without); ``record_background`` the mean of a sample
+            with no laser signal, in the same units. None otherwise.
+    """
+
+    __slots__ = (
+        "t0_ns",
+        "bin_ns",
+        "wavelength_nm",
+        "energy_j",
+        "energy_se_j",
+        "photons",
+        "order_energy_j",
+        "order_energy_se_j",
+        "received_energy_j",
+        "received_energy_se_j",
+        "outside_gate_energy_j",
+        "solar_photons_per_bin",
+        "rays",
+        "record",
+        "record_background",
+    )
+
+    def __init__(self, raw: Dict[str, Any]) -> None:
+        arrays = ("energy_j", "energy_se_j", "photons", "order_energy_j", "order_energy_se_j")
+        for name in self.__slots__:
+            v = raw.get(name)
+            if name in arrays or (name == "record" and v is not None):
+                v = _array(v)
+            setattr(self, name, v)
+
+    @property
+    def time_ns(self) -> "numpy.ndarray":  # noqa: F821
+        """The centre of each bin after emission, ns."""
+        import numpy as np
+
+        return self.t0_ns + (np.arange(len(self.photons)) + 0.5) * self.bin_ns
+
+    @property
+    def range_m(self) -> "numpy.ndarray":  # noqa: F821
+        """The range of each bin's centre, c t / 2, m (vacuum)."""
+        return self.time_ns * 1e-9 * 299_792_458.0 / 2.0
+
+    def __repr__(self) -> str:
+        return (
+            f"lidarsim.Waveform({len(self.photons)} bins of {self.bin_ns} ns from "
+            f"{self.t0_ns:.3f} ns, {self.wavelength_nm} nm, {self.rays} rays, "
+            f"received {self.received_energy_j:.4e} J)"
+        )
+
+
+class Scene:
+    """A scene loaded once (its BVHs built) and reused for many single pulses."""
+
+    def __init__(self, native: Any) -> None:
+        self._native = native
+
+    @classmethod
+    def load(
+        cls, path: PathLike, wavelength_nm: Union[None, float, Sequence[float]] = None
+    ) -> "Scene":
+        """Loads a scene file (the ``scene:`` of a campaign).
+
+        Materials are resolved at ``wavelength_nm`` (one or several bands); by default at a
+        wavelength every material of the file gives. A pulse at another band loads the
+        scene again for it, once, and keeps it.
+        """
+        bands = None
+        if wavelength_nm is not None:
+            bands = [float(wavelength_nm)] if isinstance(wavelength_nm, (int, float)) else [
+                float(w) for w in wavelength_nm
+            ]
+        return cls(_lidarsim.Scene.load(os.fspath(path), bands))
+
+    @property
+    def path(self) -> str:
+        """The scene file."""
+        return self._native.path
+
+    @property
+    def bounds(self) -> Tuple[Tuple[float, float, float], Tuple[float, float, float]]:
+        """((xmin, ymin, zmin), (xmax, ymax, zmax)), scene coordinates, metres."""
+        return self._native.bounds
+
+    def simulate_pulse(
+        self,
+        instrument: Mapping[str, Any],
+        origin: Sequence[float],
+        direction: Sequence[float],
+        wavelength_nm: Union[float, Sequence[float]] = 1064,
+        rays: int = 1000,
+        method: str = "bdpt",
+        max_order: int = 5,
+        seed: int = 1,
+        sun: Optional[Mapping[str, Any]] = None,
+        atmosphere: Optional[Mapping[str, Any]] = None,
+        record: bool = False,
+        simulation: Optional[Mapping[str, Any]] = None,
+    ) -> Union[Waveform, List[Waveform]]:
+        """Simulates one pulse in memory and returns its waveform.
+
+        The pulse is pulse 0 of a one-pulse static campaign over this scene with these
+        settings: the same numbers as that campaign's waveform file (to float32).
+
+        Args:
+            instrument: the campaign's ``instrument:`` mapping, same keys.
+            origin: the laser's position, scene coordinates, m.
+            direction: the beam's direction (normalised here).
+            wavelength_nm: the band; a list of bands returns a list of waveforms.
+            rays: ray samples (``simulation.rays_per_pulse``).
+            method: ``"bdpt"``, ``"forward"``, ``"backward"`` or ``"auto"``.
+            max_order: the highest scattering order traced.
+            seed: every random draw derives from it.
+            sun, atmosphere: the campaign's ``sun:`` and ``atmosphere:`` mappings.
+            record: also draw the instrument's noisy record (``Waveform.record``).
+            simulation: further keys of the campaign's ``simulation:`` section
+                (``sampler``, ``mis``, ``receiver_depth``).
+
+        Raises:
+            InputError: a key or value is wrong (``err.key`` names it).
+        """
+        sim = dict(simulation or {})
+        sim.update(method=method, rays_per_pulse=int(rays), max_order=int(max_order))
+        several = not isinstance(wavelength_nm, (int, float))
+        rows = self._native.simulate_pulse(
+            json.dumps(dict(instrument)),
+            tuple(float(x) for x in origin),
+            tuple(float(x) for x in direction),
+            json.dumps(list(wavelength_nm) if several else wavelength_nm),
+            json.dumps(sim),
+            int(seed),
+            None if sun is None else json.dumps(dict(sun)),
+            None if atmosphere is None else json.dumps(dict(atmosphere)),
+            bool(record),
+        )
+        waveforms = [Waveform(r) for r in rows]
+        return waveforms if several else waveforms[0]
+
+    def __repr__(self) -> str:
+        return f"lidarsim.Scene({self.path!r})"

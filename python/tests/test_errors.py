@@ -1,0 +1,99 @@
+"""Errors as Python exceptions: the class by kind, the place and the advice as attributes."""
+
+import pytest
+
+import lidarsim
+from conftest import PLANE, als_campaign, write_campaign
+
+
+def test_the_exception_classes():
+    assert issubclass(lidarsim.LidarsimError, Exception)
+    assert issubclass(lidarsim.InputError, lidarsim.LidarsimError)
+    assert issubclass(lidarsim.InputError, ValueError)
+    assert issubclass(lidarsim.DataError, lidarsim.LidarsimError)
+    assert issubclass(lidarsim.IoError, lidarsim.LidarsimError)
+    assert issubclass(lidarsim.IoError, OSError)
+
+
+def test_a_bad_value_names_its_file_line_and_key(tmp_path):
+    text = (
+        "name: bad\n"
+        f"scene: {PLANE}\n"
+        "wavelength_nm: 1064\n"
+        "instrument:\n"
+        "  pulse_energy_j: high\n"
+        "  pulse_fwhm_ns: 3\n"
+        "  footprint_half_angle_mrad: 0.3\n"
+        "  fov_half_angle_mrad: 0.5\n"
+        "  receiver_area_m2: 0.01\n"
+        "platform: { kind: static, pulses: [ { position: [5, 5, 100] } ] }\n"
+    )
+    path = tmp_path / "bad.yaml"
+    path.write_text(text)
+    with pytest.raises(lidarsim.InputError) as e:
+        lidarsim.run(path, out=tmp_path / "out")
+    err = e.value
+    assert err.file == str(path)
+    assert err.line == 5
+    assert err.column is not None
+    assert err.key == "instrument.pulse_energy_j"
+    assert str(err).startswith(f"{path}:5:")
+    assert not (tmp_path / "out").exists()
+    # a value out of range, found after parsing, is located too
+    path.write_text(text.replace("pulse_energy_j: high", "pulse_energy_j: -1"))
+    with pytest.raises(lidarsim.InputError) as e:
+        lidarsim.check(path)
+    assert (e.value.line, e.value.key) == (5, "instrument.pulse_energy_j")
+
+
+def test_an_unknown_key_and_a_bad_override(tmp_path):
+    camp = als_campaign()
+    camp["platform"]["altitude"] = 100
+    with pytest.raises(lidarsim.InputError) as e:
+        lidarsim.run(camp, out=tmp_path / "a")
+    assert "altitude" in str(e.value)
+    assert e.value.line is not None
+    with pytest.raises(lidarsim.InputError) as e:
+        lidarsim.run(als_campaign(), out=tmp_path / "b", overrides={"platform.altitude_m": -5})
+    assert e.value.key == "platform.altitude_m"
+    assert "-5" in str(e.value)
+
+
+def test_bad_arguments_are_input_errors(tmp_path):
+    with pytest.raises(lidarsim.InputError):
+        lidarsim.run(tmp_path / "missing.yaml")
+    with pytest.raises(lidarsim.InputError):
+        lidarsim.run(als_campaign(), out=tmp_path / "c", shard=(2, 2))
+    with pytest.raises(lidarsim.InputError):
+        lidarsim.run(als_campaign(), out=tmp_path / "d", stages=["plan", "nothing"])
+    with pytest.raises(lidarsim.InputError):
+        lidarsim.open_run(tmp_path)
+    plane = lidarsim.Scene.load(PLANE)
+    with pytest.raises(lidarsim.InputError) as e:
+        plane.simulate_pulse({"pulse_energy_j": 1.0}, (0, 0, 10), (0, 0, -1))
+    assert e.value.key is not None and e.value.key.startswith("instrument")
+    with pytest.raises(lidarsim.InputError):
+        plane.simulate_pulse(
+            {"pulse_energy_j": 1e-3, "pulse_fwhm_ns": 2, "footprint_half_angle_mrad": 0.3,
+             "fov_half_angle_mrad": 0.4, "receiver_area_m2": 0.1},
+            (50, 50, 10), (0, 0, -1), wavelength_nm=905,
+        )
+    # a file the system cannot read is an I/O error, an OSError as Python's own are
+    with pytest.raises(lidarsim.IoError) as e:
+        lidarsim.Scene.load(tmp_path / "none.yaml")
+    assert e.value.file.endswith("none.yaml")
+
+
+def test_damaged_files_are_data_errors(tmp_path):
+    run = lidarsim.run(
+        dict(als_campaign(), products={"points": True}),
+        out=tmp_path / "r",
+        stages=["plan", "simulate", "products"],
+    )
+    (run.folder / "pulses.parquet").write_bytes(b"not parquet")
+    with pytest.raises(lidarsim.DataError) as e:
+        run.pulses()
+    assert e.value.file.endswith("pulses.parquet")
+    assert e.value.advice
+    with pytest.raises(lidarsim.InputError):
+        run.photons()  # a discrete-return run writes none: the message says which stage would

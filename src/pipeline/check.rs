@@ -1,0 +1,219 @@
+//! `check`: a campaign validated, its scene loaded and measured, and the run's memory and
+//! time estimated before any ray is traced. The CLI prints the report; the Python package
+//! hands it over as a dict.
+
+use crate::error::Result;
+use crate::plan::{self, Plan};
+use crate::progress::peak_rss_bytes;
+use crate::scene::Scene;
+use serde::Serialize;
+use std::path::Path;
+use std::time::Instant;
+
+/// What `check` finds. Sizes in MB are 10^6 bytes, as the CLI prints them; the memory
+/// bound is also given in MiB.
+#[derive(Clone, Debug, Serialize)]
+pub struct CheckReport {
+    pub campaign: String,
+    pub campaign_file: String,
+    pub scene: String,
+    pub scene_file: String,
+    pub pulses: u64,
+    pub wavelengths_nm: Vec<f64>,
+    /// The water surface, as one line, when the scene has one.
+    pub water: Option<String>,
+    pub rays_per_pulse: u64,
+    pub instances: u64,
+    pub distinct_meshes: u64,
+    pub traced_meshes: u64,
+    pub traced_instances: u64,
+    pub distinct_triangles: u64,
+    /// Instanced triangles: every instance's counted.
+    pub triangles: u64,
+    pub scene_memory_mb: f64,
+    pub peak_process_memory_mb: Option<f64>,
+    pub bounds: [[f64; 3]; 2],
+    pub repeated: bool,
+    pub scene_load_s: f64,
+    /// What the pilots of `auto` keys chose, when there were any.
+    pub pilot: Option<String>,
+    /// A sweep's sub-runs, by name.
+    pub sweep: Vec<String>,
+    /// This process with the scene loaded, and the run's bound on top: bytes.
+    pub process_bytes: f64,
+    pub run_bytes: f64,
+    pub memory_bound_mib: f64,
+    pub total_rays: f64,
+    pub rays_per_second: f64,
+    pub threads: usize,
+    pub estimated_time_s: f64,
+    pub warnings: Vec<String>,
+}
+
+pub fn check(path: &Path) -> Result<CheckReport> {
+    let loaded = plan::read_campaign(path)?;
+    let c = &loaded.campaign;
+    let plan = Plan::new(c)?;
+    let t = Instant::now();
+    let scene = Scene::load_bands(&loaded.scene_path, c.wavelength_nm.all())?;
+    let scene_load_s = t.elapsed().as_secs_f64();
+    // before the probes below, which trace pulses in gates of the campaign's size
+    super::memory::fits(&loaded, &scene, &plan)?;
+    let s = scene.stats();
+    let (lo, hi) = scene.bounds();
+    let water = scene.water.as_ref().map(|w| {
+        format!(
+            "surface at z = {} m over [{}, {}] .. [{}, {}], n = {}, {}",
+            w.z,
+            w.lo[0],
+            w.lo[1],
+            w.hi[0],
+            w.hi[1],
+            w.n,
+            if w.mss > 0.0 {
+                format!("rough (mean square slope {:.4})", w.mss)
+            } else {
+                "smooth".to_string()
+            }
+        )
+    });
+    let peak_process_memory_mb = peak_rss_bytes().map(|b| b as f64 / 1e6);
+    // the estimates are of the method the run will use
+    let chosen = super::with_method_chosen(&loaded, &scene, &plan);
+    let pilot = chosen
+        .as_ref()
+        .map(|c| c.method_note.clone().unwrap_or_default());
+    let run = chosen.as_ref().unwrap_or(&loaded);
+    let rate = super::probe_rays_per_second(run, &scene, &plan);
+    let mut total_rays = plan.len() as f64 * c.simulation.rays_per_pulse as f64;
+    let mut sweep = Vec::new();
+    // a sweep: every combination checked as the run would check it, its rays counted at the
+    // rate measured on the campaign as written
+    if let Some(spec) = &c.sweep {
+        let runs = super::sweep::sweep_runs(run, spec)?;
+        total_rays = 0.0;
+        for (sub, name) in runs {
+            let pulses = Plan::new(&sub.campaign)?.len();
+            total_rays += pulses as f64 * sub.campaign.simulation.rays_per_pulse as f64;
+            sweep.push(name);
+        }
+    }
+    let run_bytes = super::memory::bound(run, &scene, &plan).total();
+    // what this process holds now: the program, its threads and the scene
+    let process_bytes = peak_rss_bytes().map_or(s.memory_bytes as f64, |b| b as f64);
+    Ok(CheckReport {
+        campaign: c.name.clone(),
+        campaign_file: path.display().to_string(),
+        scene: scene.name.clone(),
+        scene_file: loaded.scene_path.display().to_string(),
+        pulses: plan.len() as u64,
+        wavelengths_nm: c.wavelength_nm.all().to_vec(),
+        water,
+        rays_per_pulse: c.simulation.rays_per_pulse,
+        instances: s.instances as u64,
+        distinct_meshes: s.distinct_meshes as u64,
+        traced_meshes: s.traced_meshes as u64,
+        traced_instances: s.traced_instances as u64,
+        distinct_triangles: s.distinct_triangles as u64,
+        triangles: s.instanced_triangles as u64,
+        scene_memory_mb: s.memory_bytes as f64 / 1e6,
+        peak_process_memory_mb,
+        bounds: [lo.to_array(), hi.to_array()],
+        repeated: scene.is_repeated(),
+        scene_load_s,
+        pilot,
+        sweep,
+        process_bytes,
+        run_bytes,
+        memory_bound_mib: (process_bytes + run_bytes) / (1024.0 * 1024.0),
+        total_rays,
+        rays_per_second: rate,
+        threads: rayon::current_num_threads(),
+        estimated_time_s: total_rays / rate,
+        warnings: c.warnings(),
+    })
+}
+
+impl CheckReport {
+    /// The report as `lidarsim check` prints it, a line each.
+    pub fn lines(&self) -> Vec<String> {
+        let mut out = vec![
+            format!("campaign: {} ({})", self.campaign, self.campaign_file),
+            format!("scene: {} ({})", self.scene, self.scene_file),
+            format!("pulses: {}", self.pulses),
+        ];
+        if self.wavelengths_nm.len() > 1 {
+            let nm: Vec<String> = self.wavelengths_nm.iter().map(|w| w.to_string()).collect();
+            out.push(format!("bands: {} nm, traced in one pass", nm.join(", ")));
+        }
+        if let Some(w) = &self.water {
+            out.push(format!("water: {w}"));
+        }
+        out.push(format!("rays per pulse: {}", self.rays_per_pulse));
+        out.push(format!("instances: {}", self.instances));
+        out.push(format!("distinct meshes: {}", self.distinct_meshes));
+        out.push(format!(
+            "traced as: {} meshes, {} instances (objects with equal instance tables are one mesh)",
+            self.traced_meshes, self.traced_instances
+        ));
+        out.push(format!("triangles (distinct): {}", self.distinct_triangles));
+        out.push(format!("triangles (instanced): {}", self.triangles));
+        out.push(format!("scene memory: {:.1} MB", self.scene_memory_mb));
+        if let Some(peak) = self.peak_process_memory_mb {
+            out.push(format!("peak process memory: {peak:.1} MB"));
+        }
+        let [lo, hi] = self.bounds;
+        out.push(format!(
+            "bounds: [{:.3}, {:.3}, {:.3}] .. [{:.3}, {:.3}, {:.3}] m{}",
+            lo[0],
+            lo[1],
+            lo[2],
+            hi[0],
+            hi[1],
+            hi[2],
+            if self.repeated {
+                " (repeat: one period of an infinite landscape in x and y)"
+            } else {
+                ""
+            }
+        ));
+        out.push(format!("scene load: {:.2} s", self.scene_load_s));
+        if let Some(p) = &self.pilot {
+            // the method's, the sun's selection's and bdpt's receiver depth's choices
+            out.push(format!("pilot: {p}"));
+        }
+        if !self.sweep.is_empty() {
+            out.push(format!(
+                "sweep: {} runs ({})",
+                self.sweep.len(),
+                self.sweep.join(", ")
+            ));
+        }
+        out.push(format!(
+            "estimated peak memory: {:.0} MB (this process with the scene loaded {:.0} MB + run {:.0} MB; a bound that does not grow with the number of pulses)",
+            (self.process_bytes + self.run_bytes) / 1e6,
+            self.process_bytes / 1e6,
+            self.run_bytes / 1e6
+        ));
+        out.push(format!(
+            "estimated time: {} ({:.3e} rays at {:.3e} rays/s measured here on {} threads)",
+            human_seconds(self.estimated_time_s),
+            self.total_rays,
+            self.rays_per_second,
+            self.threads
+        ));
+        out.extend(self.warnings.iter().map(|w| format!("warning: {w}")));
+        out.push("ok".into());
+        out
+    }
+}
+
+fn human_seconds(s: f64) -> String {
+    if s < 120.0 {
+        format!("{s:.1} s")
+    } else if s < 7200.0 {
+        format!("{:.1} min", s / 60.0)
+    } else {
+        format!("{:.1} h", s / 3600.0)
+    }
+}

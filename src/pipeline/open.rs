@@ -1,0 +1,151 @@
+//! A run folder read back as tables: what the Python package's `open_run` hands over, and
+//! what scripts read instead of parsing the files themselves (outputs.md is the contract of
+//! the files; these are the same columns).
+
+use crate::error::{Error, Result};
+use crate::products::dsm::geotiff::{self, Raster};
+use arrow_array::{Array, BooleanArray, RecordBatch, UInt64Array};
+use arrow_schema::SchemaRef;
+use std::collections::HashSet;
+use std::path::{Path, PathBuf};
+
+/// A table: its schema and its batches (none when it has no rows).
+pub type Table = (SchemaRef, Vec<RecordBatch>);
+
+/// A run folder, checked to be one.
+#[derive(Clone, Debug)]
+pub struct RunFolder {
+    pub folder: PathBuf,
+}
+
+/// The three DSM rasters of a run.
+#[derive(Clone, Debug)]
+pub struct DsmRasters {
+    pub dsm: Raster,
+    pub reference: Raster,
+    pub difference: Raster,
+}
+
+impl RunFolder {
+    /// A folder `lidarsim run` wrote (it holds `manifest.json`).
+    pub fn open(folder: &Path) -> Result<RunFolder> {
+        if !folder.join("manifest.json").is_file() {
+            return Err(Error::file(
+                folder,
+                "not a run folder: it has no manifest.json; run the campaign first",
+            ));
+        }
+        Ok(RunFolder {
+            folder: folder.to_path_buf(),
+        })
+    }
+
+    fn file(&self, name: &str, stage: &str) -> Result<PathBuf> {
+        let p = self.folder.join(name);
+        if p.is_file() {
+            Ok(p)
+        } else {
+            Err(Error::file(&p, "does not exist").advise(format!(
+                "the {stage} stage writes it: run the campaign (again) with that stage, or \
+                 check that the campaign's products ask for it"
+            )))
+        }
+    }
+
+    /// A text file of the folder, whole.
+    pub fn text(&self, name: &str, stage: &str) -> Result<String> {
+        crate::error::read_text(&self.file(name, stage)?)
+    }
+
+    /// `campaign.resolved.yaml` as JSON text (YAML keys that are numbers become strings).
+    pub fn campaign_json(&self) -> Result<String> {
+        let path = self.file("campaign.resolved.yaml", "plan")?;
+        let text = crate::error::read_text(&path)?;
+        let value: serde_yaml::Value = serde_yaml::from_str(&text)
+            .map_err(|e| Error::data(&path, format!("not YAML: {e}")))?;
+        serde_json::to_string(&value).map_err(|e| Error::data(&path, e.to_string()))
+    }
+
+    /// `pulses.parquet`.
+    pub fn pulses(&self) -> Result<Table> {
+        crate::parquet_io::read_batches(&self.file("pulses.parquet", "plan")?, None)
+    }
+
+    /// The rows of every waveform part, in part order; only the rows of `pulse_ids` when
+    /// given (one row per pulse and band).
+    pub fn waveforms(&self, pulse_ids: Option<&[u64]>) -> Result<Table> {
+        let dir = self.folder.join("waveforms");
+        let mut parts: Vec<PathBuf> = std::fs::read_dir(&dir)
+            .map_err(|e| {
+                Error::io(&dir, "cannot list the waveform parts", e)
+                    .advise("the simulate stage writes them: run the campaign")
+            })?
+            .flatten()
+            .map(|e| e.path())
+            .filter(|p| {
+                p.file_name()
+                    .and_then(|n| n.to_str())
+                    .is_some_and(|n| n.starts_with("part-") && n.ends_with(".parquet"))
+            })
+            .collect();
+        parts.sort();
+        let wanted: Option<HashSet<u64>> = pulse_ids.map(|ids| ids.iter().copied().collect());
+        let keep = |b: &RecordBatch| -> Option<BooleanArray> {
+            let wanted = wanted.as_ref()?;
+            let ids = b.column_by_name("pulse_id")?;
+            let ids = ids.as_any().downcast_ref::<UInt64Array>()?;
+            Some(
+                (0..ids.len())
+                    .map(|i| Some(ids.is_valid(i) && wanted.contains(&ids.value(i))))
+                    .collect(),
+            )
+        };
+        let mut schema = None;
+        let mut batches = Vec::new();
+        for p in &parts {
+            let (s, b) = crate::parquet_io::read_batches(p, Some(&keep))?;
+            if schema.as_ref().is_some_and(|known: &SchemaRef| known != &s) {
+                return Err(Error::data(p, "its columns differ from the other parts'")
+                    .advise("run the simulate stage again"));
+            }
+            schema.get_or_insert(s);
+            batches.extend(b);
+        }
+        let schema = schema.ok_or_else(|| {
+            Error::file(&dir, "holds no waveform parts")
+                .advise("the simulate stage writes them: run the campaign")
+        })?;
+        Ok((schema, batches))
+    }
+
+    /// `points.las` or `points.laz`, one row per point ([`crate::products::points::points_table`]).
+    pub fn points(&self) -> Result<RecordBatch> {
+        let path = ["points.las", "points.laz"]
+            .iter()
+            .map(|n| self.folder.join(n))
+            .find(|p| p.is_file())
+            .ok_or_else(|| {
+                Error::file(&self.folder.join("points.las"), "does not exist").advise(
+                    "the products stage writes points for discrete-return instruments, or \
+                     with `products: { points: true }`",
+                )
+            })?;
+        let points = crate::products::las::read_las(&path)?;
+        Ok(crate::products::points::points_table(&points))
+    }
+
+    /// `photons.parquet`.
+    pub fn photons(&self) -> Result<Table> {
+        crate::parquet_io::read_batches(&self.file("photons.parquet", "products")?, None)
+    }
+
+    /// `dsm/dsm.tif`, `dsm/reference.tif` and `dsm/difference.tif`.
+    pub fn dsm(&self) -> Result<DsmRasters> {
+        let read = |name: &str| geotiff::read(&self.file(&format!("dsm/{name}.tif"), "products")?);
+        Ok(DsmRasters {
+            dsm: read("dsm")?,
+            reference: read("reference")?,
+            difference: read("difference")?,
+        })
+    }
+}

@@ -54,11 +54,18 @@ fn the_python_package_installs_with_pip_and_passes_its_suite() {
         "python3 -m venv",
         Command::new(&python).args(["-m", "venv"]).arg(&venv),
     );
-    assert!(o.status.success(), "cannot make a virtual environment: {}", text(&o));
+    assert!(
+        o.status.success(),
+        "cannot make a virtual environment: {}",
+        text(&o)
+    );
     let mut pip = Command::new(&venv_python);
     pip.args(["-m", "pip", "install", "--quiet", ".[test]"]);
     env(&mut pip);
-    let o = run("pip install .[test] (the extension's build included)", &mut pip);
+    let o = run(
+        "pip install .[test] (the extension's build included)",
+        &mut pip,
+    );
     if !o.status.success() {
         let why = text(&o);
         // no registry to fetch maturin, pyarrow or pytest from: the suite cannot run here
@@ -71,14 +78,25 @@ fn the_python_package_installs_with_pip_and_passes_its_suite() {
     }
     let mut pytest = Command::new(&venv_python);
     pytest
-        .args(["-m", "pytest", "python/tests", "-q", "-p", "no:cacheprovider", "--basetemp"])
+        .args([
+            "-m",
+            "pytest",
+            "python/tests",
+            "-q",
+            "-p",
+            "no:cacheprovider",
+            "--basetemp",
+        ])
         .arg(work.join("pytest"))
         // the Rust binary this test run built: Python's runs must write its files
         .env("LIDARSIM_BIN", env!("CARGO_BIN_EXE_lidarsim"));
     env(&mut pytest);
     let o = run("pytest python/tests", &mut pytest);
     let out = text(&o);
-    eprintln!("{}", out.lines().rev().take(3).collect::<Vec<_>>().join("\n"));
+    eprintln!(
+        "{}",
+        out.lines().rev().take(3).collect::<Vec<_>>().join("\n")
+    );
     let _ = std::fs::remove_dir_all(&work);
     assert!(o.status.success(), "the Python suite failed:\n{out}");
 }

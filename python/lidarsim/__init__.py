@@ -119,9 +119,11 @@ def run(
 
 
 def open_run(folder: PathLike) -> "Run":
-    """An existing run folder (one ``lidarsim run`` or :func:`run` wrote)."""
+    """An existing run folder (one ``lidarsim run`` or :func:`run` wrote), or a sweep's
+    folder (its runs in :attr:`Run.sweep`)."""
     r = Run(folder)
-    _lidarsim.read_run(os.fspath(r.folder), "manifest")  # checks that it is a run folder
+    if not r.sweep:
+        _lidarsim.read_run(os.fspath(r.folder), "manifest")  # checks that it is a run folder
     return r
 
 
@@ -155,6 +157,15 @@ class Run:
 
     def __repr__(self) -> str:
         return f"lidarsim.Run({str(self.folder)!r})"
+
+    @property
+    def sweep(self) -> List["Run"]:
+        """A sweep's runs, one per combination, in order (a sweep's folder holds them in
+        sub-folders, listed in its ``sweep.json``); empty for a single run."""
+        index = self.folder / "sweep.json"
+        if not index.is_file():
+            return []
+        return [Run(self.folder / name) for name in json.loads(index.read_text())["sweep"]]
 
     def _read(self, what: str, pulse_ids: Optional[List[int]] = None) -> Any:
         return _lidarsim.read_run(os.fspath(self.folder), what, pulse_ids)

@@ -177,3 +177,14 @@ def test_ctrl_c_stops_at_a_part_and_resume_finishes_the_same_bytes(session_dir):
     assert done.summary["complete"]
     diff = same_run_files(reference.folder, out)
     assert diff == "", diff
+
+
+def test_a_sweep_returns_its_runs(session_dir):
+    camp = track_campaign(rays=4)
+    camp["platform"]["along_track_step_m"] = 1.0
+    camp["sweep"] = {"platform.altitude_m": [200, 400]}
+    run = lidarsim.run(camp, out=session_dir / "sweep")
+    assert [r.folder.name for r in run.sweep] == ["altitude_m=200", "altitude_m=400"]
+    assert [r.campaign["platform"]["altitude_m"] for r in run.sweep] == [200, 400]
+    assert lidarsim.open_run(run.folder).sweep[1].pulses().num_rows == 80
+    assert lidarsim.compare([run.folder]).num_rows == 2

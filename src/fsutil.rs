@@ -106,9 +106,8 @@ impl Drop for Pending {
 
 /// Commits pending files on a thread of its own, in the order they come, each batch (with
 /// those queued meanwhile) synced by one flush of the file system. A sync waits for the disk,
-/// and a worker waiting there is a core idle: with three syncs per part on the workers, the
-/// town survey's plan and simulate stages took 6 % longer (alternating pairs against no sync
-/// at all).
+/// and a worker waiting there is a core idle: three syncs per part on the workers would make
+/// the plan and simulate stages of a survey of cheap pulses measurably longer.
 pub struct Committer {
     send: Option<std::sync::mpsc::Sender<Vec<Pending>>>,
     thread: std::sync::Mutex<Option<std::thread::JoinHandle<Result<()>>>>,
@@ -290,7 +289,7 @@ impl Fnv {
 /// The checksum of a file's bytes (XXH64 of its length and bytes, in hex), or None when it
 /// cannot be read. Read a block at a time: run files reach gigabytes, and memory must not
 /// grow with them. XXH64 reads 8 bytes a step where FNV-1a ([`fingerprint`]) reads one:
-/// FNV-1a was 2.7 % of the town survey's products stage, checking its 137 MB of parts.
+/// checking a run's parts with FNV-1a would be a measurable share of the products stage.
 pub fn file_checksum(path: &Path) -> Option<String> {
     use std::hash::Hasher;
     use std::io::Read;
@@ -320,7 +319,7 @@ mod tests {
     /// go, and any one byte changed changes it.
     #[test]
     fn file_checksum_is_the_hash_of_the_bytes() {
-        let dir = std::env::temp_dir().join(format!("lidarsim_sum_{}", std::process::id()));
+        let dir = crate::testdata::TempDir::new("sum");
         std::fs::create_dir_all(&dir).unwrap();
         let path = dir.join("f.bin");
         for len in [0usize, 1, (1 << 20) - 1, 1 << 20, (1 << 20) + 7, 3 << 20] {
@@ -345,7 +344,7 @@ mod tests {
     /// are removed, never moved into place.
     #[test]
     fn the_committer_moves_batches_into_place_or_reports_why_not() {
-        let dir = std::env::temp_dir().join(format!("lidarsim_commit_{}", std::process::id()));
+        let dir = crate::testdata::TempDir::new("commit");
         let _ = std::fs::remove_dir_all(&dir);
         let committer = Committer::default();
         for k in 0..20 {
@@ -393,7 +392,7 @@ mod tests {
 
     #[test]
     fn csv_fields_are_quoted_only_when_needed() {
-        let dir = std::env::temp_dir().join(format!("lidarsim_csv_{}", std::process::id()));
+        let dir = crate::testdata::TempDir::new("csv");
         let path = dir.join("t.csv");
         let rows = vec![
             vec!["plain".to_string(), "1.5".to_string()],

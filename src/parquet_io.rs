@@ -29,8 +29,9 @@ pub struct Encoding {
     pub byte_stream_split: bool,
 }
 
-/// The encoding of every file lidarsim writes, chosen by measurement (README, "Writing
-/// waveform parts"): no dictionary, statistics on `pulse_id` only, zstd level 1.
+/// The encoding of every file lidarsim writes, chosen by measurement (`lidarsim bench`,
+/// "Writing waveform parts", sets it against the others): no dictionary, statistics on
+/// `pulse_id` only, zstd level 1.
 pub const ENCODING: Encoding = Encoding {
     name: "no dictionary, pulse_id statistics, zstd 1",
     dictionary: false,
@@ -165,8 +166,8 @@ pub fn f32_or_null(values: impl Iterator<Item = f32>) -> ArrayRef {
 }
 
 /// A list column from borrowed rows, its buffers sized once: no row is copied but into the
-/// column (cloning each row first, and growing the buffer by doubling, cost 7 % of the wall
-/// time of a simulate stage writing 3152-bin waveforms).
+/// column (cloning each row first, and growing the buffer by doubling, costs a measurable
+/// share of the wall time of a simulate stage writing long waveforms).
 pub fn list_f32<'a>(rows: impl Iterator<Item = &'a [f32]> + Clone) -> ArrayRef {
     let (n, total) = rows.clone().fold((0, 0), |(n, t), r| (n + 1, t + r.len()));
     let mut b = ListBuilder::with_capacity(Float32Builder::with_capacity(total), n)
@@ -242,7 +243,8 @@ impl Column<'_> {
 
     /// Writes rows `rows` through Parquet's column writer: values straight from their
     /// slices, where Arrow's writer would first list every value's index (8 bytes per bin),
-    /// then gather the values by index (together 40 % of a 3152-bin simulate stage's CPU).
+    /// then gather the values by index (together a large share of a simulate stage's CPU on
+    /// long gates).
     /// Lists concatenate into `buf` with their levels, so the writer splits pages where
     /// Arrow's does and the bytes are the same ([`Table::encode_with_arrow`]).
     fn write(
@@ -468,7 +470,7 @@ pub fn f32_list_leaf(
 /// Every row of the list columns at `leaves` (see [`f32_list_leaf`]) of a Parquet file, given
 /// to `each` as (index into `leaves`, row, values), column after column, straight from the
 /// pages: Arrow's reader grows each batch's buffers by doubling, then each row is copied out
-/// of them again (80 % of a products stage reading 3152-bin waveforms).
+/// of them again (most of a products stage reading long waveforms).
 pub fn read_f32_lists(
     file: &std::fs::File,
     leaves: &[usize],

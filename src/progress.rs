@@ -50,9 +50,9 @@ pub fn log(line: &str) {
 
 /// Gives the memory the allocator holds free back to the system. glibc keeps the blocks a
 /// stage frees in its per-thread heaps, where the next stage's different sizes cannot always
-/// reuse them: without this a whole run's peak grew with its length (59 MiB at 10^5 pulses,
-/// 75 MiB at 10^7) although each stage alone stays flat. Called between stages and every few
-/// parts; other C libraries have nothing to do here.
+/// reuse them: without this a whole run's peak grows with its length although each stage
+/// alone stays flat. Called between stages and every few parts; other C libraries have
+/// nothing to do here.
 pub fn release_free_memory() {
     #[cfg(all(target_os = "linux", target_env = "gnu"))]
     {
@@ -69,9 +69,9 @@ pub fn release_free_memory() {
 /// Sets glibc's allocator for how a run uses memory: a part of a thousand waveforms (88 MB
 /// in 12.6 KB vectors on a forest's 3152-bin gate) is allocated by the workers and freed by
 /// the writer, part after part. By default free() gives the top of a thread's heap back to
-/// the system as soon as 128 KiB lie free there, so every part faulted the same pages in
-/// again (a quarter of the forest bench row's simulate CPU time was the kernel's), and a
-/// block above a threshold that adapts from 128 KiB came from mmap, one by one. Both
+/// the system as soon as 128 KiB lie free there, so every part would fault the same pages in
+/// again (a large share of a long-gate simulate stage's CPU time spent in the kernel), and a
+/// block above a threshold that adapts from 128 KiB comes from mmap, one by one. Both
 /// thresholds are raised (the mmap one to its largest, 32 MiB); freed memory still goes back
 /// between stages and every few parts ([`release_after_part`]). Other C libraries: nothing.
 pub fn tune_allocator() {
@@ -153,8 +153,8 @@ impl StageClock {
 }
 
 /// CPU time of this process so far, user and system, all threads, s: the process CPU clock,
-/// to the nanosecond (/proc/self/stat counts 10 ms ticks: ±6 % on the bench's 0.16 s
-/// single-pulse stages), else /proc/self/stat's ticks; None where neither exists.
+/// to the nanosecond (/proc/self/stat counts 10 ms ticks, coarse against a stage of a few
+/// tenths of a second), else /proc/self/stat's ticks; None where neither exists.
 pub fn process_cpu_seconds() -> Option<f64> {
     #[cfg(unix)]
     {

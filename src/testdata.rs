@@ -19,7 +19,7 @@ pub fn rami_dir() -> Option<PathBuf> {
         Some(d)
     } else {
         skip(&format!(
-            "RAMI data not found at {} (README, \"Scenes\")",
+            "RAMI data not found at {} (docs/guide.md, \"Scenes\")",
             d.display()
         ));
         None
@@ -58,4 +58,42 @@ pub fn most_outside_3se(n: usize) -> usize {
         below += term;
     }
     k
+}
+
+/// A folder for one test's files in the system's temporary directory, named after the test
+/// and the process (tests run side by side), removed with everything in it when dropped: a
+/// test leaves nothing behind, passed or failed. It derefs to its path.
+pub struct TempDir(PathBuf);
+
+impl TempDir {
+    pub fn new(name: &str) -> TempDir {
+        let d = std::env::temp_dir().join(format!("lidarsim-{name}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&d);
+        std::fs::create_dir_all(&d)
+            .unwrap_or_else(|e| panic!("cannot make the test folder {}: {e}", d.display()));
+        TempDir(d)
+    }
+
+    pub fn path(&self) -> &std::path::Path {
+        &self.0
+    }
+}
+
+impl std::ops::Deref for TempDir {
+    type Target = std::path::Path;
+    fn deref(&self) -> &std::path::Path {
+        &self.0
+    }
+}
+
+impl AsRef<std::path::Path> for TempDir {
+    fn as_ref(&self) -> &std::path::Path {
+        &self.0
+    }
+}
+
+impl Drop for TempDir {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
 }

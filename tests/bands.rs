@@ -302,7 +302,7 @@ fn tables_of_several_bands_carry_the_band() {
     for pair in rows.chunks(2) {
         assert!(pair[1].received_energy_j > 3.0 * pair[0].received_energy_j);
     }
-    let points = lidarsim::products::las::read_las(&one.join("points.las")).unwrap();
+    let points = lidarsim::products::points::las::read_las(&one.join("points.las")).unwrap();
     for nm in [532.0f32, 1064.0] {
         let n = points
             .iter()
@@ -317,7 +317,7 @@ fn tables_of_several_bands_carry_the_band() {
     let batch = first_batch(&out.join("waveforms/part-00000.parquet"));
     assert!(batch.column_by_name("wavelength_nm").is_none());
     assert_eq!(batch.num_rows(), pulses);
-    let points = lidarsim::products::las::read_las(&out.join("points.las")).unwrap();
+    let points = lidarsim::products::points::las::read_las(&out.join("points.las")).unwrap();
     assert!(points.iter().all(|p| p.wavelength_nm.is_none()));
 }
 

@@ -436,9 +436,7 @@ fn check_tilted_plane(name: &str, w: &Waveform, inst: &Inst, h: f64, alpha: f64,
         "the slope should spread the return over many bins: {}",
         support.len()
     );
-    let sa: Vec<f64> = support.iter().map(|&i| a[i]).collect();
-    let sb: Vec<f64> = support.iter().map(|&i| b[i]).collect();
-    let e = rrmse(&sa, &sb);
+    let e = lidarsim::waveform::rrmse(&a, &b, &support);
     println!("{name}: {} bins, rRMSE {e:.4}", support.len());
     assert!(e < 0.03, "rRMSE {e}");
     // and the absolute level: ρ/π · A · Σ p cos/r² du² (same quadrature) within 1%

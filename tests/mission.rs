@@ -241,7 +241,7 @@ fn points_come_from_the_record() {
         let camp = write(&d, "c.yaml", text);
         run_cli(&camp, &d.join("run"), None);
         let las = d.join("run/points.las");
-        let pts = lidarsim::products::las::read_las(&las).unwrap();
+        let pts = lidarsim::products::points::las::read_las(&las).unwrap();
         if returns {
             assert_eq!(pts.len(), 80, "one return per pulse");
             for p in &pts {

@@ -4,7 +4,7 @@
 mod common;
 
 use common::*;
-use lidarsim::products::las::read_las;
+use lidarsim::products::points::las::read_las;
 use std::path::Path;
 
 fn json(path: &Path) -> serde_json::Value {
@@ -252,14 +252,10 @@ fn plane_dsm_bias_is_under_a_centimetre() {
 /// 1.25 m footprint) and a short pulse (1 ns): the waveform of a steep view is the pulse
 /// smeared over metres of range, and with few rays a comb of one spike per ray, yet one
 /// surface gives one return, on the plane within 5 cm plus 4 standard errors of the rays'
-/// mean range (the footprint's spread in range over √rays). Before the decomposition weighed
-/// the simulation's noise, the views at 15° and steeper gave 2-4 returns each at 19 rays (19
-/// points for 6 pulses), up to 1.3 m off the plane; before it compared its components with one
-/// surface's waveform (34241fe), the views at 30° and steeper gave 2-3 returns each at 200 and
-/// 2000 rays. Before it read a few rays' comb as one surface's sampling (its runs of light
-/// together, gaps the rays leave, the compound noise of their quanta), the view at 75° held at
-/// 1 seed of 9 at 19 rays, the first ray's spike taken for the return, up to 2 m above the
-/// plane; over the other geometries below, at 19 of 42 pulses at 75° and 37 of 42 at 60°.
+/// mean range (the footprint's spread in range over √rays). The hard cases: steep views at
+/// few rays, where the decomposition must weigh the simulation's noise, compare its
+/// components with one surface's waveform, and read a comb of a few rays' spikes as one
+/// surface's sampling rather than as several returns.
 #[test]
 fn a_plane_gives_one_return_at_any_incidence_at_few_rays() {
     let dir = tmp("products-incidence");
@@ -280,7 +276,7 @@ fn a_plane_gives_one_return_at_any_incidence_at_few_rays() {
         method,
         threshold,
     };
-    // (view, rays, seeds): 19 rays is the airborne survey of issue 11
+    // (view, rays, seeds): 19 rays is the bench's airborne town survey
     let cases: [(View, usize, &[u64]); 8] = [
         (
             view(250.0, 0.3, 1.0, 2.5, "bdpt", 5.0),

@@ -224,7 +224,7 @@ fn a_repeated_scene_has_a_reference_dsm_everywhere() {
     assert!(r["cells"].as_u64().unwrap() >= 55 * 8, "{r}");
     assert!(r["coverage"].as_f64().unwrap() > 0.95, "{r}");
     assert!(r["bias_m"].as_f64().unwrap().abs() < 0.05, "{r}");
-    let points = lidarsim::products::las::read_las(&out.join("points.las")).unwrap();
+    let points = lidarsim::products::points::las::read_las(&out.join("points.las")).unwrap();
     let roofs = points.iter().filter(|p| p.classification == 6).count();
     // a 2 m x 2 m box in every 10 m x 10 m period: 4 % of the strip, in every period it crosses
     let share = roofs as f64 / points.len() as f64;

@@ -1,4 +1,4 @@
-//! The RPV glossy reflectance (README, "Glossy surfaces: RPV"): closed form 1 with RPV's hot
+//! The RPV glossy reflectance (docs/physics.md, "Glossy surfaces: RPV"): closed form 1 with RPV's hot
 //! spot, the three estimators' agreement on a tilted RPV plane and on leaves over RPV soil, RPV
 //! in several bands, and its bad parameters.
 

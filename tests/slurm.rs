@@ -1,4 +1,4 @@
-//! README's Slurm recipe on a real one-node Slurm: `tools/slurm_test.sh` starts munged,
+//! the Slurm recipe of docs/guide.md on a real one-node Slurm: `tools/slurm_test.sh` starts munged,
 //! slurmctld and slurmd in a temporary folder, submits a campaign as a job array with
 //! `--shard K/N` and then the `--resume` job with a dependency on the array, checks that the
 //! result equals a single-machine run byte for byte, and stops the daemons. Where Slurm is not

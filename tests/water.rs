@@ -1,4 +1,4 @@
-//! Water (README, "Water"): a smooth surface (Fresnel reflection and refraction, specular
+//! Water (docs/physics.md, "Water"): a smooth surface (Fresnel reflection and refraction, specular
 //! vertices handled as pbrt-v4 does) over a water column with per-band attenuation and a
 //! seabed. Checked against closed forms: the surface's mirror return and the bottom's return
 //! through two refractions, at the time of refracted travel; forward and bdpt agree.
@@ -121,7 +121,7 @@ fn surface_and_bottom_returns_match_fresnel_and_beer_lambert() {
             "wavelength_nm: 1064\n",
             &format!("wavelength_nm: {bands}\n"),
         )
-        // Seed 4, not the helper's 3, since rays come in streams of 256 (were 2048): seed 3
+        // Seed 4, not the helper's 3: with rays in streams of 256, seed 3
         // then drew bdpt's bottom 2.8 SE under the closed form and forward's 2.5 SE over it,
         // 3.7 combined. A fluke, not a bias: over 200 seeds (250,000 rays, forward) the
         // bottom's z had mean 0.01 and spread 0.93, against 0.08 and 0.95 with 2048-ray streams
@@ -355,7 +355,7 @@ fn bundled_bathymetry_campaign_sees_the_bottom_in_green() {
     let dir = tmp("water_bundled");
     let out = dir.join("run");
     run_cli(&repo().join("pipelines/bathymetry.yaml"), &out, None);
-    let points = lidarsim::products::las::read_las(&out.join("points.las")).unwrap();
+    let points = lidarsim::products::points::las::read_las(&out.join("points.las")).unwrap();
     let bottom = |nm: f32| -> Vec<f64> {
         points
             .iter()
@@ -418,8 +418,8 @@ fn forward_and_bdpt_agree_in_a_trench_under_water() {
     );
     agree("trench under water forward/bdpt", &f, &b, &[1, 3, 4]);
     // bdpt's receiver depth `auto` keeps every strategy over water, without a pilot: with
-    // `first` the light under the surface was left to the light sub-paths (the pair's standard
-    // error at order 4 was 8.1 % of it, against 2.7 % with every strategy)
+    // `first` the light under the surface would be left to the light sub-paths alone, with a
+    // larger standard error at the deep orders
     let resolved = std::fs::read_to_string(dir.join("bdpt/run/campaign.resolved.yaml")).unwrap();
     assert!(resolved.contains("receiver_depth: full"), "{resolved}");
     assert!(

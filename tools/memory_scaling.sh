@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
-# Peak memory against campaign length (issue 15): the same discrete-return ALS campaign over
-# the bundled plane, 1 ray per pulse, at two lengths, each run whole (plan, simulate,
+# Peak memory against campaign length: the same discrete-return ALS campaign over the
+# bundled plane, 1 ray per pulse, at two lengths, each run whole (plan, simulate,
 # products, report) under /usr/bin/time -v. Prints pulses, wall time and peak RSS per run,
 # and the ratio of the peaks.
 #   usage: tools/memory_scaling.sh [BINARY] [OUT_DIR] [SMALL_STEP_M] [LARGE_STEP_M]

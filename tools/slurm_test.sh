@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Runs README's Slurm recipe on a one-node Slurm that this script starts and stops, and checks
+# Runs the Slurm recipe of docs/guide.md on a one-node Slurm that this script starts and stops, and checks
 # that the result equals a single-machine run byte for byte.
 #
 #   tools/slurm_test.sh [LIDARSIM [CAMPAIGN]]
@@ -7,7 +7,7 @@
 # LIDARSIM is the binary (default $LIDARSIM, else target/release/lidarsim); CAMPAIGN defaults to
 # a generated 4000-pulse track over a plane (4 parts). In a temporary folder it starts munged
 # (its own key and socket) and slurmctld and slurmd (their own slurm.conf, on free ports), runs
-# the campaign once on this machine (`--out single`), then submits it the README's way: a job
+# the campaign once on this machine (`--out single`), then submits it the way docs/guide.md gives: a job
 # array of SHARDS tasks (default 3), task K running `--shard K/SHARDS`, and a `--resume` job
 # with `--dependency=afterok:` on the array, both into `cluster`. It compares the two folders
 # with tools/compare_runs.sh. Every daemon it started is stopped and the folder removed on any
@@ -207,7 +207,7 @@ for _ in $(seq 120); do
 done
 [ "$state" = idle ] || die "node $host is not idle after 60 s (sinfo says '${state:-nothing}')"
 
-# ---- README's recipe ----
+# ---- the recipe of docs/guide.md ----
 cd "$tmp"
 out=$tmp/cluster
 array=$(sbatch --parsable --job-name=shards --array="0-$((shards - 1))" --cpus-per-task="$threads" \

@@ -280,7 +280,7 @@ class Waveform:
     @property
     def range_m(self) -> "numpy.ndarray":  # noqa: F821
         """The range of each bin's centre, c t / 2, m (vacuum)."""
-        return self.time_ns * 1e-9 * 299_792_458.0 / 2.0
+        return self.time_ns * 1e-9 * _lidarsim.C / 2.0
 
     def __repr__(self) -> str:
         return (

@@ -3,6 +3,9 @@ modules: the public names, typed where they are defined, live in lidarsim/__init
 
 from typing import Any, Dict, List, Optional, Sequence, Tuple
 
+#: The speed of light in vacuum, m/s (the core's constant).
+C: float
+
 def version() -> str: ...
 def run(
     path: Optional[str] = None,

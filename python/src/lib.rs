@@ -547,6 +547,7 @@ fn _lidarsim(m: &Bound<'_, PyModule>) -> PyResult<()> {
         return Err(pyo3::exceptions::PyImportError::new_err(why));
     }
     lidarsim::progress::set_sink(Some(Arc::new(log_to_python)));
+    m.add("C", lidarsim::C)?;
     m.add_function(wrap_pyfunction!(version, m)?)?;
     m.add_function(wrap_pyfunction!(run, m)?)?;
     m.add_function(wrap_pyfunction!(check, m)?)?;

@@ -14,10 +14,12 @@ from pathlib import Path
 
 import pytest
 
+import lidarsim
+
 REPO = Path(__file__).resolve().parents[2]
 FOREST = REPO / "scenes" / "small_forest" / "forest.yaml"
 PLANE = REPO / "scenes" / "plane.yaml"
-C = 299_792_458.0
+C = lidarsim._lidarsim.C
 
 
 def als_campaign(name="py_als"):

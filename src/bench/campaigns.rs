@@ -1,14 +1,14 @@
 //! The campaign rows of `lidarsim bench`: the paper's sections 3.2-3.4 run as whole
 //! campaigns through the pipeline (plan, simulate, products), each timed and with its peak
-//! memory. The orchard rows need the RAMI files (README, "Scenes") and are skipped, with a
+//! memory. The orchard rows need the RAMI files (docs/guide.md, "Scenes") and are skipped, with a
 //! note in the table, when they are absent.
 
 use crate::error::{Error, Result};
 use crate::generate::{generate_with_summary, GenerateOptions, SceneKind};
 use crate::pipeline::manifest::Manifest;
 use crate::pipeline::{self, RunOptions};
-use crate::products::dsm::DsmReport;
-use crate::products::summary::ProductsSummary;
+use crate::products::raster::DsmReport;
+use crate::products::report::summary::ProductsSummary;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -170,7 +170,7 @@ pub fn find_rami(scene: &Path) -> std::result::Result<PathBuf, String> {
         .join("../../shared/data/rami-wco/CISI1/foliage.ply");
     if !probe.exists() {
         return Err(format!(
-            "RAMI geometry not found at {} (README, \"Scenes\")",
+            "RAMI geometry not found at {} (docs/guide.md, \"Scenes\")",
             probe.display()
         ));
     }
@@ -296,9 +296,8 @@ const SHORT_RUNS: usize = 5;
 
 /// [`run_row`], run [`SHORT_RUNS`] times in all when it takes under [`SHORT_RUN_S`]: the row
 /// of the run of median wall time. A run of a few tenths of a second, and the CPU share
-/// measured over it, are at the mercy of the shared machine: the orchard's single pulse gave
-/// 157, 198, 198 and 193 % CPU in four runs one after another, and 139-195 % (median 194 %)
-/// in ten at 36a32ab, where the median of three runs had given 188 %.
+/// measured over it, are at the mercy of the shared machine: runs one after another can
+/// differ by tens of per cent in CPU share, and a median of three is still swayed by them.
 pub fn run_row_settled(
     dir: &Path,
     runner: Option<&Path>,
@@ -320,10 +319,9 @@ pub fn run_row_settled(
 
 /// [`run_row`] on `threads` threads (as many as this process has when None), in a folder of
 /// its own. A run in this process inherits what the rows before it left (the allocator's
-/// heap, the peak memory, a cache's warmth): in the quick bench at 0e256d5 the town's run on
-/// two threads took 1.9 s after the orchard rows and 1.6 s without them, its serial share
-/// read 22 % against 8 %, and its peak memory 163 MB where its own run peaks at 52 MiB. In a
-/// process of its own each row measures what a user's run does.
+/// heap, the peak memory, a cache's warmth), which can make it slower, its serial share
+/// larger and its peak memory several times its own. In a process of its own each row
+/// measures what a user's run does.
 fn run_row_on(
     dir: &Path,
     runner: Option<&Path>,
@@ -541,7 +539,7 @@ pub fn bands_table(rows: &[BandsRow]) -> String {
         "
 ### Several bands in one pass (532, 1064 and 1550 nm)
 
-The campaign in its own band and in three bands at once: every path traced once, with one throughput per band (README, \"Several bands in one pass\"). Simulate stage wall time, median of alternating runs.
+The campaign in its own band and in three bands at once: every path traced once, with one throughput per band (docs/physics.md, \"Several bands in one pass\"). Simulate stage wall time, median of alternating runs.
 
 | campaign | pulses | runs each | 1 band s | 3 bands s | 3 bands / 1 band | mean received energy per pulse, J (532 / 1064 / 1550 nm) |
 | --- | ---: | ---: | ---: | ---: | ---: | --- |
@@ -580,9 +578,9 @@ pub struct Scaling {
 const SCALING_PAIRS: usize = 3;
 
 /// Runs the campaign of `row` on one thread and then on all, [`SCALING_PAIRS`] times, and
-/// keeps the pair of median serial fraction (of the whole run). One run on one thread against
-/// the row's median run on all gave the town's serial fraction as 0.039, 0.114 and 0.152 in
-/// three benches of the same code: a pair run back to back shares the machine's mood.
+/// keeps the pair of median serial fraction (of the whole run). One run on one thread set
+/// against a run on all made at another time gives serial fractions that vary several-fold
+/// between benches of the same code: a pair run back to back shares the machine's mood.
 pub fn scaling(
     dir: &Path,
     runner: Option<&Path>,

@@ -125,33 +125,25 @@ fn gedi(footprint_diameter_m: f64, fov_mrad: f64, altitude: f64) -> Instrument {
     .expect("a fixed instrument parses")
 }
 
-/// rRMSE of a waveform against a reference over the bins where the reference carries signal
-/// (above 1e-3 of its peak): RMS difference over the reference's mean there.
-pub fn rrmse(w: &[f32], reference: &[f32]) -> f64 {
+/// The bins where a reference waveform carries signal (above 1e-3 of its peak): where the
+/// bench compares waveforms with it.
+fn signal_bins(reference: &[f32]) -> Vec<usize> {
     let peak = reference.iter().cloned().fold(0.0f32, f32::max) as f64;
-    let bins: Vec<usize> = (0..reference.len())
+    (0..reference.len())
         .filter(|&i| reference[i] as f64 > 1e-3 * peak)
-        .collect();
-    if bins.is_empty() {
-        return f64::NAN;
-    }
-    let n = bins.len() as f64;
-    let mse = bins
-        .iter()
-        .map(|&i| (w[i] as f64 - reference[i] as f64).powi(2))
-        .sum::<f64>()
-        / n;
-    let mean = bins.iter().map(|&i| reference[i] as f64).sum::<f64>() / n;
-    mse.sqrt() / mean
+        .collect()
+}
+
+/// rRMSE of a waveform against a reference over the bins where the reference carries signal
+/// ([`crate::waveform::rrmse`] over [`signal_bins`]).
+pub fn rrmse(w: &[f32], reference: &[f32]) -> f64 {
+    crate::waveform::rrmse(w, reference, &signal_bins(reference))
 }
 
 /// Coefficient of determination of a waveform against the reference, over the same bins as
 /// [`rrmse`]: 1 − Σ(w − r)² / Σ(r − r̄)².
 pub fn r_squared(w: &[f32], reference: &[f32]) -> f64 {
-    let peak = reference.iter().cloned().fold(0.0f32, f32::max) as f64;
-    let bins: Vec<usize> = (0..reference.len())
-        .filter(|&i| reference[i] as f64 > 1e-3 * peak)
-        .collect();
+    let bins = signal_bins(reference);
     if bins.len() < 2 {
         return f64::NAN;
     }
@@ -801,10 +793,16 @@ fn ladder_table(
 }
 
 /// Writes the report beside the generated scene and returns its path.
-pub fn write_report(opts: &BenchOptions, text: &str) -> Result<PathBuf> {
-    let path = opts.dir.join("bench.md");
-    crate::fsutil::write_text_atomic(&path, text)?;
-    Ok(path)
+/// Writes the report to `path` (its folder made when missing).
+pub fn write_report(path: &Path, text: &str) -> Result<PathBuf> {
+    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).map_err(|e| {
+            Error::io(dir, "cannot create the report's folder", e)
+                .advise(crate::fsutil::WRITE_ADVICE)
+        })?;
+    }
+    crate::fsutil::write_text_atomic(path, text)?;
+    Ok(path.to_path_buf())
 }
 
 /// Used by tests: the ladder and the report on a small scene, quickly.

@@ -6,9 +6,9 @@ use crate::error::{Error, Result};
 use crate::fsutil::write_text_atomic;
 use crate::pipeline::manifest::Manifest;
 use crate::pipeline::sweep::SweepIndex;
-use crate::products::dsm::DsmReport;
-use crate::products::plot::{line_plot, Series};
-use crate::products::summary::ProductsSummary;
+use crate::products::figures::plot::{line_plot, Series};
+use crate::products::raster::DsmReport;
+use crate::products::report::summary::ProductsSummary;
 use std::path::{Path, PathBuf};
 
 /// One run's row.

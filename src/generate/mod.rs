@@ -316,7 +316,7 @@ impl Default for Canopy {
 }
 
 fn write_file(path: &Path, text: &str) -> Result<()> {
-    crate::fsutil::write_text_atomic(path, text).map_err(|e| Error::file(path, e))
+    crate::fsutil::write_text_atomic(path, text)
 }
 
 /// Writes the canopy into `dir` and returns the scene file's path.

@@ -4,8 +4,8 @@ use glam::DVec3;
 use std::time::Instant;
 
 /// A fresh folder per test (and process), so that tests running in parallel do not meet.
-fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("lidarsim-generate-{name}-{}", std::process::id()));
+fn scratch(name: &str) -> crate::testdata::TempDir {
+    let dir = crate::testdata::TempDir::new(&format!("generate-{name}"));
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
     dir
@@ -116,7 +116,7 @@ fn small_scenes_load_with_their_figures() {
     }
 }
 
-/// The forest as shipped: the figures the brief asks for, measured on the loaded scene.
+/// The forest as shipped: the figures the generator promises, measured on the loaded scene.
 #[test]
 fn default_forest_is_huge_when_instanced_yet_small_in_memory() {
     let dir = scratch("forest-default");

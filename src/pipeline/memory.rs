@@ -40,14 +40,14 @@ pub fn bound(loaded: &Loaded, scene: &Scene, plan: &Plan) -> Bound {
     let threads = rayon::current_num_threads() as f64;
     // a part in the making, the one queued, and the one being encoded (its table and bytes),
     // with a part's worth for the allocator's slack, and the Parquet writer's own buffers and
-    // compressors: about 40 MB whatever the part, as measured on a 25,000-pulse survey
+    // compressors, measured at about 40 MB whatever the part
     let simulate = 5.0 * part + 40e6 + threads * bins * 64.0 * 8.0;
     let (lo, hi) = scene.bounds();
     let dsm_cells = match crate::products::stage::wanted(loaded).dsm {
         Some(res) => ((hi.x - lo.x) / res + 2.0) * ((hi.y - lo.y) / res + 2.0),
         None => 0.0,
     };
-    let points = crate::products::spill::CHUNK as f64 * 2.0 * 80.0;
+    let points = crate::products::points::spill::CHUNK as f64 * 2.0 * 80.0;
     let top_view = crate::products::figures::TOP_VIEW_MAX_POINTS as f64 * 32.0 * 3.0;
     Bound {
         gate_bins: gate,
@@ -68,8 +68,8 @@ fn machine_bytes() -> Option<f64> {
 
 /// An error at the key that sizes a run whose [`Bound`] exceeds the machine's memory: the
 /// DSM's cell size when its grids are most of it, else the gate's bins. The bound is generous
-/// (331 MB for the town survey that peaks at 50 MB), so the run it refuses is one that could
-/// not have finished, not one that might.
+/// (several times a run's measured peak), so the run it refuses is one that could not have
+/// finished, not one that might.
 pub fn fits(loaded: &Loaded, scene: &Scene, plan: &Plan) -> Result<()> {
     let Some(machine) = machine_bytes() else {
         return Ok(());

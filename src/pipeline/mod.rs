@@ -22,7 +22,7 @@ pub use simulate::{probe_rays_per_second, simulate, simulate_in_memory, with_met
 use sweep::run_sweep;
 pub use sweep::RunTotals;
 
-use crate::campaign::{Campaign, Loaded, Method, ReceiverDepth};
+use crate::campaign::{Loaded, Method, ReceiverDepth};
 use crate::error::{Error, Result};
 use crate::fsutil::write_text_atomic;
 use crate::plan::{self, Plan};
@@ -118,8 +118,8 @@ pub fn run_loaded(loaded: &Loaded, opts: &RunOptions) -> Result<RunSummary> {
     })
 }
 
-/// Most threads a run may ask for: 4096 start here in 8 s, 100,000 fail to start (each
-/// needs its stack), which ends the process where no error can be returned.
+/// Most threads a run may ask for: these still start, if slowly, while far more fail to
+/// start (each needs its stack), which ends the process where no error can be returned.
 pub const MAX_THREADS: usize = 4096;
 
 /// Runs `f` on a pool of `threads` threads (all cores when None).
@@ -404,7 +404,7 @@ fn run_single(
     // simulate stage's fingerprint)
     let as_written = loaded.campaign_yaml();
     let fp_plan = fingerprint(&[as_written.as_bytes(), env!("CARGO_PKG_VERSION").as_bytes()]);
-    let plan = plan_stage(&mut run, &loaded.campaign, &fp_plan)?;
+    let plan = plan_stage(&mut run, loaded, &fp_plan)?;
 
     let mut summary = RunSummary {
         out: out.to_path_buf(),
@@ -450,8 +450,9 @@ fn run_single(
     };
     let picked = chosen.as_ref().map(|c| simulate::choices_made(c, original));
     // what loading the scene and the pilots freed (a BVH build's scratch) goes back before
-    // the simulate stage allocates, and is not counted as its time: returning it was 3-5 ms
-    // of one thread at the end of the orchard's 0.13 s GEDI pulse (4 % of its CPU share)
+    // the simulate stage allocates, and is not counted as its time: returned at the stage's
+    // end, it would keep one thread busy after the others, a visible part of a short run's
+    // CPU share
     crate::progress::release_free_memory();
     let parts = Parts::of_run(loaded, scene, &plan);
     let fp_sim = simulate_fingerprint(&fp_plan, scene, picked, parts)?;
@@ -549,11 +550,14 @@ fn report_stage(
 /// The plan stage. Planning is cheap and deterministic, so every stage makes the pulses it
 /// needs from the [`Plan`], a part at a time; `pulses.parquet` is written only when the stage
 /// is not already done.
-fn plan_stage(run: &mut RunFolder, c: &Campaign, fp: &str) -> Result<Plan> {
+fn plan_stage(run: &mut RunFolder, loaded: &Loaded, fp: &str) -> Result<Plan> {
     let clock = StageClock::start();
-    let pulses = Plan::new(c)?;
+    let pulses = Plan::new(&loaded.campaign)?;
     if pulses.is_empty() {
-        return Err(Error::msg("the platform plans no pulses"));
+        return Err(loaded.doc.error("platform", "plans no pulses").advise(
+            "give it at least one: static pulses, or lines, tracks and angle ranges longer \
+             than their steps",
+        ));
     }
     if run.wanted(Stage::Plan) && !run.done(Stage::Plan, fp) {
         plan::write_pulses(&run.out.join("pulses.parquet"), &pulses)?;

@@ -3,7 +3,7 @@
 //! the files; these are the same columns).
 
 use crate::error::{Error, Result};
-use crate::products::dsm::geotiff::{self, Raster};
+use crate::products::raster::geotiff::{self, Raster};
 use arrow_array::{Array, BooleanArray, RecordBatch, UInt64Array};
 use arrow_schema::SchemaRef;
 use std::collections::HashSet;
@@ -130,7 +130,7 @@ impl RunFolder {
                      with `products: { points: true }`",
                 )
             })?;
-        let points = crate::products::las::read_las(&path)?;
+        let points = crate::products::points::las::read_las(&path)?;
         Ok(crate::products::points::points_table(&points))
     }
 

@@ -44,8 +44,8 @@ pub(super) fn simulate_parts(
     let bands = loaded.campaign.wavelength_nm.all().len();
     // Part k is written while part k + 1 is simulated, as two halves of one rayon join: the
     // same threads do both, so no core waits for a writer (a writer thread beside the workers
-    // left the cores idle whenever encoding was slower than simulating), and at most two
-    // parts are in memory.
+    // would leave the cores idle whenever encoding is slower than simulating), and at most
+    // two parts are in memory.
     // ... and synced and renamed into place on a thread of its own, which waits for the disk
     let committer = Committer::default();
     let write = |(n, k, waveforms, secs): (usize, usize, Vec<Waveform>, Vec<f64>)| -> Result<()> {
@@ -149,17 +149,10 @@ const TASKS_PER_THREAD_BESIDE_A_WRITE: usize = 8;
 
 /// Pulses a task of a parallel loop over pulses holds at most: a [`TASKS_PER_THREAD`]th of a
 /// thread's share with `finely`, else a [`TASKS_PER_THREAD_BESIDE_A_WRITE`]th. Rayon cuts a
-/// slice into about as many pieces as threads and cuts a piece again only when a thread
-/// steals it. Where nothing runs beside the loop no thread steals until its piece is done: on
-/// 2 threads the quick MABEL track's one part of 692 pulses went 346 to each thread, one idle
-/// for the last 80 ms of the other's 0.85 s (the simulate stage at 186-189 % CPU; 195-198 %
-/// cut finely, 0.96 times the whole run's wall time in 9 alternating pairs). A part written
-/// beside the next is stolen from as soon as the write ends, but its last pieces could still
-/// leave a thread idle at the part's end: the quick forest ALS row's 17 parts of 40 ms gave
-/// 186-193 % (median 189.5 %, 6 runs) left whole and 189-193 % (median 192.6 %) in 8 tasks per
-/// thread. Cut in 64, the town survey's 267 parts took 1.02-1.03 times the CPU time (two
-/// series of alternating pairs); in 8, 0.994 (0.93-1.07, 6 pairs), and the paper's forest
-/// campaign's 161 parts 1.019 (0.84-1.05, 4 pairs, wall 0.989): within the machine's noise.
+/// slice into about as many pieces as threads and cuts one again only when a thread steals
+/// it, so where nothing runs beside the loop a thread could sit idle at the end of a part.
+/// Beside a write, threads steal once it ends: 8 tasks a thread keep the part's end busy,
+/// where 64 cost measurably more CPU time (the figures are in the commit that made the choice).
 fn leaf_pulses(pulses: usize, finely: bool) -> usize {
     let tasks = if finely {
         TASKS_PER_THREAD
@@ -243,8 +236,8 @@ pub fn simulate_in_memory(
 /// are those of the run's first eight chunks, traced in parallel), and pulses enough for
 /// [`PILOT_RAY_BUDGET`] rays per method, but no more than a tenth of the campaign's rays (so
 /// at most 30 % of a small campaign's cost over the three methods, under 1 % of a survey's),
-/// and at least one pulse: a few-ray campaign's score rests on hundreds of pulses, not on the
-/// 8 × 19 rays that left the town survey's pilot with no energy at all.
+/// and at least one pulse: a few-ray campaign's score rests on hundreds of pulses, not on a
+/// handful whose few rays may find no energy at all.
 const PILOT_RAYS: u64 = 8 * crate::transport::CHUNK_RAYS;
 const PILOT_RAY_BUDGET: u64 = 8 * PILOT_RAYS;
 

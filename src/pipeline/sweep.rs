@@ -6,7 +6,7 @@ use crate::campaign::{Campaign, Loaded};
 use crate::error::{Error, Result};
 use crate::fsutil::write_text_atomic;
 use crate::plan;
-use crate::products::plot::{line_plot, Series};
+use crate::products::figures::plot::{line_plot, Series};
 use crate::progress::log;
 use crate::waveform::file::{part_name, read_waveforms};
 use std::collections::BTreeMap;

@@ -18,11 +18,10 @@ pub(crate) const BACKOFF: f32 = 1e-3;
 
 /// obvhs's slow preset: large triangles' boxes split before the build (a long blade or a
 /// ground triangle no longer gives one box that most rays enter), a wider PLOC search and
-/// more reinsertion. Chosen over the medium preset by measurement (README, "BVH build
-/// quality"): a forest survey's whole run 0.92 of the CPU, the orchard's photon-counting
-/// track 0.99, the town survey 0.99 (and the same bytes), for 0.15 s more scene load on
-/// 0.8 M distinct triangles and 10-18 % more scene memory; the very slow preset traced no
-/// faster and built twice as long.
+/// more reinsertion. Chosen over the medium preset by measurement: the campaigns traced with
+/// less CPU for the same bytes, at the cost of a slightly longer scene load and a little more
+/// scene memory; the very slow preset traced no faster and built twice as long (the figures
+/// are in the commit that made the choice).
 const BUILD: BvhBuildParams = BvhBuildParams::slow_build();
 
 /// One distinct mesh with its BVH. Triangles are stored in BVH leaf order, so the id obvhs

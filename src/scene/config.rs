@@ -33,7 +33,7 @@ pub(crate) struct MaterialSpec {
     pub back_reflectance: Option<Spectral>,
     #[serde(default)]
     pub transmittance: Option<Spectral>,
-    /// The RPV glossy reflectance (README, "Glossy surfaces: RPV") instead of Lambert's.
+    /// The RPV glossy reflectance (docs/physics.md, "Glossy surfaces: RPV") instead of Lambert's.
     #[serde(default)]
     pub rpv: Option<RpvSpec>,
 }
@@ -60,7 +60,7 @@ pub(crate) enum ObjectSpec {
 
 const KINDS: &[&str] = &["plane", "mesh", "heightfield", "water"];
 
-/// A body of water (README, "Water"): its smooth surface, a horizontal rectangle at `z`, over
+/// A body of water (docs/physics.md, "Water"): its smooth surface, a horizontal rectangle at `z`, over
 /// a water column that fills everything below it within the rectangle, down to whatever the
 /// scene puts there (the seabed).
 #[derive(Debug, Deserialize)]
@@ -278,7 +278,7 @@ fn resolve_rpv(
     };
     for (side, r) in ["front", "back"].into_iter().zip(rho0) {
         let (albedo, deg) = rpv.max_albedo(r);
-        // the quadrature is good to about 1e-3 (README, "Glossy surfaces: RPV")
+        // the quadrature is good to about 1e-3 (docs/physics.md, "Glossy surfaces: RPV")
         if albedo > 1.0 + 2e-3 {
             return Err(doc.error(
                 &key,

@@ -64,6 +64,16 @@ impl SurfaceClass {
         }
     }
 
+    /// The waveform files' column of the class's impulse energy per bin.
+    pub const fn energy_column(self) -> &'static str {
+        match self {
+            SurfaceClass::Ground => "ground_energy_j",
+            SurfaceClass::Vegetation => "vegetation_energy_j",
+            SurfaceClass::Building => "building_energy_j",
+            SurfaceClass::Other => "other_energy_j",
+        }
+    }
+
     /// Name of the LAS class, as `products.json` counts points by it.
     pub fn las_name(self) -> &'static str {
         match self {
@@ -111,7 +121,7 @@ pub struct WaterInterface {
 
 /// A body of water: its surface at `z` over the rectangle `lo..hi` (x, y), and the water
 /// column below it, of refractive index `n` and beam attenuation `attenuation[b]` per metre in
-/// band b (README, "Water").
+/// band b (docs/physics.md, "Water").
 #[derive(Clone, Debug, PartialEq)]
 pub struct WaterBody {
     /// Mean square slope of the surface's facets (0: smooth).

@@ -3,8 +3,8 @@ use crate::rng::Rand;
 use std::path::PathBuf;
 
 /// A fresh folder for one test's files.
-fn tmp(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("lidarsim-scene-{}-{name}", std::process::id()));
+fn tmp(name: &str) -> crate::testdata::TempDir {
+    let d = crate::testdata::TempDir::new(&format!("scene-{name}"));
     let _ = std::fs::remove_dir_all(&d);
     std::fs::create_dir_all(&d).unwrap();
     d

@@ -421,8 +421,8 @@ mod tests {
     use super::*;
     use std::path::{Path, PathBuf};
 
-    fn tmp(name: &str) -> PathBuf {
-        let d = std::env::temp_dir().join(format!("lidarsim-dsm-{}-{name}", std::process::id()));
+    fn tmp(name: &str) -> crate::testdata::TempDir {
+        let d = crate::testdata::TempDir::new(&format!("dsm-{name}"));
         let _ = std::fs::remove_dir_all(&d);
         std::fs::create_dir_all(&d).unwrap();
         d

@@ -93,23 +93,38 @@ pub(super) fn survives(surfaces: usize, beta: &mut f64, a: f64, rng: &mut Rng) -
     true
 }
 
-/// Extends a sub-path whose last vertex emits along `dir` with throughput `beta`, up to
-/// `cap` vertices. On a light sub-path (`light`), a segment that crosses the aperture before
-/// any facet is the strategy t = 0 and is scored on the way. With several bands, `ratios`
-/// (one per vertex, starting with the end point's) gains each new vertex's band factors.
-#[allow(clippy::too_many_arguments)]
+/// A sub-path's random walk: its vertices so far (the end point first) with their band
+/// factors, the direction and throughput it leaves the last one with, the most vertices it
+/// may hold, and whether it carries light from a source (`light`) or importance from the
+/// receiver.
+pub(super) struct Walk<'b> {
+    pub path: &'b mut Vec<Vertex>,
+    /// With several bands, one entry per vertex (the end point's first): each new vertex's
+    /// band factors are pushed as it is made.
+    pub ratios: &'b mut Vec<BandVec>,
+    pub dir: DVec3,
+    pub beta: f64,
+    pub cap: usize,
+    pub light: bool,
+}
+
+/// Extends a sub-path ([`Walk`]) up to its cap. On a light sub-path, a segment that crosses
+/// the aperture before any facet is the strategy t = 0 and is scored on the way.
 pub(super) fn walk(
     setup: &PulseSetup,
-    path: &mut Vec<Vertex>,
-    ratios: &mut Vec<BandVec>,
-    mut dir: DVec3,
-    mut beta: f64,
-    cap: usize,
-    light: bool,
+    walk: Walk,
     rng: &mut Rng,
     acc: &mut Accum,
     scratch: &mut Vec<f64>,
 ) {
+    let Walk {
+        path,
+        ratios,
+        mut dir,
+        mut beta,
+        cap,
+        light,
+    } = walk;
     let scene = setup.scene;
     let recv = &setup.receiver;
     // the band factors of the sub-path so far, the last vertex's scattering included
@@ -243,7 +258,8 @@ pub(super) fn contribution(
 /// the receiver's aperture point and its direction within the field of view. With
 /// `sampler: sobol` they come from the pulse's low-discrepancy sequence ([`Sobol2`], sample
 /// index = ray index in the pulse); else from the ray's stream, drawn where they are used,
-/// so that independent sampling draws exactly as it did before the choice existed.
+/// so that independent sampling keeps the draws, and so the files, of versions without the
+/// `sampler` key.
 pub(super) struct FirstDims(Option<(Sobol2, u64)>);
 
 impl FirstDims {
@@ -336,12 +352,14 @@ fn light_subpath(
             let beta = sun.band_irradiance * sun.disk_area() / (q_sun * share);
             walk(
                 setup,
-                &mut b.light,
-                &mut b.light_r,
-                sun.dir,
-                beta,
-                s_cap,
-                true,
+                Walk {
+                    path: &mut b.light,
+                    ratios: &mut b.light_r,
+                    dir: sun.dir,
+                    beta: beta,
+                    cap: s_cap,
+                    light: true,
+                },
                 rng,
                 acc,
                 &mut b.scratch,
@@ -359,12 +377,14 @@ fn light_subpath(
             let (dir, _) = laser.sample(u, v);
             walk(
                 setup,
-                &mut b.light,
-                &mut b.light_r,
-                dir,
-                laser.energy / q_laser,
-                s_cap,
-                true,
+                Walk {
+                    path: &mut b.light,
+                    ratios: &mut b.light_r,
+                    dir: dir,
+                    beta: laser.energy / q_laser,
+                    cap: s_cap,
+                    light: true,
+                },
                 rng,
                 acc,
                 &mut b.scratch,
@@ -408,12 +428,14 @@ fn receiver_subpath(
         ));
         walk(
             setup,
-            &mut b.cam,
-            &mut b.cam_r,
-            dir,
-            recv.area * w,
-            t_cap,
-            false,
+            Walk {
+                path: &mut b.cam,
+                ratios: &mut b.cam_r,
+                dir: dir,
+                beta: recv.area * w,
+                cap: t_cap,
+                light: false,
+            },
             rng,
             acc,
             &mut b.scratch,

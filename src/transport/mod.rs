@@ -52,9 +52,8 @@ use std::sync::Mutex;
 
 /// Rays per random stream and per unit of parallel work. Small enough that one pulse of a few
 /// thousand rays (the GEDI ladder's 2000, the orchard's 20000) is split evenly between the
-/// threads: at 2048 the orchard's pulse was 10 tasks, and the thread that finished its share
-/// first sat idle for most of a task (189 % CPU on 2 threads). A chunk's cost beyond its rays
-/// is one tally to fill and merge.
+/// threads: cut into a few large tasks, the thread that finishes its share first sits idle
+/// for most of a task. A chunk's cost beyond its rays is one tally to fill and merge.
 pub const CHUNK_RAYS: u64 = 256;
 
 /// Surface interactions before Russian roulette may stop a sub-path.
@@ -178,7 +177,7 @@ pub struct Vertex {
     /// Area density of this vertex if the other sub-path had sampled it.
     pub pdf_rev: f64,
     /// A specular scattering (a smooth water surface): no strategy connects to it, and the
-    /// densities it makes are Dirac's (README, "Water").
+    /// densities it makes are Dirac's (docs/physics.md, "Water").
     pub delta: bool,
 }
 
@@ -284,7 +283,7 @@ pub fn simulate_pulse_in<'s>(setup: &PulseSetup, rays: u64, scratch: &'s mut Scr
     // the chunks summed over a tree of fixed shape, each half traced in parallel and the
     // halves added: the additions' order, so every bit, is the same on any number of threads,
     // no thread waits at a barrier between batches of chunks, and the tallies alive are a
-    // tree's depth per thread (a tally per chunk of 10^19 rays asked for 4·10^18 bytes)
+    // tree's depth per thread (a tally per chunk of 10^19 rays would ask for 4·10^18 bytes)
     if chunks > 1 {
         let pool = Mutex::new(Vec::new());
         let (total, _) = sum_chunks(0..chunks, &trace, setup, &pool);

@@ -76,8 +76,9 @@ impl Tally {
 
     pub(super) fn merge(&mut self, o: &Tally) {
         let add = |a: &mut [f64], b: &[f64]| a.iter_mut().zip(b).for_each(|(x, y)| *x += y);
-        // over `o`'s lit span only: outside it `o` holds zeros, and x + 0 is x for x ≥ 0 (each
-        // chunk of a many-chunk pulse added a whole gate's sums before: same bits, less work)
+        // over `o`'s lit span only: outside it `o` holds zeros, and x + 0 is x for x ≥ 0
+        // (adding a whole gate for each chunk of a many-chunk pulse: the same bits for more
+        // work)
         let (lo, hi) = o.lit;
         let (lo, hi) = (lo.min(hi), hi);
         let per_bin = o.sub.len() / o.bin_sq.len().max(1);

@@ -2,7 +2,7 @@ use super::*;
 use crate::campaign::Instrument;
 
 fn setup_scene(name: &str) -> Scene {
-    let dir = std::env::temp_dir().join(format!("lidarsim-{name}-{}", std::process::id()));
+    let dir = crate::testdata::TempDir::new(name);
     std::fs::create_dir_all(&dir).unwrap();
     let path = dir.join("s.yaml");
     std::fs::write(

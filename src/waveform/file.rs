@@ -5,6 +5,7 @@ use super::Waveform;
 use crate::error::{Error, Result};
 use crate::fsutil::Pending;
 use crate::parquet_io::{Column, Table};
+use crate::scene::SurfaceClass;
 use arrow_array::Array;
 use arrow_schema::DataType;
 use std::path::Path;
@@ -22,8 +23,8 @@ const PART_BYTES: f64 = 64e6;
 /// How a run's pulses are cut into part files: parts of `size` pulses, the last one shorter.
 /// Each part costs the same few milliseconds whatever it holds (its files created, synced and
 /// renamed, a compression context per column written and read, the workers meeting at its
-/// end): on the town survey (19 rays a pulse), parts of 3000 pulses instead of 1000 took 6 %
-/// off its CPU time and 8 % off its run's wall time, about 3 ms of CPU for each part fewer.
+/// end), which on a survey of cheap pulses is a measurable share of the run's CPU and wall
+/// time (the figures are in the commit that made the choice).
 /// So a part holds a thousand pulses, or up to four thousand where they are cheap: few rays
 /// and short gates. The size is a function of the campaign, scene and plan, which the
 /// simulation's fingerprint covers, so a resume and every shard cut the same parts.
@@ -142,7 +143,7 @@ pub fn checksum_path(part: &Path) -> std::path::PathBuf {
 }
 
 /// The waveforms as the table a part file holds. One statement per column of the output
-/// contract (README, "Outputs"), in the file's column order: the function is as long as the
+/// contract (docs/outputs.md, "Waveform parts"), in the file's column order: the function is as long as the
 /// contract, and splitting it would scatter the contract over several places.
 pub fn waveform_table(w: &[Waveform]) -> Table<'_> {
     let list = |f: fn(&Waveform) -> &[f32]| Column::ListF32(w.iter().map(f).collect());
@@ -162,10 +163,12 @@ pub fn waveform_table(w: &[Waveform]) -> Table<'_> {
             Column::U32(w.iter().map(|r| r.span_first_bin as u32).collect()),
         ),
         ("impulse_energy_se_j", list(|r| &r.impulse_energy_se_j)),
-        ("ground_energy_j", list(|r| &r.class_energy_j[0])),
-        ("vegetation_energy_j", list(|r| &r.class_energy_j[1])),
-        ("building_energy_j", list(|r| &r.class_energy_j[2])),
-        ("other_energy_j", list(|r| &r.class_energy_j[3])),
+    ];
+    columns.extend(SurfaceClass::ALL.map(|c| {
+        let bins = w.iter().map(|r| r.class_energy_j[c.index()].as_slice());
+        (c.energy_column(), Column::ListF32(bins.collect()))
+    }));
+    columns.extend([
         ("received_energy_j", f64s(|r| r.received_energy_j)),
         ("outside_gate_energy_j", f64s(|r| r.outside_gate_energy_j)),
         (
@@ -191,7 +194,7 @@ pub fn waveform_table(w: &[Waveform]) -> Table<'_> {
         ),
         ("rays", Column::U32(w.iter().map(|r| r.rays).collect())),
         ("paths_per_ray", f32s(|r| r.paths_per_ray)),
-    ];
+    ]);
     // a run of several bands: one row per pulse and band, the band beside the pulse id
     if w.iter().any(|r| r.wavelength_nm.is_some()) {
         let nm = w.iter().map(|r| r.wavelength_nm.unwrap_or(f64::NAN));
@@ -211,8 +214,8 @@ pub fn read_waveforms(path: &Path) -> Result<Vec<Waveform>> {
 /// as it decomposes photons. The impulse energies are a column as long as the gate, like the
 /// photons: a third of the bins a part holds.
 /// The rows of `spare` (a part done with) lend their buffers to the rows read: a part's
-/// thousands of bin lists, allocated and freed part after part, were a twelfth of the town
-/// survey's products stage.
+/// thousands of bin lists, allocated and freed part after part, would be a measurable share
+/// of the products stage.
 pub fn read_waveforms_but_impulse(path: &Path, spare: Vec<Waveform>) -> Result<Vec<Waveform>> {
     read_waveforms_with(path, true, false, spare)
 }
@@ -220,15 +223,18 @@ pub fn read_waveforms_but_impulse(path: &Path, spare: Vec<Waveform>) -> Result<V
 /// The columns of a waveform's bins, in [`Waveform`]'s order: laser photons, impulse energy
 /// (the whole gate), then those stored from `span_first_bin` on
 /// ([`Waveform::span_first_bin`]): its standard error and the four classes' energies.
-const BIN_COLUMNS: [&str; 7] = [
-    "laser_photons",
-    "impulse_energy_j",
-    "impulse_energy_se_j",
-    "ground_energy_j",
-    "vegetation_energy_j",
-    "building_energy_j",
-    "other_energy_j",
-];
+const BIN_COLUMNS: [&str; 7] = {
+    let c = SurfaceClass::ALL;
+    [
+        "laser_photons",
+        "impulse_energy_j",
+        "impulse_energy_se_j",
+        c[0].energy_column(),
+        c[1].energy_column(),
+        c[2].energy_column(),
+        c[3].energy_column(),
+    ]
+};
 
 /// [`read_waveforms`]; with `pages`, the bins of a file laid out as lidarsim writes it are read
 /// straight from its pages (`parquet_io::read_f32_lists`) and the other columns through
@@ -378,7 +384,8 @@ fn read_waveforms_with(
             into.extend_from_slice(values.get(a..b).unwrap_or_default());
             into
         };
-        // parts written before the spans (0304098) hold the whole gate in every bin column
+        // parts written by older versions, before the spans, hold the whole gate in every
+        // bin column
         let first =
             optional("span_first_bin", &u32t)?.map(|c| c.as_primitive::<UInt32Type>().clone());
         for i in 0..b.num_rows() {
@@ -451,8 +458,8 @@ fn row<'o>(out: &'o mut Vec<Waveform>, spare: &mut Vec<Waveform>, i: usize) -> &
 }
 
 /// `into` made `bins`, in its own buffer unless that is more than twice as large: a buffer
-/// lent row after row would otherwise grow to the widest span it ever held (on the forest
-/// survey's 3152-bin gates, 110 MiB more at the products stage's peak).
+/// lent row after row would otherwise grow to the widest span it ever held (on a forest
+/// survey's long gates, a large addition to the products stage's peak).
 fn refill<T: Copy>(into: &mut Vec<T>, bins: &[T]) {
     if into.capacity() > 2 * bins.len() + 16 {
         *into = bins.to_vec();
@@ -480,7 +487,7 @@ fn bins_of(w: &mut Waveform, c: usize) -> &mut Vec<f32> {
         0 => &mut w.laser_photons,
         1 => &mut w.impulse_energy_j,
         2 => &mut w.impulse_energy_se_j,
-        c => &mut w.class_energy_j[(c - 3).min(3)],
+        c => &mut w.class_energy_j[SurfaceClass::ALL[(c - 3).min(3)].index()],
     }
 }
 
@@ -510,18 +517,7 @@ pub fn part_is_whole(path: &Path, rows: usize, fingerprint: &str) -> bool {
 
 /// Whether a column of the waveform files holds one list per pulse.
 fn name_is_list(name: &str) -> bool {
-    matches!(
-        name,
-        "laser_photons"
-            | "impulse_energy_j"
-            | "impulse_energy_se_j"
-            | "order_energy_j"
-            | "order_energy_se_j"
-            | "ground_energy_j"
-            | "vegetation_energy_j"
-            | "building_energy_j"
-            | "other_energy_j"
-    )
+    BIN_COLUMNS.contains(&name) || matches!(name, "order_energy_j" | "order_energy_se_j")
 }
 
 #[cfg(test)]
@@ -591,7 +587,7 @@ mod tests {
     #[test]
     fn meaningless_brfs_are_null_in_the_file() {
         use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
-        let dir = std::env::temp_dir().join(format!("lidarsim-wfnull-{}", std::process::id()));
+        let dir = crate::testdata::TempDir::new("wfnull");
         let (a, b) = (dir.join("a.parquet"), dir.join("b.parquet"));
         let with_nulls = vec![waveform(0, f32::NAN, 0.3), waveform(1, f32::NAN, f32::NAN)];
         write_waveforms(&a, &with_nulls, "fp").unwrap();
@@ -621,7 +617,7 @@ mod tests {
     /// a span that runs past its gate is an error.
     #[test]
     fn span_stored_columns_read_back() {
-        let dir = std::env::temp_dir().join(format!("lidarsim-wfspan-{}", std::process::id()));
+        let dir = crate::testdata::TempDir::new("wfspan");
         let path = dir.join("part.parquet");
         let bins = 40;
         let spans = [
@@ -724,7 +720,7 @@ mod tests {
     /// writes lists) is read through Arrow's reader to the same waveforms.
     #[test]
     fn bins_from_the_pages_equal_arrows_reading() {
-        let dir = std::env::temp_dir().join(format!("lidarsim-wfpages-{}", std::process::id()));
+        let dir = crate::testdata::TempDir::new("wfpages");
         let path = dir.join("part.parquet");
         let rows: Vec<Waveform> = (0..1100u64)
             .map(|i| {
@@ -802,7 +798,7 @@ mod tests {
     /// reads as an error or as waveforms, never as a panic, through either reader.
     #[test]
     fn damaged_parts_never_panic() {
-        let dir = std::env::temp_dir().join(format!("lidarsim-wfdamage-{}", std::process::id()));
+        let dir = crate::testdata::TempDir::new("wfdamage");
         let path = dir.join("part.parquet");
         let rows: Vec<Waveform> = (0..40u64)
             .map(|i| {

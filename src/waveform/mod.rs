@@ -47,8 +47,8 @@ pub struct Waveform {
     pub class_energy_j: [Vec<f32>; 4],
     /// The gate bin at which `impulse_energy_se_j` and `class_energy_j` start: they hold the
     /// bins the pulse's light reached, as the files do (column `span_first_bin`). Dense,
-    /// they were 96 % zeros on an airborne survey; filling, scanning and reading those zeros
-    /// back cost a few per cent of the simulate stage on 3152-bin gates.
+    /// they would be mostly zeros on an airborne survey, and filling, scanning and reading
+    /// those zeros back costs a few per cent of the simulate stage on long gates.
     pub span_first_bin: usize,
     pub rays: u32,
     /// Paths that carried energy, per ray.
@@ -56,6 +56,20 @@ pub struct Waveform {
     /// The band of this row in a run of several bands (column `wavelength_nm`); `None` with
     /// one band, whose files have no such column.
     pub wavelength_nm: Option<f64>,
+}
+
+/// rRMSE of a waveform `w` against a reference over the bins `over`: the RMS of their
+/// differences over the reference's mean there (the paper's measure of a waveform's error);
+/// NaN over no bins.
+pub fn rrmse<T: Copy + Into<f64>>(w: &[T], reference: &[T], over: &[usize]) -> f64 {
+    if over.is_empty() {
+        return f64::NAN;
+    }
+    let n = over.len() as f64;
+    let (a, r) = (|i: usize| w[i].into(), |i: usize| reference[i].into());
+    let mse = over.iter().map(|&i| (a(i) - r(i)).powi(2)).sum::<f64>() / n;
+    let mean = over.iter().map(|&i| r(i)).sum::<f64>() / n;
+    mse.sqrt() / mean
 }
 
 /// Sub-bins per bin so that a sub-bin is at most σ/4 wide (1 for an impulse pulse).
@@ -72,8 +86,8 @@ pub fn sub_bins_per_bin(bin_s: f64, pulse_sigma_s: f64) -> usize {
 /// with an approximate erfc (1e-7) those differences, and the fit's Jacobian built from them,
 /// lose their digits wherever a bin is narrow against the pulse or far in its tail. The C
 /// library's, not the `libm` crate's: the same algorithm (Sun's) over the system's exp, where
-/// the crate's own exp was 23 % of the products stage's samples (the crate made the stage 1.11x
-/// slower in CPU), and std's exp, which the transport uses, is the system's already.
+/// the crate's own exp is slower (it makes the products stage measurably slower in CPU), and
+/// std's exp, which the transport uses, is the system's already.
 pub fn normal_cdf(x: f64) -> f64 {
     0.5 * c_erfc(-x / std::f64::consts::SQRT_2)
 }
@@ -100,7 +114,7 @@ const QUADRATURE_MAX_BIN_SIGMAS: f64 = 0.5;
 /// than [`QUADRATURE_MAX_BIN_SIGMAS`], by quadrature of φ, stepped from bin to bin as
 /// φ(z + h) = φ(z) e^(-z h) e^(-h²/2) (e^(-z h) falling by e^(-h²) a bin): a few exponentials
 /// per component instead of an erfc, itself an exponential and a rational function, per
-/// edge (together a third of a products stage); else as differences of Φ.
+/// edge (together a large share of a products stage); else as differences of Φ.
 pub fn bin_masses_into(
     centre: f64,
     sigma: f64,
@@ -122,7 +136,7 @@ pub fn bin_masses_into(
     let z0 = (offset + a as f64 - centre) / sigma;
     // The four nodes' φ stepped side by side, each bin's mass summed node after node: the
     // same products and sums as one node's pass over the bins after another, four times as
-    // many multiplications in flight (one pass at a time waited on each step's product).
+    // many multiplications in flight (one pass at a time would wait on each step's product).
     let mut phi = [0.0; 4];
     let mut fall = [0.0; 4];
     let mut weight = [0.0; 4];
@@ -132,8 +146,8 @@ pub fn bin_masses_into(
         let z = z0 + x * h;
         (phi[k], fall[k], weight[k]) = (normal_pdf(z), (-z * h).exp(), w * h);
     }
-    // written into a slice, not pushed: a push a bin kept the vector's length in memory and
-    // checked its capacity each time, more instructions than the quadrature's own
+    // written into a slice, not pushed: a push a bin keeps the vector's length in memory and
+    // checks its capacity each time, more instructions than the quadrature's own
     let start = out.len();
     out.resize(start + (b - a), 0.0);
     for o in &mut out[start..] {
@@ -188,10 +202,10 @@ pub fn convolve(
     let last = lit.1.saturating_mul(sub_bins).min(sub.len()).max(first);
     // the bin integrals by the stepped quadrature of `bin_masses_into` where bins are at most
     // half a sigma: a few exponentials per sub-bin instead of an erfc per edge, whose 2 × 96
-    // per sub-bin on the forest's gates (0.067 ns bins, 1.27 ns sigma) were most of building
-    // a waveform
+    // per sub-bin on a forest's gates (0.067 ns bins, 1.27 ns sigma) would be most of
+    // building a waveform
     // a sub-bin's masses cover its reach within the gate: no more than the gate's bins, whatever
-    // the pulse (one of 10^9 ns asked for 68 GB here)
+    // the pulse (one of 10^9 ns would ask 68 GB here)
     let mut masses = Vec::with_capacity((2 * reach as usize + 1).min(gate.bins));
     for (i, &e) in sub.iter().enumerate().take(last).skip(first) {
         if e == 0.0 {

@@ -189,8 +189,8 @@ fn convolve_gaussian(v: &[f64], sigma_bins: f64) -> Vec<f64> {
     }
     let reach = (4.0 * sigma_bins).ceil();
     let cdf = |x: f64| super::normal_cdf(x / sigma_bins);
-    // taps further than the record is long never land in it: a response of 10^9 ns asked for
-    // a 54 GB kernel; its ±4σ mass is then taken whole from Φ
+    // taps further than the record is long never land in it (a response of 10^9 ns would ask
+    // for a 54 GB kernel); its ±4σ mass is then taken whole from Φ
     let half = if reach < v.len() as f64 {
         reach as usize
     } else {

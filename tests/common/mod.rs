@@ -9,7 +9,7 @@ use std::f64::consts::PI;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-pub const C: f64 = 299_792_458.0;
+pub use lidarsim::C;
 
 /// A fresh, empty folder for one test.
 pub fn tmp(name: &str) -> PathBuf {
@@ -468,13 +468,6 @@ pub fn sphere_scene(dir: &Path, albedo: f64) -> PathBuf {
             mesh.display()
         ),
     )
-}
-
-/// rRMSE of `a` against the reference `r`: RMS difference over the mean of the reference.
-pub fn rrmse(a: &[f64], r: &[f64]) -> f64 {
-    let n = r.len() as f64;
-    let mse = a.iter().zip(r).map(|(x, y)| (x - y) * (x - y)).sum::<f64>() / n;
-    mse.sqrt() / (r.iter().sum::<f64>() / n)
 }
 
 /// Per-order agreement: |a - b| < 3 combined standard errors, with standard errors small

@@ -10,9 +10,9 @@ pub(super) fn smoothing_sigma(hint: f64) -> f64 {
 
 /// The waveform convolved with a Gaussian of `sigma` bins (±3σ, normalised by the kernel's
 /// weight inside the waveform). A bin whose window holds no non-zero value is 0 without being
-/// summed: most of a long waveform is empty gate, and its sums were most of the products
-/// stage's time on 3000-bin waveforms. Every other bin is summed in the same order as before,
-/// so the result is the same to the bit.
+/// summed: most of a long waveform is empty gate, whose sums would be most of the products
+/// stage's time on long waveforms. Every other bin is summed in the same order as the dense
+/// sum, so the result is the same to the bit.
 pub(super) fn smooth(y: &[f64], sigma: f64) -> Vec<f64> {
     let reach = (3.0 * sigma).ceil() as usize;
     let kernel: Vec<f64> = (0..=reach)

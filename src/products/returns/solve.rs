@@ -3,10 +3,6 @@
 
 use super::fit::{pdf, Params, Window};
 
-/// Steps a fit may take: far more than a fit that converges needs (one or two from a
-/// window's moments, ten to twenty for several components).
-pub(super) const MAX_ITERATIONS: usize = 100;
-
 impl Window<'_> {
     /// Levenberg-Marquardt on the Poisson deviance: gradient Σ (1 - y/m) ∂m/∂θ and the
     /// Fisher information Σ ∂m/∂θ ∂m/∂θᵀ / m as the curvature. Returns the parameters
@@ -102,7 +98,7 @@ impl Window<'_> {
         for (c, p) in params.iter().enumerate() {
             let (a, b) = self.reach(p);
             // zero where the component does not reach, written below where it does (zeroing
-            // the whole matrix first was 7 % of the fit's instructions)
+            // the whole matrix first would be a measurable share of the fit's instructions)
             let (before, reached) = jac.split_at_mut(a * np);
             let after = &mut reached[(b - a) * np..];
             for row in before
@@ -118,7 +114,7 @@ impl Window<'_> {
             // and e^(-z h) itself falls by e^(-h²) an edge, so three exponentials serve the
             // whole component instead of one per edge (the Jacobian's main cost after Φ);
             // the product's relative error grows by an ulp or two an edge. No division per
-            // bin either: three of them a bin were a twentieth of the town survey's products
+            // bin either: three of them a bin would be a measurable share of the products
             // stage, throughput-bound where everything else pipelines.
             let h = 1.0 / s;
             let area_h = p[2] * h;
@@ -145,8 +141,8 @@ impl Window<'_> {
     /// expected curvature `h` = Σ J Jᵀ / m (full symmetric matrix).
     fn scoring(&self, jac: &[f64], m: &[f64], h: &mut [f64], g: &mut [f64]) {
         // one and two components, most fits, with their sizes known to the compiler: its
-        // loops unrolled and unchecked (the general loop's index checks were a tenth of the
-        // fit's time); the same sums in the same order, so the same bits
+        // loops unrolled and unchecked (the general loop's index checks are a measurable
+        // share of the fit's time); the same sums in the same order, so the same bits
         match g.len() {
             3 => scoring_sized(3, self.y, jac, m, h, g),
             6 => scoring_sized(6, self.y, jac, m, h, g),
@@ -157,8 +153,8 @@ impl Window<'_> {
     /// The first damped step that does not raise the deviance `dev`, raising the damping
     /// `lambda` until one does (at most 12 tries) and lowering it after; None when none does,
     /// or when a step is too small to mean anything: then the fit has converged, and the
-    /// step is not worth the model it would cost to try (most fits ended with such a step,
-    /// often tried several times as float noise in the deviance rejected it).
+    /// step is not worth the model it would cost to try (most fits end with such a step,
+    /// which float noise in the deviance could otherwise reject several times over).
     /// `dmax` is the largest diagonal of `h`, `floor` the least sigma. The step taken, its
     /// model and bin integrals are left in `trial`, and its deviance returned.
     fn damped_step(
@@ -214,7 +210,7 @@ impl Window<'_> {
 }
 
 /// A thread's buffers for [`Window::fit`], kept from fit to fit: their ten vectors, allocated
-/// for each fit, were a fortieth of the town survey's products stage.
+/// for each fit, would be a measurable share of the products stage.
 #[derive(Default)]
 struct Buffers {
     /// Each component's bin integrals at the current parameters.
@@ -279,9 +275,9 @@ const SPARSE_COMPONENTS: usize = 16;
 
 /// [`scoring_sized`] for three components or more, each bin's sums over the components that
 /// reach it only: a bin far from a component has its three derivatives zero, and adding
-/// their zero products left a fit of six components summing 171 products a bin to find the
-/// few that are not (a third of the forest survey's products stage was this solver). The
-/// products skipped are zeros, so the sums are the same to the bit.
+/// their zero products would leave a fit of six components summing 171 products a bin to
+/// find the few that are not (on a forest survey this solver is a large share of the
+/// products stage). The products skipped are zeros, so the sums are the same to the bit.
 fn scoring_sparse(np: usize, y: &[f64], jac: &[f64], m: &[f64], h: &mut [f64], g: &mut [f64]) {
     let nc = np / 3;
     if nc > SPARSE_COMPONENTS || !np.is_multiple_of(3) {

@@ -83,8 +83,8 @@ fn noise_free_gaussians_are_recovered_exactly() {
     assert!(worst_c < 0.01 && worst_a < 0.002);
 }
 
-/// The criterion: 1 to 4 Gaussians (σ 1.5–4 bins, at least 3σ apart) with Poisson
-/// noise, centres within 0.1 bin and areas within 2 %. Areas are 5·10⁴–5·10⁵ photons, a
+/// The decomposition's criterion: 1 to 4 Gaussians (σ 1.5–4 bins, at least 3σ apart) with
+/// Poisson noise, centres within 0.1 bin and areas within 2 %. Areas are 5·10⁴–5·10⁵ photons, a
 /// mJ-class airborne return (the bundled ALS campaign over the plane gets ~2·10⁸), one
 /// decade apart at most within a waveform: there the Cramér–Rao bounds of an isolated
 /// return, σ/√A ≤ 0.018 bin and 1/√A ≤ 0.45 %, put the tolerances at 5.6 and 4.5 standard
@@ -492,11 +492,11 @@ impl Comb {
 
 /// Twenty rays over a steep hard surface, one spike each, none significant against the
 /// simulation's noise alone: together one return, placed within a standard error of their
-/// mean range, not at the first spike (which the first-hit rule alone made the return, up to
-/// 2 m above a plane seen at 75°). Two such surfaces with a gap
-/// far longer than their rays' spacing between them are two returns. Eight leaves hit one
-/// ray each give the first leaf as the first return, as a first-hit simulator has it, where
-/// the same light off a hard surface is one return.
+/// mean range, not at the first spike (where the first-hit rule alone would put the return,
+/// up to 2 m above a plane seen at 75°). Two such surfaces with a gap far longer than their
+/// rays' spacing between them are two returns. Eight leaves hit one ray each give the first
+/// leaf as the first return, as a first-hit simulator has it, where the same light off a hard
+/// surface is one return.
 #[test]
 fn a_few_rays_comb_is_one_surface_unless_leaves_or_a_gap_part_it() {
     let rx = rx(1.7);
@@ -535,11 +535,11 @@ fn a_few_rays_comb_is_one_surface_unless_leaves_or_a_gap_part_it() {
 }
 
 /// A forest ALS waveform (als_sweep, pulse 71648 at 250 m and 150 kHz, 32 rays: four returns
-/// with deep dips between them) on which a fit wandered to a centre of 8.8e8 bins and a width
-/// of 3e9, which became a point 2700 km away and a panic in the LAS writer: every component
-/// stays within its waveform, and a fit that fails keeps the detector's return. (The four
-/// merge into one here: each is as large as one ray's share of the Monte Carlo error, and
-/// with no leaves' share of the light given they are read as one surface's comb.)
+/// with deep dips between them) on which a fit can wander to a centre and a width of billions
+/// of bins, a point thousands of kilometres away that the LAS writer cannot take: every
+/// component stays within its waveform, and a fit that fails keeps the detector's return.
+/// (The four merge into one here: each is as large as one ray's share of the Monte Carlo
+/// error, and with no leaves' share of the light given they are read as one surface's comb.)
 #[test]
 fn no_component_leaves_its_waveform() {
     let v: serde_json::Value = serde_json::from_str(include_str!(
@@ -618,8 +618,7 @@ fn smoothing_skips_empty_windows_to_the_same_bits() {
 /// gate's own bins as the model is exact; the count itself is found as on the gate's bins
 /// but for a weak return between two strong ones, which the residual search (a heuristic
 /// whose path depends on the bins) finds on the gate's own bins and may miss on coarse ones
-/// (it printed 1 case of these 600 on σ/4 bins, 2 on σ/3 and 3 on σ/2, the bins now; at most
-/// 1 % is allowed).
+/// (a few of these 600 cases, which the test prints; at most 1 % is allowed).
 #[test]
 fn fine_gates_are_decomposed_on_coarser_bins_without_loss() {
     let mut r = SplitMix64::new(11);
@@ -769,9 +768,9 @@ fn signal_span_equals_the_scan_bin_by_bin() {
 /// from the 2-D footprint itself (a grid over the disk, each cell's range affine in its
 /// coordinate), noise-free and with Poisson noise at 10^4 to 10^6 photons. One return each
 /// time, placed at the light's centroid within a tenth of a pulse sigma plus 3 standard
-/// errors of the centroid (the spread's over √photons). Before the decomposition compared its
-/// components with one surface's waveform, spreads of 8 sigmas and more gave 2-4 returns,
-/// and a wide one went to the summit of its flat top.
+/// errors of the centroid (the spread's over √photons). Without comparing its components
+/// with one surface's waveform, the decomposition would make 2-4 returns of spreads of 8
+/// sigmas and more, and place a wide one at the summit of its flat top.
 #[test]
 fn a_smeared_surface_is_one_return_at_any_spread() {
     let sigma = 1.7;

@@ -3,6 +3,8 @@
 //! waveforms with their fitted components. Text needs a font: DejaVu Sans ships in `assets/`
 //! and is compiled in, so no system font library is needed.
 
+pub mod plot;
+
 use crate::error::{Error, Result};
 use crate::products::returns::Component;
 use plotters::coord::types::RangedCoordf64;
@@ -11,7 +13,7 @@ use plotters::prelude::*;
 use std::path::Path;
 use std::sync::Once;
 
-const FONT: &[u8] = include_bytes!("../../assets/DejaVuSans.ttf");
+const FONT: &[u8] = include_bytes!("../../../assets/DejaVuSans.ttf");
 static REGISTER: Once = Once::new();
 
 pub(crate) fn register_font() {
@@ -357,7 +359,7 @@ mod tests {
 
     #[test]
     fn figures_are_png_files() {
-        let d = std::env::temp_dir().join(format!("lidarsim-fig-{}", std::process::id()));
+        let d = crate::testdata::TempDir::new("fig");
         let pts: Vec<TopPoint> = (0..100)
             .map(|k| TopPoint {
                 x: k as f64,

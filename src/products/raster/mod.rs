@@ -434,11 +434,9 @@ impl From<&Point> for DsmPoint {
 mod tests {
     use super::*;
     use crate::scene::Scene;
-    use std::path::PathBuf;
 
-    fn tmp(name: &str) -> PathBuf {
-        let d =
-            std::env::temp_dir().join(format!("lidarsim-dsmprod-{}-{name}", std::process::id()));
+    fn tmp(name: &str) -> crate::testdata::TempDir {
+        let d = crate::testdata::TempDir::new(&format!("dsmprod-{name}"));
         let _ = std::fs::remove_dir_all(&d);
         std::fs::create_dir_all(&d).unwrap();
         d

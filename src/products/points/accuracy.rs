@@ -2,7 +2,7 @@
 //! does not, so that a decomposition that invents returns shows up as points in mid-air or
 //! under the ground.
 
-use super::points::Point;
+use super::Point;
 use crate::scene::Scene;
 use glam::DVec3;
 use rayon::prelude::*;

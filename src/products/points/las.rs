@@ -166,7 +166,14 @@ pub fn write_las_chunks(
     layout: &Layout,
     chunks: impl FnOnce(&mut dyn FnMut(&[Point]) -> Result<()>) -> Result<()>,
 ) -> Result<()> {
-    let err = |e: las::Error| Error::file(path, format!("cannot write LAS: {e}"));
+    let err = |e: las::Error| {
+        Error::io(
+            path,
+            "cannot write LAS",
+            std::io::Error::other(e.to_string()),
+        )
+        .advise(crate::fsutil::WRITE_ADVICE)
+    };
     let offset = layout.offset;
     let mut b = Builder::from((1, 4));
     b.version = Version::new(1, 4);
@@ -298,7 +305,7 @@ pub fn read_las(path: &Path) -> Result<Vec<Point>> {
             .header()
             .all_vlrs()
             .find(|v| v.user_id == "LASF_Spec" && v.record_id == 4)
-            .ok_or_else(|| Error::file(path, "no Extra Bytes VLR"))?;
+            .ok_or_else(|| Error::data(path, "no Extra Bytes VLR"))?;
         let mut at = 0usize;
         let mut found = [None; 2];
         let mut band = None;
@@ -308,7 +315,7 @@ pub fn read_las(path: &Path) -> Result<Vec<Point>> {
             let size = if d[2] == 0 {
                 d[3] as usize // undocumented bytes: options holds the length
             } else {
-                type_size(d[2]).ok_or_else(|| Error::file(path, "unknown extra bytes type"))?
+                type_size(d[2]).ok_or_else(|| Error::data(path, "unknown extra bytes type"))?
             };
             for (k, e) in EXTRA.iter().enumerate() {
                 if e.0 == name && e.1 == d[2] {
@@ -323,7 +330,7 @@ pub fn read_las(path: &Path) -> Result<Vec<Point>> {
         match found {
             [Some(a), Some(b)] => (a, b, band),
             _ => {
-                return Err(Error::file(
+                return Err(Error::data(
                     path,
                     "missing apparent_reflectance or pulse_id",
                 ))
@@ -336,7 +343,7 @@ pub fn read_las(path: &Path) -> Result<Vec<Point>> {
         let p = p.map_err(err)?;
         let e = &p.extra_bytes;
         if e.len() < offsets.0 + 4 || e.len() < offsets.1 + 8 {
-            return Err(Error::file(path, "point too short for its extra bytes"));
+            return Err(Error::data(path, "point too short for its extra bytes"));
         }
         let rho = f32::from_le_bytes(e[offsets.0..offsets.0 + 4].try_into().expect("4 bytes"));
         let id = u64::from_le_bytes(e[offsets.1..offsets.1 + 8].try_into().expect("8 bytes"));
@@ -344,7 +351,7 @@ pub fn read_las(path: &Path) -> Result<Vec<Point>> {
             Some(at) => {
                 let b = e
                     .get(at..at + 4)
-                    .ok_or_else(|| Error::file(path, "point too short for its wavelength_nm"))?;
+                    .ok_or_else(|| Error::data(path, "point too short for its wavelength_nm"))?;
                 Some(f32::from_le_bytes(b.try_into().expect("4 bytes")))
             }
             None => None,
@@ -398,15 +405,17 @@ mod tests {
             .collect()
     }
 
-    fn tmp(name: &str) -> std::path::PathBuf {
-        let d = std::env::temp_dir().join(format!("lidarsim-products-{}", std::process::id()));
-        d.join(name)
+    /// A file `name` in a folder of its own, removed with the folder.
+    fn tmp(name: &str) -> (crate::testdata::TempDir, std::path::PathBuf) {
+        let d = crate::testdata::TempDir::new(&format!("las-{name}"));
+        let p = d.join(name);
+        (d, p)
     }
 
     #[test]
     fn write_then_read_back() {
         let pts = sample(1000);
-        let path = tmp("roundtrip.las");
+        let (_dir, path) = tmp("roundtrip.las");
         write_las(&path, &pts).unwrap();
         let back = read_las(&path).unwrap();
         assert_eq!(back.len(), pts.len());
@@ -449,14 +458,16 @@ mod tests {
 
     #[test]
     fn empty_and_bad_points() {
-        let path = tmp("empty.las");
+        let (_dir, path) = tmp("empty.las");
         write_las(&path, &[]).unwrap();
         assert!(read_las(&path).unwrap().is_empty());
         let mut p = sample(2);
         p[1].z = f64::NAN;
-        assert!(write_las(&tmp("bad.las"), &p).is_err());
-        assert!(!tmp("bad.las").exists());
-        assert!(read_las(&tmp("missing.las")).is_err());
+        let (_bad_dir, bad) = tmp("bad.las");
+        assert!(write_las(&bad, &p).is_err());
+        assert!(!bad.exists());
+        let (_missing_dir, missing) = tmp("missing.las");
+        assert!(read_las(&missing).is_err());
     }
 
     #[test]
@@ -471,7 +482,7 @@ mod tests {
             return;
         }
         let pts = sample(257);
-        let path = tmp("laspy.las");
+        let (_dir, path) = tmp("laspy.las");
         write_las(&path, &pts).unwrap();
         let returns: Vec<String> = pts.iter().map(|p| p.return_number.to_string()).collect();
         let script = format!(

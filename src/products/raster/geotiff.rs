@@ -157,7 +157,7 @@ mod tests {
     /// shifted by the origin, and the GeoTIFF tags that place it.
     #[test]
     fn a_raster_reads_back_north_up_with_its_tags() {
-        let dir = std::env::temp_dir().join(format!("lidarsim-geotiff-{}", std::process::id()));
+        let dir = crate::testdata::TempDir::new("geotiff");
         let path = dir.join("dsm.tif");
         let grid = Grid {
             x0: 10.0,

@@ -67,8 +67,10 @@ pub struct H5Writer {
     path: std::path::PathBuf,
 }
 
+/// A write the HDF5 writer could not make: the system's refusal, as far as lidarsim can
+/// tell (the file is its own, written afresh).
 fn h5_error(path: &Path, what: &str, e: hdf5_pure::Error) -> Error {
-    Error::msg(format!("{}: {what}: {e}", path.display()))
+    Error::io(path, what, std::io::Error::other(e.to_string())).advise(crate::fsutil::WRITE_ADVICE)
 }
 
 impl H5Writer {

@@ -97,7 +97,7 @@ pub struct PointsSummary {
     pub points_by_class: BTreeMap<String, usize>,
     /// How far the points lie from the scene's surfaces; null without points.
     #[serde(default)]
-    pub surface_distance: Option<crate::products::accuracy::SurfaceDistance>,
+    pub surface_distance: Option<crate::products::points::accuracy::SurfaceDistance>,
 }
 
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]

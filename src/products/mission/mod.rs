@@ -2,21 +2,27 @@
 //! `waveforms_l1b.h5` (GEDI L1B-like: one group per beam) and `photons_atl03.h5` (ICESat-2
 //! ATL03-like: one group per ground track). Names, shapes and indexing follow the real
 //! products (`rx_sample_start_index` counts from 1, `signal_conf_ph` is N x 5); the
-//! simulation defines the values as README's output contract says.
+//! simulation defines the values as the output contract (docs/outputs.md) says.
 //!
 //! Coordinates: with a `frame`, `latitude*`/`lat_ph` hold the northing and
 //! `longitude*`/`lon_ph` the easting in the frame's CRS, heights are local z + the origin's
 //! height (campaign.md: every coordinate a product writes is local + origin); without one,
 //! local y, x and z. Each file names the CRS in its root attributes.
 
+pub mod h5;
+
+/// The mission-shaped files (campaign.md, "Files of the next wave").
+pub const L1B_FILE: &str = "waveforms_l1b.h5";
+pub const ATL03_FILE: &str = "photons_atl03.h5";
+
 use crate::campaign::Frame;
 use crate::error::{Error, Result};
 use crate::plan::Pulse;
-use crate::products::h5::{Field, H5Writer, Kind};
 use crate::products::photons::PhotonRow;
 use crate::waveform::record::{transmitted_pulse, Record};
 use crate::waveform::Waveform;
 use glam::DVec3;
+use h5::{Field, H5Writer, Kind};
 use std::collections::BTreeMap;
 use std::path::Path;
 

@@ -272,7 +272,7 @@ mod tests {
         let rows = photon_rows(&pulse, t0, &ev, 12.5);
         assert!((rows[0].z - 100.0).abs() < 1e-9 && rows[0].x == 1.0);
         assert!((rows[1].time_ns - t0 - 2.0).abs() < 1e-9);
-        let dir = std::env::temp_dir().join(format!("lidarsim-photons-{}", std::process::id()));
+        let dir = crate::testdata::TempDir::new("photons");
         let path = dir.join("photons.parquet");
         write_photons(&path, &rows, false).unwrap();
         let file = std::fs::File::open(&path).unwrap();

@@ -1,5 +1,9 @@
 //! Discrete-return points from a pulse's decomposed waveform.
 
+pub mod accuracy;
+pub mod las;
+pub mod spill;
+
 use crate::plan::Pulse;
 use crate::products::returns::Component;
 use crate::waveform::Waveform;

@@ -140,7 +140,7 @@ mod tests {
     /// Every field comes back bit for bit, in order, across chunk boundaries.
     #[test]
     fn points_come_back_as_they_went() {
-        let dir = std::env::temp_dir().join(format!("lidarsim-spill-{}", std::process::id()));
+        let dir = crate::testdata::TempDir::new("spill");
         let points: Vec<Point> = (0..CHUNK as u64 + 7)
             .map(|i| Point {
                 x: i as f64 * 0.1 - 3e5,

@@ -136,7 +136,7 @@ mod tests {
 
     #[test]
     fn error_map_is_a_png_file() {
-        let d = std::env::temp_dir().join(format!("lidarsim-dsmfig-{}", std::process::id()));
+        let d = crate::testdata::TempDir::new("dsmfig");
         let grid = Grid {
             x0: 0.0,
             y0: 0.0,

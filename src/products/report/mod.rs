@@ -1,13 +1,15 @@
 //! `report.md`: what ran, on what, how fast, and what came back, with the products' figures.
 
+pub mod summary;
+
 use crate::campaign::Loaded;
 use crate::error::Result;
-use crate::products::dsm::DsmReport;
-use crate::products::summary::{ProductsSummary, WaveformTotals};
+use crate::products::raster::DsmReport;
 use crate::scene::Scene;
 use crate::scene::SurfaceClass;
 use crate::waveform::file::{part_name, read_waveforms, Parts};
 use std::path::Path;
+use summary::{ProductsSummary, WaveformTotals};
 
 /// `report.md`: what ran, on what, how fast, and what came back.
 pub fn report(
@@ -144,7 +146,7 @@ fn mission_section(out: &Path, inst: &crate::campaign::Instrument, crs: Option<&
         format!("latitude = northing and longitude = easting in {c}")
     });
     let mut text = String::new();
-    if out.join(crate::products::stage::L1B_FILE).is_file() {
+    if out.join(crate::products::mission::L1B_FILE).is_file() {
         let mut record = vec![];
         match &inst.noise {
             Some(n) => record.push(format!(
@@ -170,7 +172,7 @@ fn mission_section(out: &Path, inst: &crate::campaign::Instrument, crs: Option<&
             record.join(", ")
         );
     }
-    if out.join(crate::products::stage::ATL03_FILE).is_file() {
+    if out.join(crate::products::mission::ATL03_FILE).is_file() {
         text += &format!(
             "\nICESat-2 ATL03-like photons for ATL03 tools: `photons_atl03.h5` ({place}); `signal_conf_ph` is 4 for laser photons and 0 for solar and dark ones, and `truth_source` says which.\n"
         );

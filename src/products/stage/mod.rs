@@ -1,0 +1,196 @@
+//! The products stage: the waveforms read a part at a time and handed to a list of writers
+//! (points, photons, the mission files), each adding what it makes of the part to its
+//! files, then finishing them; `products.json` sums up.
+
+mod mission;
+mod part;
+mod photons;
+mod points;
+
+use crate::campaign::{InstrumentKind, Loaded};
+use crate::error::{Error, Result};
+use crate::fsutil::write_text_atomic;
+use crate::plan::Plan;
+use crate::products::mission::{Atl03, L1b, ATL03_FILE, L1B_FILE};
+use crate::products::report::summary::{ProductsSummary, WaveformTotals};
+use crate::progress::{log, progress};
+use crate::scene::Scene;
+use crate::sensor::pulse_sigma_s;
+use crate::waveform::file::{part_name, read_waveforms_but_impulse, Parts};
+use crate::waveform::record::Recorder;
+use crate::waveform::Waveform;
+use part::{Part, Writer};
+use std::path::Path;
+
+/// Which products a campaign asks for: its `products:` section, or by instrument kind.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Wanted {
+    pub points: bool,
+    pub photons: bool,
+    pub dsm: Option<f64>,
+    /// `waveforms_l1b.h5`: waveform instruments.
+    pub l1b: bool,
+}
+
+pub fn wanted(loaded: &Loaded) -> Wanted {
+    let c = &loaded.campaign;
+    let kind = c.instrument.kind;
+    match &c.products {
+        Some(p) => Wanted {
+            points: p.points,
+            photons: p.photons,
+            dsm: p.dsm.as_ref().map(|d| d.resolution_m),
+            l1b: kind == InstrumentKind::Waveform,
+        },
+        None => Wanted {
+            points: kind == InstrumentKind::DiscreteReturn,
+            photons: kind == InstrumentKind::PhotonCounting,
+            dsm: (kind == InstrumentKind::DiscreteReturn).then_some(2.0),
+            l1b: kind == InstrumentKind::Waveform,
+        },
+    }
+}
+
+/// The writers of the products `want` asks for, in the order the manifest lists their files.
+fn writers<'a>(
+    loaded: &'a Loaded,
+    scene: &'a Scene,
+    out: &'a Path,
+    plan: &'a Plan,
+    cut: Parts,
+    want: Wanted,
+) -> Result<Vec<Box<dyn Writer + Send + 'a>>> {
+    let c = &loaded.campaign;
+    let mut list: Vec<Box<dyn Writer + Send + 'a>> = Vec::new();
+    if want.points {
+        let w = points::PointsWriter::new(loaded, scene, plan, cut, out, want.dsm)?;
+        list.push(Box::new(w));
+    }
+    if want.photons {
+        let path = out.join(photons::PHOTONS_FILE);
+        let bands = c.wavelength_nm.several();
+        list.push(Box::new(photons::PhotonsWriter::new(
+            path,
+            bands,
+            plan.len(),
+        )));
+        let file = Atl03::create(&out.join(ATL03_FILE), &c.name, c.frame.as_ref())?;
+        list.push(Box::new(mission::Atl03Writer { file, plan }));
+    }
+    if want.l1b {
+        let file = L1b::create(
+            &out.join(L1B_FILE),
+            &c.name,
+            c.frame.as_ref(),
+            pulse_sigma_s(&c.instrument),
+            c.instrument.digitiser.is_some(),
+            c.instrument.detection_threshold_photons,
+        )?;
+        let recorder = Recorder::new(&c.instrument, c.seed);
+        list.push(Box::new(mission::L1bWriter {
+            file,
+            recorder,
+            plan,
+        }));
+    }
+    Ok(list)
+}
+
+/// Runs the products stage; returns the files written (relative to `out`) and a note.
+///
+/// Memory is bounded by a part and the scene, not by the campaign's length: the writers take
+/// the waveforms a part at a time and write or spill what they make of them as they go.
+pub fn run(
+    loaded: &Loaded,
+    scene: &Scene,
+    out: &Path,
+    plan: &Plan,
+    cut: Parts,
+) -> Result<(Vec<String>, String)> {
+    let parts = cut.count();
+    let want = wanted(loaded);
+    let mut writers = writers(loaded, scene, out, plan, cut, want)?;
+    let mut seen = 0usize;
+    let mut totals = WaveformTotals::default();
+    let bar = progress(plan.len() as u64, "products");
+    let start = std::time::Instant::now();
+    let every = parts.div_ceil(10).max(1);
+    // Part k + 1 is read and decoded while part k is made into products, as two halves of
+    // one rayon join, as the simulate stage writes: the same threads do both, so no core
+    // waits for a reader (a reader thread beside the workers made the loop wait for it
+    // whenever it lost its share of the cores to them)
+    let read = |k: usize, spare| read_waveforms_but_impulse(&out.join(part_name(k)), spare);
+    let mut next = (parts > 0).then(|| read(0, Vec::new()));
+    // The part before lends its buffers to the reading of the next.
+    let mut previous: Option<Vec<Waveform>> = None;
+    for k in 0..parts {
+        if let Some(signal) = crate::interrupt::requested() {
+            return Err(Error::interrupted(
+                signal,
+                "the products stage stopped before writing anything; the waveforms are kept",
+            ));
+        }
+        crate::progress::release_after_part(k);
+        let Some(rows) = next.take() else {
+            break;
+        };
+        let rows = rows?;
+        let finished = previous.take();
+        let (ahead, done) = rayon::join(
+            || (k + 1 < parts).then(|| read(k + 1, finished.unwrap_or_default())),
+            || -> Result<()> {
+                if rows.iter().any(|w| w.pulse_id as usize >= plan.len()) {
+                    return Err(Error::msg(format!(
+                        "{}: waveforms of pulses that were not planned: run again without --resume",
+                        out.display()
+                    )));
+                }
+                let part = Part::new(loaded, plan, &rows, want.points, want.photons);
+                seen += part.first.len();
+                part.first.iter().for_each(|w| totals.add(w));
+                for w in &mut writers {
+                    w.add(&part)?;
+                }
+                bar.inc(part.first.len() as u64);
+                if bar.is_hidden() && (k + 1) % every == 0 && k + 1 < parts {
+                    let rate = seen as f64 / start.elapsed().as_secs_f64().max(1e-9);
+                    log(&format!(
+                        "products: {}/{} parts, {rate:.0} pulses/s, {:.0} s left",
+                        k + 1,
+                        parts,
+                        (plan.len() - seen.min(plan.len())) as f64 / rate
+                    ));
+                }
+                Ok(())
+            },
+        );
+        done?;
+        next = ahead;
+        previous = Some(rows);
+    }
+    bar.finish_and_clear();
+    if seen != plan.len() {
+        return Err(Error::msg(format!(
+            "{}: {seen} waveforms for {} planned pulses: run again with --resume",
+            out.display(),
+            plan.len()
+        )));
+    }
+    let mut summary = ProductsSummary {
+        pulses: plan.len(),
+        waveform_totals: Some(totals),
+        ..Default::default()
+    };
+    let mut outputs = Vec::new();
+    for w in writers {
+        outputs.extend(w.finish(&mut summary)?);
+    }
+    write_text_atomic(&out.join("products.json"), &summary.to_json())?;
+    outputs.push("products.json".to_string());
+    let note = if !want.points && !want.photons {
+        "the waveforms are the product"
+    } else {
+        ""
+    };
+    Ok((outputs, note.to_string()))
+}

@@ -1,0 +1,244 @@
+//! What the products stage hands its writers: a part of waveforms, with the discrete returns
+//! and photon events made of it once, and the two calls every writer answers.
+
+use crate::campaign::Loaded;
+use crate::error::Result;
+use crate::plan::Plan;
+use crate::products::photons::{count_photons, photon_rows, PhotonRow};
+use crate::products::points::{points_on_axis, Point, PointConfig};
+use crate::products::report::summary::ProductsSummary;
+use crate::products::returns::{decompose, place_on_summits, Component, Decomposition, Receiver};
+use crate::rng::SplitMix64;
+use crate::scene::SurfaceClass;
+use crate::sensor::pulse_sigma_s;
+use crate::waveform::record::Recorder;
+use crate::waveform::Waveform;
+use glam::DVec3;
+use rayon::prelude::*;
+use std::borrow::Cow;
+
+/// One part of the waveforms, as every writer sees it.
+pub(super) struct Part<'a> {
+    /// The rows of the campaign's first band (every row with one band): the DSM, the mission
+    /// files, the figures and the summaries are made of one band.
+    pub first: Vec<&'a Waveform>,
+    /// The discrete returns of every row, in pulse order then time (then band); empty when
+    /// the campaign asks for no points.
+    pub points: Vec<Point>,
+    /// Those of the first band, with several bands (else [`Part::points`] are).
+    first_points: Option<Vec<Point>>,
+    /// The photon events of every row; empty when the campaign asks for none.
+    pub photons: Vec<PhotonRow>,
+    /// Those of the first band, with several bands.
+    first_photons: Option<Vec<PhotonRow>>,
+}
+
+/// A product made part by part: what it makes of each part, then its files finished.
+pub(super) trait Writer {
+    fn add(&mut self, part: &Part) -> Result<()>;
+    /// Finishes the files, puts the product's figures in the summary, and returns the
+    /// files' names (relative to the run folder), in the order the manifest lists them.
+    fn finish(self: Box<Self>, summary: &mut ProductsSummary) -> Result<Vec<String>>;
+}
+
+impl<'a> Part<'a> {
+    pub fn new(
+        loaded: &Loaded,
+        plan: &Plan,
+        rows: &'a [Waveform],
+        points: bool,
+        photons: bool,
+    ) -> Part<'a> {
+        let first_nm = loaded.campaign.wavelength_nm.first();
+        let several = loaded.campaign.wavelength_nm.several();
+        let first = rows.iter().filter(|w| first_band(loaded, w)).collect();
+        let points = if points {
+            discrete_returns(loaded, plan, rows)
+        } else {
+            Vec::new()
+        };
+        let first_points = several.then(|| {
+            let of_first = |p: &&Point| p.wavelength_nm.is_none_or(|nm| nm == first_nm as f32);
+            points.iter().filter(of_first).cloned().collect()
+        });
+        let photons = if photons {
+            photon_events(loaded, plan, rows)
+        } else {
+            Vec::new()
+        };
+        let first_photons = several.then(|| {
+            let of_first = |r: &&PhotonRow| r.wavelength_nm.is_none_or(|nm| nm == first_nm);
+            photons.iter().filter(of_first).copied().collect()
+        });
+        Part {
+            first,
+            points,
+            first_points,
+            photons,
+            first_photons,
+        }
+    }
+
+    pub fn first_points(&self) -> &[Point] {
+        self.first_points.as_deref().unwrap_or(&self.points)
+    }
+
+    pub fn first_photons(&self) -> &[PhotonRow] {
+        self.first_photons.as_deref().unwrap_or(&self.photons)
+    }
+}
+
+/// LAS class of a component: the surface class with the most impulse energy within two
+/// sigmas of its centre.
+fn class_of(w: &Waveform, centre: f64, sigma: f64) -> u8 {
+    let lo = (centre - 2.0 * sigma).floor().max(0.0) as usize;
+    let hi = ((centre + 2.0 * sigma).ceil() as usize).min(w.laser_photons.len());
+    let mut best = (0.0f64, SurfaceClass::Other.las_code());
+    for class in SurfaceClass::ALL {
+        let code = class.las_code();
+        let e = w.class_energy_sum(class.index(), lo, hi);
+        if e > best.0 {
+            best = (e, code);
+        }
+    }
+    best.1
+}
+
+/// The decomposition of one waveform as the campaign asks for it: of the instrument's
+/// record (noise, detector response, digitiser) when it has one, else of the mean photons.
+/// The components as fitted (the figures draw them).
+pub(super) fn components(loaded: &Loaded, w: &Waveform) -> Vec<Component> {
+    decomposed(loaded, w).0
+}
+
+/// [`components`], with the photons they were fitted to and the return's sigma in bins.
+fn decomposed<'w>(loaded: &Loaded, w: &'w Waveform) -> (Vec<Component>, Cow<'w, [f32]>, f64) {
+    let c = &loaded.campaign;
+    let inst = &c.instrument;
+    let hv = crate::photon_energy_j(band_of(loaded, w));
+    // photons per bin of the gate from energies over the span of bins the light reached, as
+    // the waveform holds them (zero outside)
+    let photons_of = |energies: &[f32]| {
+        let mut v = vec![0.0f32; w.laser_photons.len()];
+        let span = w.span_first_bin.min(v.len())..v.len();
+        for (m, &e) in v[span].iter_mut().zip(energies) {
+            *m = (e as f64 / hv) as f32;
+        }
+        v
+    };
+    let mc_se = photons_of(&w.impulse_energy_se_j);
+    let leaves = photons_of(&w.class_energy_j[SurfaceClass::Vegetation.index()]);
+    let band = c.wavelength_nm.index_of(w.wavelength_nm);
+    let recorder = Recorder::new(inst, SplitMix64::band_seed(c.seed, band));
+    let (photons, sigma_s) = if recorder.changes_returns() {
+        let recorded = recorder.laser_photons(&recorder.record(w));
+        (
+            Cow::Owned(recorded),
+            recorder.return_sigma_s(pulse_sigma_s(inst)),
+        )
+    } else {
+        (
+            Cow::Borrowed(w.laser_photons.as_slice()),
+            pulse_sigma_s(inst),
+        )
+    };
+    let sigma_bins = sigma_s / (inst.bin_ns * 1e-9);
+    let receiver = Receiver {
+        sigma_bins,
+        footprint_edge_sigmas: Some(crate::sensor::footprint_edge_sigmas(inst)),
+        noise_floor: recorder.noise_floor_photons(w),
+    };
+    let comps = decompose(
+        &photons,
+        &mc_se,
+        &leaves,
+        inst.detection_threshold_photons,
+        inst.max_returns as usize,
+        Decomposition::Gaussian,
+        &receiver,
+    );
+    (comps, photons, sigma_bins)
+}
+
+/// The wavelength of a waveform row, nm: its band's, or the campaign's.
+fn band_of(loaded: &Loaded, w: &Waveform) -> f64 {
+    w.wavelength_nm
+        .unwrap_or(loaded.campaign.wavelength_nm.first())
+}
+
+/// Whether a waveform row is of the campaign's first band.
+fn first_band(loaded: &Loaded, w: &Waveform) -> bool {
+    w.wavelength_nm
+        .is_none_or(|nm| nm == loaded.campaign.wavelength_nm.first())
+}
+
+/// Discrete returns of every pulse, in pulse order then time (then band).
+fn discrete_returns(loaded: &Loaded, plan: &Plan, waveforms: &[Waveform]) -> Vec<Point> {
+    let c = &loaded.campaign;
+    let inst = &c.instrument;
+    let reference_range = if plan.is_empty() {
+        1.0
+    } else {
+        plan.pulse(0).origin.z.abs().max(1.0)
+    };
+    let by_pulse: Vec<Vec<Point>> = waveforms
+        .par_iter()
+        .map(|w| {
+            let config = PointConfig {
+                emitted_energy_j: inst.pulse_energy_j,
+                photon_energy_j: crate::photon_energy_j(band_of(loaded, w)),
+                telescope_area_m2: inst.receiver_area_m2,
+                reference_range_m: reference_range,
+            };
+            let pulse = &plan.pulse(w.pulse_id);
+            // the points where a detector puts the returns: wide ones at their summits
+            let (mut comps, photons, sigma_bins) = decomposed(loaded, w);
+            place_on_summits(&mut comps, &photons, sigma_bins);
+            let classes: Vec<u8> = comps
+                .iter()
+                .map(|k| class_of(w, k.centre_bin, k.sigma_bins))
+                .collect();
+            let mut points =
+                points_on_axis(pulse, w.t0_ns, w.bin_ns as f64, &comps, &classes, &config);
+            for p in &mut points {
+                p.wavelength_nm = w.wavelength_nm.map(|nm| nm as f32);
+            }
+            points
+        })
+        .collect();
+    by_pulse.into_iter().flatten().collect()
+}
+
+/// Photon events of every pulse (photon counting), deterministic per (seed, pulse).
+fn photon_events(loaded: &Loaded, plan: &Plan, waveforms: &[Waveform]) -> Vec<PhotonRow> {
+    let c = &loaded.campaign;
+    let inst = &c.instrument;
+    let first = if plan.is_empty() {
+        DVec3::ZERO
+    } else {
+        plan.pulse(0).origin
+    };
+    let by_pulse: Vec<Vec<PhotonRow>> = waveforms
+        .par_iter()
+        .map(|w| {
+            let pulse = &plan.pulse(w.pulse_id);
+            let events = count_photons(
+                &w.laser_photons,
+                w.solar_photons_per_bin as f64,
+                w.bin_ns as f64 * 1e-9,
+                inst.quantum_efficiency.unwrap_or(1.0),
+                inst.dark_count_hz.unwrap_or(0.0),
+                inst.dead_time_ns.unwrap_or(0.0) * 1e-9,
+                SplitMix64::band_seed(c.seed, c.wavelength_nm.index_of(w.wavelength_nm)),
+                w.pulse_id,
+            );
+            let along = (pulse.origin - first).truncate().length();
+            let mut rows = photon_rows(pulse, w.t0_ns, &events, along);
+            for r in &mut rows {
+                r.wavelength_nm = w.wavelength_nm;
+            }
+            rows
+        })
+        .collect();
+    by_pulse.into_iter().flatten().collect()
+}

@@ -377,8 +377,29 @@ fn run_row_on(
         .as_ref()
         .and_then(|p| p.waveform_totals.as_ref())
         .map_or((0, 0), |t| (t.pulses, t.rays));
+    let result = row_result(&run, products.as_ref(), pulses)?;
+    Ok(CampaignRow {
+        name: name.to_string(),
+        what: what.to_string(),
+        pulses,
+        rays_per_pulse: rays / pulses.max(1) as u64,
+        run_s,
+        simulate_s,
+        pulses_per_s: pulses as f64 / simulate_s,
+        run_pulses_per_s: pulses as f64 / run_s,
+        cpu_utilisation,
+        threads,
+        peak_mb,
+        result,
+    })
+}
+
+/// What a campaign row's run came back with, in a few words: photons per shot, points per
+/// pulse with their distance to the surfaces and the DSM's error, or (for a waveform run) the
+/// first pulse's solar photons and BRFs.
+fn row_result(run: &Path, products: Option<&ProductsSummary>, pulses: usize) -> Result<String> {
     let mut result = String::new();
-    if let Some(p) = &products {
+    if let Some(p) = products {
         if let Some(ph) = &p.photons {
             let shots = pulses.max(1) as f64;
             let _ = write!(
@@ -421,20 +442,7 @@ fn run_row_on(
             );
         }
     }
-    Ok(CampaignRow {
-        name: name.to_string(),
-        what: what.to_string(),
-        pulses,
-        rays_per_pulse: rays / pulses.max(1) as u64,
-        run_s,
-        simulate_s,
-        pulses_per_s: pulses as f64 / simulate_s,
-        run_pulses_per_s: pulses as f64 / run_s,
-        cpu_utilisation,
-        threads,
-        peak_mb,
-        result,
-    })
+    Ok(result)
 }
 
 /// Runs `campaign` into `out` on `threads` threads with the lidarsim executable `exe`, its

@@ -573,6 +573,69 @@ fn header(kind: SceneKind, seed: u64, lines: &[String]) -> String {
     s
 }
 
+/// The scene file's parts that every stand has besides its trees.
+struct StandFile<'a> {
+    kind: SceneKind,
+    plans: &'a [TemplatePlan<'a>],
+    placed: &'a [PlacedTree],
+    ground_area: f64,
+    ground_facets: u64,
+    /// The materials listed before the templates' own, and whether those follow.
+    materials: &'a [&'a Optics],
+    template_materials: bool,
+    /// The YAML lines of the objects before the trees (the ground first).
+    objects: String,
+    /// Buildings beside the trees, and their facets.
+    buildings: usize,
+    building_facets: u64,
+}
+
+/// What every stand does once its trees are placed: the templates' meshes and instance
+/// tables, then the scene file (its header from `header`, given the summary), written last.
+fn write_stand(
+    seed: u64,
+    dir: &Path,
+    o: &StandOptions,
+    s: StandFile,
+    mut out: Written,
+    header_lines: impl FnOnce(&GeneratedSummary) -> Vec<String>,
+) -> Result<GeneratedSummary> {
+    let (summaries, objects) = trees(
+        seed,
+        dir,
+        s.plans,
+        s.placed,
+        o.leaves,
+        o.lai,
+        s.ground_area,
+        &mut out,
+    )?;
+    let mut summary = summarize(
+        s.kind,
+        seed,
+        dir,
+        out,
+        summaries,
+        s.ground_facets,
+        s.ground_area,
+    );
+    summary.facets += s.building_facets;
+    summary.buildings = s.buildings;
+    summary.distinct_facets += s.building_facets;
+    let mut yaml = header(s.kind, seed, &header_lines(&summary));
+    let _ = writeln!(yaml, "name: {}\nmaterials:", s.kind.name());
+    for m in s.materials {
+        material_line(&mut yaml, m);
+    }
+    if s.template_materials {
+        template_materials(&mut yaml, s.plans);
+    }
+    yaml.push_str("objects:\n");
+    yaml.push_str(&s.objects);
+    yaml.push_str(&objects);
+    finish(summary, dir.join(format!("{}.yaml", s.kind.name())), &yaml)
+}
+
 /// A forest stand: terrain, species templates, tree positions, instance tables, scene file,
 /// in the order of one random stream (the draw order makes the stand); the steps are
 /// helpers (`terrain`, `positions`, `trees`), this function is their sequence and the YAML.
@@ -646,31 +709,23 @@ pub(super) fn forest(seed: u64, dir: &Path, o: &StandOptions) -> Result<Generate
             }
         })
         .collect();
-    let (summaries, objects) = trees(
-        seed,
-        dir,
-        &plans,
-        &placed,
-        o.leaves,
-        o.lai,
+    let file = StandFile {
+        kind: SceneKind::Forest,
+        plans: &plans,
+        placed: &placed,
         ground_area,
-        &mut out,
-    )?;
-    let ground_facets = 2 * (ground.rows - 1) as u64 * (ground.cols - 1) as u64;
-    let summary = summarize(
-        SceneKind::Forest,
-        seed,
-        dir,
-        out,
-        summaries,
-        ground_facets,
-        ground_area,
-    );
-
-    let mut yaml = header(
-        SceneKind::Forest,
-        seed,
-        &[
+        ground_facets: 2 * (ground.rows - 1) as u64 * (ground.cols - 1) as u64,
+        materials: &[&SOIL],
+        template_materials: true,
+        objects: format!(
+            "  - heightfield: {{ file: terrain.csv, cell_m: {}, material: soil, class: ground }}\n",
+            ground.cell
+        ),
+        buildings: 0,
+        building_facets: 0,
+    };
+    write_stand(seed, dir, o, file, out, |summary| {
+        vec![
             format!(
                 "{} trees of {} species templates on {} × {} m, after the RAMI-IV Järvselja birch stand;",
                 summary.trees,
@@ -682,18 +737,8 @@ pub(super) fn forest(seed: u64, dir: &Path, o: &StandOptions) -> Result<Generate
                 "terrain slope {}, leaf area index {:.3}, {} facets once instanced ({} distinct).",
                 o.slope, summary.lai, summary.facets, summary.distinct_facets
             ),
-        ],
-    );
-    yaml.push_str("name: forest\nmaterials:\n");
-    material_line(&mut yaml, &SOIL);
-    template_materials(&mut yaml, plans.as_slice());
-    let _ = writeln!(
-        yaml,
-        "objects:\n  - heightfield: {{ file: terrain.csv, cell_m: {}, material: soil, class: ground }}",
-        ground.cell
-    );
-    yaml.push_str(&objects);
-    finish(summary, dir.join("forest.yaml"), &yaml)
+        ]
+    })
 }
 
 /// An orchard (the WCO layout: rows of one species); long for the same reason as [`forest`].
@@ -701,7 +746,7 @@ pub(super) fn orchard(seed: u64, dir: &Path, o: &StandOptions) -> Result<Generat
     // WCO: rows about 4.5 m apart along y, trees 2 m apart in a row, some missing
     const ROW_M: f64 = 4.5;
     const TREE_M: f64 = 2.0;
-    let mut out = Written::default();
+    let out = Written::default();
     let mut rng = stream(seed, 0);
     let rows = (o.size[0] / ROW_M).floor().max(1.0) as usize;
     let slots = (o.size[1] / TREE_M).floor().max(1.0) as usize;
@@ -760,30 +805,20 @@ pub(super) fn orchard(seed: u64, dir: &Path, o: &StandOptions) -> Result<Generat
             }
         })
         .collect();
-    let ground_area = o.size[0] * o.size[1];
-    let (summaries, objects) = trees(
-        seed,
-        dir,
-        &plans,
-        &placed,
-        o.leaves,
-        o.lai,
-        ground_area,
-        &mut out,
-    )?;
-    let summary = summarize(
-        SceneKind::Orchard,
-        seed,
-        dir,
-        out,
-        summaries,
-        2,
-        ground_area,
-    );
-    let mut yaml = header(
-        SceneKind::Orchard,
-        seed,
-        &[
+    let file = StandFile {
+        kind: SceneKind::Orchard,
+        plans: &plans,
+        placed: &placed,
+        ground_area: o.size[0] * o.size[1],
+        ground_facets: 2,
+        materials: &[&ORCHARD_SOIL, &CITRUS_WOOD, &CITRUS_LEAF],
+        template_materials: false,
+        objects: ground_plane(o),
+        buildings: 0,
+        building_facets: 0,
+    };
+    write_stand(seed, dir, o, file, out, |summary| {
+        vec![
             format!(
                 "{} citrus trees of {} templates in rows {ROW_M} m apart, {TREE_M} m apart in a row, on {} × {} m,",
                 summary.trees,
@@ -795,19 +830,16 @@ pub(super) fn orchard(seed: u64, dir: &Path, o: &StandOptions) -> Result<Generat
                 "after the RAMI-V Wellington Citrus Orchard; leaf area index {:.3}, {} facets once instanced.",
                 summary.lai, summary.facets
             ),
-        ],
-    );
-    yaml.push_str("name: orchard\nmaterials:\n");
-    for m in [&ORCHARD_SOIL, &CITRUS_WOOD, &CITRUS_LEAF] {
-        material_line(&mut yaml, m);
-    }
-    let _ = writeln!(
-        yaml,
-        "objects:\n  - plane: {{ z: 0, extent: [[0, 0], [{}, {}]], material: soil, class: ground }}",
+        ]
+    })
+}
+
+/// The flat ground plane of a stand, as a scene file's object line.
+fn ground_plane(o: &StandOptions) -> String {
+    format!(
+        "  - plane: {{ z: 0, extent: [[0, 0], [{}, {}]], material: soil, class: ground }}\n",
         o.size[0], o.size[1]
-    );
-    yaml.push_str(&objects);
-    finish(summary, dir.join("orchard.yaml"), &yaml)
+    )
 }
 
 pub(super) fn flat(seed: u64, dir: &Path, o: &StandOptions) -> Result<GeneratedSummary> {
@@ -883,12 +915,9 @@ impl Building {
     }
 }
 
-/// A town: flat ground, box buildings (five per hectare, flat roofs, 6-15 m tall, at least
-/// 3 m apart) and sparse trees (the forest's first species, at least `min_spacing_m` apart and
-/// clear of the buildings by their crown radius); long for the same reason as [`forest`].
-pub(super) fn town(seed: u64, dir: &Path, o: &StandOptions) -> Result<GeneratedSummary> {
-    let mut out = Written::default();
-    let mut rng = stream(seed, 0);
+/// The town's buildings: five per hectare, each inside the scene and at least 3 m from the
+/// others, drawn from `rng` until that many fit.
+fn place_buildings(rng: &mut crate::rng::Rand, o: &StandOptions) -> Result<Vec<Building>> {
     let ground_area = o.size[0] * o.size[1];
     let n_buildings = ((5.0 * ground_area / 1e4).round() as usize).max(1);
     let mut buildings: Vec<Building> = Vec::with_capacity(n_buildings);
@@ -919,11 +948,17 @@ pub(super) fn town(seed: u64, dir: &Path, o: &StandOptions) -> Result<GeneratedS
             buildings.push(b);
         }
     }
+    Ok(buildings)
+}
+
+/// The buildings as one OBJ mesh: their walls and flat roofs, groups `wall` and `roof`.
+fn buildings_obj(seed: u64, buildings: &[Building]) -> String {
+    let n_buildings = buildings.len();
     let mut obj = format!(
         "# {n_buildings} box buildings (lidarsim generate, seed {seed})
 "
     );
-    for b in &buildings {
+    for b in buildings {
         for [x, y] in b.corners() {
             for z in [0.0, b.height] {
                 obj.push_str("v ");
@@ -954,31 +989,19 @@ pub(super) fn town(seed: u64, dir: &Path, o: &StandOptions) -> Result<GeneratedS
             let _ = writeln!(obj, "f {g0} {t1} {t0}");
         }
     }
-    out.write(dir.join("buildings.obj"), &obj)?;
+    obj
+}
 
-    let templates = o.templates.min(o.trees);
-    let plans: Vec<TemplatePlan> = (0..templates)
-        .map(|k| {
-            let sp = &SPECIES[k % SPECIES.len()];
-            let mut shape = sp.shape.clone();
-            let mut r = stream(seed, 500 + k as u64);
-            shape.height *= 0.5 + 0.2 * r.uniform();
-            shape.crown_base *= 0.4 + 0.2 * r.uniform();
-            // a garden tree: fewer, shorter branches than one grown in a stand
-            shape.branches /= 3;
-            TemplatePlan {
-                stem: format!("{}{}", sp.name, k + 1),
-                species: format!("{} ({})", sp.name, sp.latin),
-                shape,
-                leaf: &sp.leaf,
-                bark: sp.bark,
-            }
-        })
-        .collect();
-    let crown = plans
-        .iter()
-        .map(|p| p.shape.crown_radius * 1.2)
-        .fold(0.0, f64::max);
+/// Trees at least `min_spacing_m` apart, clear of the buildings by `crown`, their crowns
+/// inside the scene; every template gets a tree first.
+fn place_garden_trees(
+    rng: &mut crate::rng::Rand,
+    o: &StandOptions,
+    templates: usize,
+    crown: f64,
+    buildings: &[Building],
+) -> Result<Vec<PlacedTree>> {
+    let n_buildings = buildings.len();
     let mut placed: Vec<PlacedTree> = Vec::with_capacity(o.trees);
     let mut attempts = 0usize;
     while placed.len() < o.trees {
@@ -1017,25 +1040,58 @@ pub(super) fn town(seed: u64, dir: &Path, o: &StandOptions) -> Result<GeneratedS
             });
         }
     }
-    let (summaries, objects) = trees(
-        seed,
-        dir,
-        &plans,
-        &placed,
-        o.leaves,
-        o.lai,
+    Ok(placed)
+}
+
+/// A town: flat ground, box buildings (five per hectare, flat roofs, 6-15 m tall, at least
+/// 3 m apart) and sparse trees (the forest's first species, at least `min_spacing_m` apart and
+/// clear of the buildings by their crown radius); long for the same reason as [`forest`].
+pub(super) fn town(seed: u64, dir: &Path, o: &StandOptions) -> Result<GeneratedSummary> {
+    let mut out = Written::default();
+    let mut rng = stream(seed, 0);
+    let ground_area = o.size[0] * o.size[1];
+    let buildings = place_buildings(&mut rng, o)?;
+    let n_buildings = buildings.len();
+    out.write(dir.join("buildings.obj"), &buildings_obj(seed, &buildings))?;
+    let templates = o.templates.min(o.trees);
+    let plans: Vec<TemplatePlan> = (0..templates)
+        .map(|k| {
+            let sp = &SPECIES[k % SPECIES.len()];
+            let mut shape = sp.shape.clone();
+            let mut r = stream(seed, 500 + k as u64);
+            shape.height *= 0.5 + 0.2 * r.uniform();
+            shape.crown_base *= 0.4 + 0.2 * r.uniform();
+            // a garden tree: fewer, shorter branches than one grown in a stand
+            shape.branches /= 3;
+            TemplatePlan {
+                stem: format!("{}{}", sp.name, k + 1),
+                species: format!("{} ({})", sp.name, sp.latin),
+                shape,
+                leaf: &sp.leaf,
+                bark: sp.bark,
+            }
+        })
+        .collect();
+    let crown = plans
+        .iter()
+        .map(|p| p.shape.crown_radius * 1.2)
+        .fold(0.0, f64::max);
+    let placed = place_garden_trees(&mut rng, o, templates, crown, &buildings)?;
+    let file = StandFile {
+        kind: SceneKind::Town,
+        plans: &plans,
+        placed: &placed,
         ground_area,
-        &mut out,
-    )?;
-    let mut summary = summarize(SceneKind::Town, seed, dir, out, summaries, 2, ground_area);
-    let building_facets = 10 * buildings.len() as u64;
-    summary.facets += building_facets;
-    summary.buildings = buildings.len();
-    summary.distinct_facets += building_facets;
-    let mut yaml = header(
-        SceneKind::Town,
-        seed,
-        &[
+        ground_facets: 2,
+        materials: &[&SOIL, &ROOF, &WALL],
+        template_materials: true,
+        objects: ground_plane(o)
+            + "  - mesh: { file: buildings.obj, materials: { roof: roof, wall: wall }, class: building }\n",
+        buildings: buildings.len(),
+        building_facets: 10 * buildings.len() as u64,
+    };
+    write_stand(seed, dir, o, file, out, |summary| {
+        vec![
             format!(
                 "{n_buildings} box buildings and {} trees of {} templates on flat ground, {} × {} m;",
                 summary.trees,
@@ -1047,23 +1103,8 @@ pub(super) fn town(seed: u64, dir: &Path, o: &StandOptions) -> Result<GeneratedS
                 "leaf area index {:.3} over the whole ground, {} facets once instanced.",
                 summary.lai, summary.facets
             ),
-        ],
-    );
-    yaml.push_str("name: town\nmaterials:\n");
-    material_line(&mut yaml, &SOIL);
-    material_line(&mut yaml, &ROOF);
-    material_line(&mut yaml, &WALL);
-    template_materials(&mut yaml, plans.as_slice());
-    let _ = writeln!(
-        yaml,
-        "objects:\n  - plane: {{ z: 0, extent: [[0, 0], [{}, {}]], material: soil, class: ground }}",
-        o.size[0], o.size[1]
-    );
-    yaml.push_str(
-        "  - mesh: { file: buildings.obj, materials: { roof: roof, wall: wall }, class: building }\n",
-    );
-    yaml.push_str(&objects);
-    finish(summary, dir.join("town.yaml"), &yaml)
+        ]
+    })
 }
 
 fn summarize(

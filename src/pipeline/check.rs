@@ -50,6 +50,7 @@ pub struct CheckReport {
     pub warnings: Vec<String>,
 }
 
+/// Long because it gathers every figure of the report in the order `check` prints them.
 pub fn check(path: &Path) -> Result<CheckReport> {
     let loaded = plan::read_campaign(path)?;
     let c = &loaded.campaign;

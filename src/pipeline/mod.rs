@@ -385,6 +385,9 @@ impl<'a> RunFolder<'a> {
     }
 }
 
+/// One campaign's stages in order, each kept or run by its fingerprint. Long because it is the
+/// run's whole sequence (plan, scene, pilot, simulate, products, report) read top to bottom;
+/// each stage is a function of its own.
 fn run_single(
     loaded: &Loaded,
     out: &Path,

@@ -23,6 +23,9 @@ use std::time::Instant;
 /// at most, so memory stays at about two parts. A signal (see [`crate::interrupt`]) stops it
 /// before the next part, the parts in flight written. Returns (rays traced, parts written,
 /// the signal that stopped it).
+///
+/// Long because the loop simulates part k + 1 while part k is written (one rayon join), and
+/// logs progress and the stage's figures; the pulses themselves are [`simulate`]'s.
 pub(super) fn simulate_parts(
     loaded: &Loaded,
     scene: &Scene,

@@ -239,6 +239,9 @@ pub(crate) fn common_wavelength(path: &Path) -> Result<f64> {
 /// Reads a scene file and builds its scene: the objects checked against the file, every
 /// distinct mesh loaded once, materials given to each slot, instances placed, the top level
 /// built.
+///
+/// Long because it is the load's sequence in one place (file, materials, water, meshes,
+/// instances, tables, BVHs), each step a function of its own.
 pub(crate) fn load(path: &Path, wavelengths_nm: &[f64]) -> Result<Scene> {
     let doc = Doc::read(path)?;
     let mut files = vec![path.to_path_buf()];

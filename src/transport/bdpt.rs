@@ -110,6 +110,10 @@ pub(super) struct Walk<'b> {
 
 /// Extends a sub-path ([`Walk`]) up to its cap. On a light sub-path, a segment that crosses
 /// the aperture before any facet is the strategy t = 0 and is scored on the way.
+///
+/// Long because the loop is one bounce: the aperture scored on the way (t = 0), the vertex
+/// made, its band factors, the BSDF sampled and the roulette; split, each step would carry
+/// the whole walk's state.
 pub(super) fn walk(
     setup: &PulseSetup,
     walk: Walk,

@@ -239,6 +239,10 @@ const BIN_COLUMNS: [&str; 7] = {
 /// [`read_waveforms`]; with `pages`, the bins of a file laid out as lidarsim writes it are read
 /// straight from its pages (`parquet_io::read_f32_lists`) and the other columns through
 /// Arrow's reader, which reads every column of any other file.
+///
+/// Long because it is one pass over the file's columns in the contract's order: each checked
+/// for its type, then read into the rows (bins from the pages or through Arrow), so that only
+/// one column's values are held beside the rows.
 fn read_waveforms_with(
     path: &Path,
     pages: bool,

@@ -12,6 +12,9 @@ use std::path::Path;
 use summary::{ProductsSummary, WaveformTotals};
 
 /// `report.md`: what ran, on what, how fast, and what came back.
+///
+/// Long because `report.md` is written top to bottom in the order a reader reads it, a few
+/// lines per section.
 pub fn report(
     loaded: &Loaded,
     scene: &Scene,

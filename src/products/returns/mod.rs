@@ -165,6 +165,9 @@ pub fn place_on_summits(comps: &mut [Component], photons: &[f32], pulse_sigma_bi
 /// significance). When more components than `max_returns` are found, the strongest (largest
 /// area) are kept: the weakest are the least reliable, and a dense canopy must not hide the
 /// ground.
+///
+/// Long because it is the decomposition's sequence in one place: the signal's span, peaks,
+/// fit, resolution into returns, selection; each step is a function of its own.
 pub fn decompose(
     photons: &[f32],
     mc_se_photons: &[f32],
@@ -503,6 +506,8 @@ impl Noise<'_> {
 ///    return unless the waveform dips between them by more than its noise (Sparrow's
 ///    criterion, the noise setting the depth a detector can see, and a few rays' comb
 ///    leaving gaps no surface has: [`Noise::compound_var`]).
+///
+/// Long because its three rules act on the same runs of components in one pass.
 pub(super) fn resolve(
     mut comps: Vec<Component>,
     y: &[f64],

@@ -245,6 +245,9 @@ pub(super) fn unclaimed(
 /// above `level` around them, the light of the others taken out; None where that holds no
 /// light or the beam's shape is unknown. The search for the best stretch stops as soon as
 /// the fit is `enough` for the caller's question (most chains settle at the first trial).
+///
+/// Long because the search is one loop over trial stretches of one surface's waveform, each
+/// fitted against the same window and judged by the caller's `enough`.
 fn smear_fit(
     chain: &[Component],
     others: &[Component],

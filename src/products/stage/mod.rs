@@ -100,6 +100,9 @@ fn writers<'a>(
 ///
 /// Memory is bounded by a part and the scene, not by the campaign's length: the writers take
 /// the waveforms a part at a time and write or spill what they make of them as they go.
+///
+/// Long because the loop reads part k + 1 while the writers take part k (one rayon join),
+/// checks the part and logs progress; the products themselves are the writers'.
 pub fn run(
     loaded: &Loaded,
     scene: &Scene,

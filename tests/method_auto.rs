@@ -184,3 +184,53 @@ fn receiver_depth_auto_is_chosen_by_the_pilot_and_said() {
     let err3 = run_cli(&fwd, &dir.join("forward"), Some(2));
     assert!(!err3.contains("receiver_depth"), "{err3}");
 }
+
+/// `auto` never picks a method that cannot sample a contribution the campaign asks for, and
+/// says which it left out and why: forward with the sun over a repeated scene (its sun
+/// sub-paths start over one copy only), backward over water (no connection through a smooth
+/// surface). The candidates left are scored as before.
+#[test]
+fn auto_excludes_the_methods_that_cannot_see_a_contribution() {
+    let dir = tmp("auto_excluded");
+    write(
+        &dir,
+        "tile.yaml",
+        "name: tile\nrepeat: true\nmaterials:\n  soil: { reflectance: 0.3 }\nobjects:\n  - plane: { z: 0, extent: [[0, 0], [10, 10]], material: soil }\n",
+    );
+    let camp = write(
+        &dir,
+        "c.yaml",
+        "name: c\nscene: tile.yaml\nwavelength_nm: 1064\ninstrument: { pulse_energy_j: 0.001, pulse_fwhm_ns: 2, footprint_half_angle_mrad: 0.5, fov_half_angle_mrad: 5, receiver_area_m2: 0.1, bandwidth_nm: 1 }\nplatform: { kind: track, altitude_m: 300, track: { start: [0, 5], end: [40, 5] }, along_track_step_m: 1 }\nsun: { zenith_deg: 30, azimuth_deg: 0, irradiance_w_m2_um: 640 }\nsimulation: { method: auto, rays_per_pulse: 64, max_order: 2 }\n",
+    );
+    let loaded = lidarsim::plan::read_campaign(&camp).unwrap();
+    let scene = lidarsim::scene::Scene::load(&loaded.scene_path, 1064.0).unwrap();
+    let plan = lidarsim::plan::Plan::new(&loaded.campaign).unwrap();
+    let excluded = lidarsim::pipeline::simulate::excluded_methods(&loaded, &scene);
+    assert_eq!(excluded.len(), 1, "{excluded:?}");
+    assert_eq!(excluded[0].0, lidarsim::campaign::Method::Forward);
+    let chosen = lidarsim::pipeline::with_method_chosen(&loaded, &scene, &plan).unwrap();
+    assert_ne!(
+        chosen.campaign.simulation.method,
+        lidarsim::campaign::Method::Forward
+    );
+    let note = chosen.method_note.unwrap();
+    assert!(
+        note.contains("excluded: forward (it cannot sample the sun's light"),
+        "{note}"
+    );
+    assert!(
+        !note.contains(" forward fixed ") && !note.contains(" forward power "),
+        "{note}"
+    );
+    // over water, backward
+    let lake = lidarsim::testdata::repo().join("pipelines/bathymetry.yaml");
+    let loaded = lidarsim::plan::read_campaign(&lake).unwrap();
+    let scene =
+        lidarsim::scene::Scene::load_bands(&loaded.scene_path, loaded.campaign.wavelength_nm.all())
+            .unwrap();
+    let excluded = lidarsim::pipeline::simulate::excluded_methods(&loaded, &scene);
+    assert_eq!(
+        excluded.iter().map(|e| e.0).collect::<Vec<_>>(),
+        [lidarsim::campaign::Method::Backward]
+    );
+}

@@ -166,7 +166,8 @@ fn surface_and_bottom_returns_match_fresnel_and_beer_lambert() {
                 .max_by(|&i, &j| w.impulse_energy_j[i].total_cmp(&w.impulse_energy_j[j]))
                 .unwrap()
         };
-        let (s_bin, b_bin) = (bin_of(w, 2.0 * H), bin_of(w, 2.0 * (H + N * DEPTH)));
+        let n_g = lidarsim::scene::water_group_index(N, [532.0, 1064.0][b]);
+        let (s_bin, b_bin) = (bin_of(w, 2.0 * H), bin_of(w, 2.0 * (H + n_g * DEPTH)));
         let surface_peak = peak(0, (s_bin + b_bin) / 2);
         let bottom_peak = peak((s_bin + b_bin) / 2, w.impulse_energy_j.len());
         println!("{name}: surface in bin {surface_peak} ({s_bin} expected), bottom in bin {bottom_peak} ({b_bin} expected; {} without refraction)", bin_of(w, 2.0 * (H + DEPTH)));
@@ -190,6 +191,136 @@ fn surface_and_bottom_returns_match_fresnel_and_beer_lambert() {
             b.order_energy_j[k]
         );
         assert!(z.abs() < 3.0);
+    }
+}
+
+/// Bathymetry at nadir: the pulse travels in water at the group velocity, so the bottom's
+/// discrete return lies n_g d below the surface as a range in vacuum (the point a survey
+/// writes before its refraction correction), with n_g the group index at the band (about 1.355
+/// at 532 nm, Quan and Fry's dispersion on top of the phase index 1.33; the phase index would
+/// put it 2 % shallower), within one bin's range, at 1, 5 and 20 m of water; and a given
+/// `group_index` is the one used.
+#[test]
+fn the_bottom_return_lies_at_the_group_index() {
+    let n_g = lidarsim::scene::water_group_index(N, 532.0);
+    assert!((1.35..1.36).contains(&n_g), "{n_g}");
+    for (depth, given) in [(1.0, None), (5.0, None), (20.0, None), (5.0, Some(1.40))] {
+        let dir = tmp(&format!("water_group_{depth}_{}", given.is_some()));
+        let index = given.map_or(String::new(), |g: f64| format!(", group_index: {g}"));
+        let scene = write(
+            &dir,
+            "lake.yaml",
+            &format!(
+                "name: lake\nmaterials:\n  sand: {{ reflectance: 0.3 }}\nobjects:\n  - water: {{ z: 0, extent: [[-50, -50], [50, 50]], refractive_index: {N}, attenuation_per_m: 0.05{index} }}\n  - plane: {{ z: {}, extent: [[-50, -50], [50, 50]], material: sand }}\n",
+                -depth
+            ),
+        );
+        let inst = Inst {
+            fwhm_ns: 2.0,
+            ..inst()
+        };
+        let text = campaign(
+            &scene,
+            &inst,
+            [0.0, 0.0, H],
+            [0.0, 0.0, -1.0],
+            "bdpt",
+            200_000,
+            3,
+        )
+        .replace("wavelength_nm: 1064\n", "wavelength_nm: 532\n")
+        .replace(
+            "instrument:\n",
+            "instrument:\n  kind: discrete_return\n  detection_threshold_photons: 1\n",
+        );
+        let camp = write(&dir, "c.yaml", &text);
+        let out = dir.join("out");
+        run_cli(&camp, &out, None);
+        let points = lidarsim::products::points::las::read_las(&out.join("points.las")).unwrap();
+        let bottom = points.iter().map(|p| p.z).fold(f64::INFINITY, f64::min);
+        let n = given.unwrap_or(n_g);
+        let (want, phase) = (-n * depth, -N * depth);
+        let bin_m = inst.bin_ns * 1e-9 * C / 2.0;
+        println!("{depth} m: bottom point at {bottom:.4} m, n_g d gives {want:.4}, the phase index {phase:.4}");
+        assert!(
+            (bottom - want).abs() < bin_m,
+            "{depth} m: {bottom} against {want}"
+        );
+        if depth >= 20.0 {
+            assert!(
+                (phase - want).abs() > 2.0 * bin_m,
+                "the test tells n_g from n"
+            );
+        }
+    }
+}
+
+/// Several bands where one is all but opaque: over 10 m and 20 m of water that takes 45 per
+/// metre of the near-infrared band and 0.1 of the green, a run of [1064, 532] weighs its
+/// paths with the least attenuating band's water, so the green bottom return is the
+/// single-band green run's within 3 combined SE (before, the paths carried the first band's
+/// attenuation and every band's weight underflowed to 0 beyond about 8 m), the infrared sees
+/// no bottom, and no value of either run is NaN or infinite.
+#[test]
+fn an_opaque_first_band_leaves_the_others_bottom_return_whole() {
+    for depth in [10.0, 20.0] {
+        let dir = tmp(&format!("water_opaque_{depth}"));
+        let scene = write(
+            &dir,
+            "deep.yaml",
+            &format!(
+                "name: deep\nmaterials:\n  sand: {{ reflectance: {RHO_BOTTOM} }}\nobjects:\n  - water: {{ z: 0, extent: [[-50, -50], [50, 50]], attenuation_per_m: {{ 532: 0.1, 1064: 45 }} }}\n  - plane: {{ z: {}, extent: [[-50, -50], [50, 50]], material: sand }}\n",
+                -depth
+            ),
+        );
+        let text = |bands: &str| {
+            campaign(
+                &scene,
+                &inst(),
+                [0.0, 0.0, H],
+                [0.0, 0.0, -1.0],
+                "bdpt",
+                2_000_000,
+                3,
+            )
+            .replace(
+                "wavelength_nm: 1064\n",
+                &format!("wavelength_nm: {bands}\n"),
+            )
+        };
+        for sub in ["two", "one"] {
+            std::fs::create_dir_all(dir.join(sub)).unwrap();
+        }
+        let two = run(&dir.join("two"), &text("[1064, 532]"), None);
+        let one = run(&dir.join("one"), &text("532"), None).remove(0);
+        let green = two.iter().find(|w| w.wavelength_nm == Some(532.0)).unwrap();
+        let infrared = two
+            .iter()
+            .find(|w| w.wavelength_nm == Some(1064.0))
+            .unwrap();
+        for w in [&one, green, infrared] {
+            let finite = w
+                .laser_photons
+                .iter()
+                .chain(&w.impulse_energy_j)
+                .all(|x| x.is_finite())
+                && w.order_energy_j
+                    .iter()
+                    .chain(&w.order_energy_se_j)
+                    .all(|x| x.is_finite())
+                && w.received_energy_j.is_finite()
+                && w.outside_gate_energy_j.is_finite();
+            assert!(finite, "{depth} m: a value is not finite");
+        }
+        let (a, b) = (green.order_energy_j[2], one.order_energy_j[2]);
+        let se = green.order_energy_se_j[2].hypot(one.order_energy_se_j[2]);
+        println!("{depth} m: green bottom {a:.6e} in two bands, {b:.6e} alone, z {:+.2}, rel se {:.4}; infrared bottom {:.3e}", (a - b) / se, se / b, infrared.order_energy_j[2]);
+        assert!(
+            b > 0.0 && se < 0.05 * b,
+            "{depth} m: standard error {se} of {b}"
+        );
+        assert!((a - b).abs() < 3.0 * se, "{depth} m: {a} against {b}");
+        assert!(infrared.order_energy_j[2] < 1e-12 * b);
     }
 }
 
@@ -347,9 +478,9 @@ fn forward_and_bdpt_agree_over_rough_water() {
 }
 
 /// The bundled bathymetric campaign (pipelines/bathymetry.yaml over scenes/lake.yaml) runs,
-/// and its green bottom points lie at the apparent depth n × d of ranges c t / 2 (median ratio
-/// to the true depth within 1 % of n; the scan's slant moves it a little), with more bottom
-/// points in the green band than in the infrared, whose water absorbs.
+/// and its green bottom points lie at the apparent depth n_g × d of ranges c t / 2 (median
+/// ratio to the true depth within 1 % of the group index; the scan's slant moves it a little),
+/// with more bottom points in the green band than in the infrared, whose water absorbs.
 #[test]
 fn bundled_bathymetry_campaign_sees_the_bottom_in_green() {
     let dir = tmp("water_bundled");
@@ -372,7 +503,8 @@ fn bundled_bathymetry_campaign_sees_the_bottom_in_green() {
         infrared.len()
     );
     assert!(green.len() > 1000 && green.len() > 2 * infrared.len());
-    assert!((median / N - 1.0).abs() < 0.01, "{median}");
+    let n_g = lidarsim::scene::water_group_index(N, 532.0);
+    assert!((median / n_g - 1.0).abs() < 0.01, "{median} against {n_g}");
 }
 
 /// Under a smooth surface, a V-shaped trench (two 30° slopes that face each other): paths

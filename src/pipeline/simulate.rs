@@ -39,6 +39,7 @@ pub(super) fn simulate_parts(
     let bar = progress(total as u64, "simulating");
     let clock = crate::progress::StageClock::start();
     let mut rays = 0u64;
+    let mut non_finite = 0u64;
     let mut done_pulses = 0usize;
     let terminal = crate::progress::interactive();
     let mut last_log = 0.0;
@@ -81,6 +82,7 @@ pub(super) fn simulate_parts(
             .step_by(bands)
             .map(|w| w.rays as u64)
             .sum::<u64>();
+        non_finite += waveforms.iter().map(|w| w.non_finite).sum::<u64>();
         done_pulses += pulses.len();
         let elapsed = clock.wall_s();
         let rate = done_pulses as f64 / elapsed;
@@ -106,6 +108,11 @@ pub(super) fn simulate_parts(
     }
     committer.finish()?;
     bar.finish_and_clear();
+    if non_finite > 0 {
+        log(&format!(
+            "warning: {non_finite} contributions whose weight was not a finite number were left out of the waveforms: this is a bug, please report it with the campaign"
+        ));
+    }
     let secs = clock.wall_s();
     if done_pulses > 0 {
         // the share of the cores kept busy: what a serial step or a slow writer costs
@@ -438,25 +445,20 @@ pub fn choose_method(loaded: &Loaded, scene: &Scene, plan: &Plan) -> (Method, St
             None,
         );
     }
-    // backward tracing cannot find the paths a smooth water surface makes (laser, specular
-    // surface, bottom, specular surface, telescope: no connection reaches the laser through
-    // a specular vertex), so it is no candidate over water
-    let candidates: &[Method] = if scene.water.is_some() {
-        &[Method::Bdpt, Method::Forward]
-    } else {
-        &[Method::Bdpt, Method::Forward, Method::Backward]
-    };
-    let scores: Vec<(Method, f64)> = candidates
-        .iter()
-        .map(|&m| (m, pilot_score(loaded, scene, &pulses, rays, m)))
+    let excluded = excluded_methods(loaded, scene);
+    let scores: Vec<(Method, f64)> = [Method::Bdpt, Method::Forward, Method::Backward]
+        .into_iter()
+        .filter(|m| !excluded.iter().any(|(x, _)| x == m))
+        .map(|m| (m, pilot_score(loaded, scene, &pulses, rays, m)))
         .collect();
     let table = score_table(&scores, method_name);
     match cheapest(&scores) {
         Some(m) => (
             m,
             format!(
-                "simulation.method auto chose {}: relative variance x scene queries per pulse over {n} pilot pulses of {rays} rays (lower is better): {table}",
-                method_name(m)
+                "simulation.method auto chose {}: relative variance x scene queries per pulse over {n} pilot pulses of {rays} rays (lower is better): {table}{}",
+                method_name(m),
+                exclusions(&excluded)
             ),
             score_of(&scores, m),
         ),
@@ -468,6 +470,44 @@ pub fn choose_method(loaded: &Loaded, scene: &Scene, plan: &Plan) -> (Method, St
             None,
         ),
     }
+}
+
+/// The methods `auto` must not pick for this campaign, each with why: an estimator that
+/// cannot sample a contribution the campaign asks for would leave it out of the waveform, with
+/// no error to say so, however well it scores on the rest.
+/// - Backward tracing over water: the paths through a smooth surface (laser, specular surface,
+///   bottom, specular surface, telescope) need a connection through a specular vertex, which
+///   no strategy of a receiver sub-path makes.
+/// - Forward tracing with the sun in a repeated scene: the sun's light sub-paths start on a
+///   disk over one copy of the landscape, and the light the receiver sees from the others is
+///   only found from the receiver's side.
+pub fn excluded_methods(loaded: &Loaded, scene: &Scene) -> Vec<(Method, &'static str)> {
+    let mut out = Vec::new();
+    if scene.water.is_some() {
+        out.push((
+            Method::Backward,
+            "it cannot find the paths through a smooth water surface",
+        ));
+    }
+    if scene.is_repeated() && loaded.campaign.sun.is_some() {
+        out.push((
+            Method::Forward,
+            "it cannot sample the sun's light over a repeated scene's other copies",
+        ));
+    }
+    out
+}
+
+/// "; excluded: backward (why)" for the run log's note, empty when nothing was.
+fn exclusions(excluded: &[(Method, &str)]) -> String {
+    if excluded.is_empty() {
+        return String::new();
+    }
+    let list: Vec<String> = excluded
+        .iter()
+        .map(|(m, why)| format!("{} ({why})", method_name(*m)))
+        .collect();
+    format!("; excluded: {}", list.join(", "))
 }
 
 /// The score of candidate `c` in `scores`.
@@ -679,17 +719,17 @@ fn choose_jointly(
             None,
         );
     }
-    let mut candidates = vec![
+    let excluded = excluded_methods(loaded, scene);
+    let candidates = [
         (Method::Bdpt, SunSelection::Fixed),
         (Method::Bdpt, SunSelection::Power),
         (Method::Forward, SunSelection::Fixed),
         (Method::Forward, SunSelection::Power),
-    ];
-    // backward tracing cannot find the paths a smooth water surface makes (see
-    // `choose_method`)
-    if scene.water.is_none() {
-        candidates.push((Method::Backward, SunSelection::Fixed));
-    }
+        // backward starts no light sub-path: the selection changes nothing for it
+        (Method::Backward, SunSelection::Fixed),
+    ]
+    .into_iter()
+    .filter(|(m, _)| !excluded.iter().any(|(x, _)| x == m));
     let scores: Vec<((Method, SunSelection), f64)> = candidates
         .into_iter()
         .map(|(m, sel)| {
@@ -710,9 +750,10 @@ fn choose_jointly(
             m,
             Some(sel),
             format!(
-                "simulation.method and sun.selection auto chose {} with {}: laser and solar relative variance x scene queries per pulse over {n} pilot pulses of {rays} rays (lower is better): {table}",
+                "simulation.method and sun.selection auto chose {} with {}: laser and solar relative variance x scene queries per pulse over {n} pilot pulses of {rays} rays (lower is better): {table}{}",
                 method_name(m),
-                selection_name(sel)
+                selection_name(sel),
+                exclusions(&excluded)
             ),
             score_of(&scores, (m, sel)),
         ),

@@ -70,9 +70,14 @@ pub(crate) struct WaterSpec {
     pub extent: [[f64; 2]; 2],
     /// Beam attenuation coefficient of the water column, per metre, by wavelength.
     pub attenuation_per_m: Spectral,
-    /// Default 1.33.
+    /// The phase index, which steers refraction; default 1.33.
     #[serde(default)]
     pub refractive_index: Option<f64>,
+    /// The group index, per band or one number: light in the column travels at c / n_g.
+    /// Default: the phase index plus the dispersion of Quan and Fry's water index at the band
+    /// ([`crate::scene::water_group_index`]).
+    #[serde(default)]
+    pub group_index: Option<Spectral>,
     /// Wind speed at 12.5 m, m/s: a surface roughened by Cox-Munk slopes; absent: smooth.
     #[serde(default)]
     pub wind_speed_m_s: Option<f64>,

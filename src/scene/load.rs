@@ -155,6 +155,23 @@ fn water_body(doc: &Doc, file: &SceneFile, wavelengths_nm: &[f64]) -> Result<Opt
                 format!("expected a refractive index above 1 and at most 3, found {n}"),
             ));
         }
+        let n_group = wavelengths_nm
+            .iter()
+            .map(|&nm| {
+                let at = format!("{key}.group_index");
+                let g = match &w.group_index {
+                    Some(s) => s.at(nm).map_err(|why| doc.error(&at, why))?,
+                    None => super::water_group_index(n, nm),
+                };
+                if !(g.is_finite() && (1.0..=3.0).contains(&g)) {
+                    return Err(doc.error(
+                        &at,
+                        format!("expected a group index of 1 to 3 at {nm} nm, found {g}"),
+                    ));
+                }
+                Ok(g)
+            })
+            .collect::<Result<Vec<f64>>>()?;
         let attenuation = wavelengths_nm
             .iter()
             .map(|&nm| {
@@ -190,6 +207,8 @@ fn water_body(doc: &Doc, file: &SceneFile, wavelengths_nm: &[f64]) -> Result<Opt
             lo: [a[0].min(b[0]), a[1].min(b[1])],
             hi: [a[0].max(b[0]), a[1].max(b[1])],
             n,
+            n_group,
+            attenuation_min: attenuation.iter().cloned().fold(f64::INFINITY, f64::min),
             attenuation,
         });
     }

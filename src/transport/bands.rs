@@ -5,12 +5,14 @@
 //!   β_b = β Π_vertices f_b / f  Π_segments T_b / T,
 //!
 //! where f is the BSDF the path was sampled and weighted with and T the transmittance of the
-//! first band's atmosphere. f takes, for reflection and for transmission separately, the
+//! first band's atmosphere (in water, of the band that attenuates least). f takes, for reflection and for transmission separately, the
 //! largest of the bands' ρ and τ (ρ_max, τ_max): no band whose material scatters is left
 //! unsampled, every factor f_b / f = ρ_b / ρ_max (or ρ_back or τ, by the side the path takes)
 //! is at most 1, so no band's weight grows along a path, and paths are as long as the
 //! brightest band needs (a mean would cut the near-infrared band's multiple scattering short
-//! and weight its survivors up). T_b / T = exp(-(d_b - d_0)) with d the optical depth. The
+//! and weight its survivors up). T_b / T = exp(-(d_b - d_0)) with d the optical depth, and
+//! exp(-(c_b - c_min) ℓ) ≤ 1 over ℓ of water: a band the water absorbs (near-infrared light
+//! under metres of it) fades in its own factor and never drags the others' weights to 0. The
 //! sampling densities are the same for every band, so every strategy's MIS weight is shared
 //! and each band's estimate stays unbiased; Russian roulette, decided on the sampled albedo
 //! ρ_max + τ_max (which may exceed 1: then no roulette), divides every band alike.
@@ -37,7 +39,7 @@ pub struct Bands {
     surface: Vec<[f64; 3]>,
     /// Per band, the atmosphere of transmittance T_b / T_0; empty in vacuum.
     atmosphere: Vec<Atmosphere>,
-    /// The water column and each band's attenuation less the first band's, per metre.
+    /// The water column and each band's attenuation less the least of them, per metre.
     water: Option<(WaterBody, Vec<f64>)>,
     /// Per surface, for an RPV one: the shape and amplitudes (front, back) paths are weighted
     /// with, then each band's. Its f_b / f depends on the directions, so it is evaluated.
@@ -93,8 +95,8 @@ impl Bands {
             })
             .collect();
         let water = scene.water.as_ref().map(|w| {
-            let c0 = w.attenuation[0];
-            (w.clone(), w.attenuation.iter().map(|c| c - c0).collect())
+            let least = w.attenuation_min;
+            (w.clone(), w.attenuation.iter().map(|c| c - least).collect())
         });
         Bands {
             count,
@@ -135,13 +137,14 @@ impl Bands {
     }
 
     /// Multiplies `r` by each band's T_b / T of the segment from vertex `a` to the point `b`
-    /// (as [`segment_transmittance`](super::bdpt::segment_transmittance)).
+    /// (as [`segment_transmittance`](super::bdpt::segment_transmittance)). In water T is the
+    /// least attenuating band's, so every band's factor, the first's included, is at most 1.
     #[inline]
     pub fn segment(&self, r: &mut BandVec, a: &Vertex, b: DVec3) {
         if let Some((w, extra)) = &self.water {
             if w.holds(a.p, b) {
                 let len = (b - a.p).length();
-                for (x, c) in r.iter_mut().zip(extra).skip(1) {
+                for (x, c) in r.iter_mut().zip(extra) {
                     *x *= (-c * len).exp();
                 }
                 return;

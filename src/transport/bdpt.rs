@@ -41,9 +41,10 @@ pub(super) struct Buffers {
 #[inline]
 pub(super) fn segment_transmittance(setup: &PulseSetup, a: &Vertex, b: DVec3) -> f64 {
     if let Some(w) = &setup.scene.water {
-        // in the water column, its attenuation and no air
+        // in the water column, its attenuation and no air: the least of the bands', each band
+        // taking the rest in its factor (`Bands::segment`)
         if w.holds(a.p, b) {
-            return (-w.attenuation[0] * (b - a.p).length()).exp();
+            return (-w.attenuation_min * (b - a.p).length()).exp();
         }
     }
     match setup.atmosphere {
@@ -53,17 +54,35 @@ pub(super) fn segment_transmittance(setup: &PulseSetup, a: &Vertex, b: DVec3) ->
     }
 }
 
-/// The time a straight segment of geometric length `len` from `a` to `b` takes, as a length
-/// in vacuum: n × len in the water column, len elsewhere.
+/// The time a straight segment of geometric length `len` from `a` to `b` takes in the first
+/// band, as a length in vacuum: n_g × len in the water column (n_g the band's group index),
+/// len elsewhere.
 #[inline]
 pub(super) fn optical_length(setup: &PulseSetup, a: DVec3, b: DVec3, len: f64) -> f64 {
     match &setup.scene.water {
-        Some(w) if w.holds(a, b) => w.n * len,
+        // the pulse travels at the group velocity; the first band's times are the tally's
+        Some(w) if w.holds(a, b) => w.n_group[0] * len,
         _ => len,
     }
 }
 
-pub(super) fn surface_vertex(hit: &crate::scene::Hit, beta: f64, len: f64) -> Vertex {
+/// The geometric length of a straight segment from `a` to `b` in the water column: `len` or 0.
+#[inline]
+pub(super) fn water_length(setup: &PulseSetup, a: DVec3, b: DVec3, len: f64) -> f64 {
+    match &setup.scene.water {
+        Some(w) if w.holds(a, b) => len,
+        _ => 0.0,
+    }
+}
+
+/// The water's group index in each band (none without water): a band's time over a path is
+/// the first band's plus (n_g,b - n_g,0) × its length in water.
+#[inline]
+pub(super) fn group_indices<'s>(setup: &PulseSetup<'s>) -> &'s [f64] {
+    setup.scene.water.as_ref().map_or(&[], |w| &w.n_group)
+}
+
+pub(super) fn surface_vertex(hit: &crate::scene::Hit, beta: f64, len: f64, wlen: f64) -> Vertex {
     Vertex {
         kind: VertexKind::Surface,
         p: hit.position,
@@ -72,6 +91,7 @@ pub(super) fn surface_vertex(hit: &crate::scene::Hit, beta: f64, len: f64) -> Ve
         facet: hit.facet,
         beta,
         len,
+        wlen,
         pdf_fwd: 0.0,
         pdf_rev: 0.0,
         delta: false,
@@ -152,6 +172,7 @@ pub(super) fn walk(
                     );
                     q.beta = beta * segment_transmittance(setup, &last, q.p);
                     q.len = last.len + optical_length(setup, last.p, q.p, tq);
+                    q.wlen = last.wlen + water_length(setup, last.p, q.p, tq);
                     path.push(q);
                     link(setup, path);
                     let w = mis_weight(setup, path, &[], scratch);
@@ -163,7 +184,8 @@ pub(super) fn walk(
                             acc.add_solar_bands(q.beta * w, &r);
                         } else {
                             let class = class_of(setup, &path[1]);
-                            acc.add_bands(q.len, q.beta * w, surfaces, class, &r);
+                            let len = (q.len, q.wlen, group_indices(setup));
+                            acc.add_bands(len, q.beta * w, surfaces, class, &r);
                         }
                     } else if sun {
                         acc.add_solar(q.beta * w);
@@ -180,7 +202,8 @@ pub(super) fn walk(
         let Some(hit) = hit else { break };
         beta *= segment_transmittance(setup, &last, hit.position);
         let len = last.len + optical_length(setup, last.p, hit.position, hit.t);
-        path.push(surface_vertex(&hit, beta, len));
+        let wlen = last.wlen + water_length(setup, last.p, hit.position, hit.t);
+        path.push(surface_vertex(&hit, beta, len, wlen));
         if setup.both_subpaths() {
             link(setup, path);
         }
@@ -207,6 +230,12 @@ pub(super) fn walk(
         }
         dir = next;
     }
+}
+
+/// The geometric length in water of the path that joins `x` (a light sub-path's end) to `y`
+/// (a receiver sub-path's).
+fn joined_water(setup: &PulseSetup, x: &Vertex, y: &Vertex) -> f64 {
+    x.wlen + water_length(setup, x.p, y.p, (y.p - x.p).length()) + y.wlen
 }
 
 /// Unweighted estimate f/p of the path light[..s] + cam[..t] (t ≥ 1, s ≥ 1, s + t ≥ 3) and
@@ -360,7 +389,7 @@ fn light_subpath(
                     path: &mut b.light,
                     ratios: &mut b.light_r,
                     dir: sun.dir,
-                    beta: beta,
+                    beta,
                     cap: s_cap,
                     light: true,
                 },
@@ -384,7 +413,7 @@ fn light_subpath(
                 Walk {
                     path: &mut b.light,
                     ratios: &mut b.light_r,
-                    dir: dir,
+                    dir,
                     beta: laser.energy / q_laser,
                     cap: s_cap,
                     light: true,
@@ -435,7 +464,7 @@ fn receiver_subpath(
             Walk {
                 path: &mut b.cam,
                 ratios: &mut b.cam_r,
-                dir: dir,
+                dir,
                 beta: recv.area * w,
                 cap: t_cap,
                 light: false,
@@ -468,7 +497,12 @@ fn connect_to_lights(setup: &PulseSetup, acc: &mut Accum, b: &mut Buffers, sun_o
                 let w = mis_weight(setup, &laser_light, cam, &mut b.scratch);
                 if let Some(bands) = setup.bands {
                     let r = bands.connection(setup, &laser_light, cam, (&ONES, &b.cam_r[t - 1]));
-                    acc.add_bands(length, c * w, t - 1, class_of(setup, y), &r);
+                    let len = (
+                        length,
+                        joined_water(setup, &laser_end, y),
+                        group_indices(setup),
+                    );
+                    acc.add_bands(len, c * w, t - 1, class_of(setup, y), &r);
                 } else {
                     acc.add(length, c * w, t - 1, class_of(setup, y));
                 }
@@ -550,7 +584,8 @@ fn connect_subpaths(
                 if is_sun {
                     acc.add_solar_bands(c * w, &r);
                 } else {
-                    acc.add_bands(length, c * w, order, class_of(setup, &light[1]), &r);
+                    let len = (length, joined_water(setup, x, y), group_indices(setup));
+                    acc.add_bands(len, c * w, order, class_of(setup, &light[1]), &r);
                 }
             } else if is_sun {
                 acc.add_solar(c * w);

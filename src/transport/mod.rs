@@ -170,8 +170,12 @@ pub struct Vertex {
     /// Throughput of the sub-path up to this vertex over its sampling densities: energy (J)
     /// on a light sub-path, importance (m² sr) on a receiver sub-path.
     pub beta: f64,
-    /// Length of the sub-path from its start to this vertex, m.
+    /// Length of the sub-path from its start to this vertex, as the time light takes over it
+    /// in the first band (in vacuum metres: a length in water counts n_g times), m.
     pub len: f64,
+    /// The geometric length of it in the water column, m: where the bands' group indexes part
+    /// their times.
+    pub wlen: f64,
     /// Area density of this vertex as sampled by its own sub-path.
     pub pdf_fwd: f64,
     /// Area density of this vertex if the other sub-path had sampled it.
@@ -191,6 +195,7 @@ impl Vertex {
             facet: FacetId::NONE,
             beta: 1.0,
             len: 0.0,
+            wlen: 0.0,
             pdf_fwd,
             pdf_rev: 0.0,
             delta: false,

@@ -36,6 +36,9 @@ pub struct Tally {
     /// Scene queries (closest hits and visibility tests) the rays made: their cost, counted
     /// the same on any machine.
     pub queries: u64,
+    /// Contributions whose weight was not a finite number (NaN or infinite), left out of every
+    /// sum: none is expected, and the run log says so when one is.
+    pub non_finite: u64,
     /// Bins [lo, hi) that received energy in the gate (lo = hi: none). Every per-bin and
     /// per-sub-bin sum is zero outside them, so a pulse of few paths in a long gate (3152
     /// bins of 0.067 ns over a forest) is reset and turned into a waveform over its span only.
@@ -56,6 +59,7 @@ impl Tally {
             rays: 0,
             paths: 0,
             queries: 0,
+            non_finite: 0,
             solar_sum: 0.0,
             solar_sq: 0.0,
             lit: (0, 0),
@@ -98,6 +102,7 @@ impl Tally {
         self.solar_sum += o.solar_sum;
         self.solar_sq += o.solar_sq;
         self.queries += o.queries;
+        self.non_finite += o.non_finite;
         self.light(o.lit.0, o.lit.1);
     }
 
@@ -206,17 +211,23 @@ impl Accum {
     }
 
     /// [`Accum::add`] in every band, band b's energy being `energy × r[b]`.
+    /// `length`: the path's length in the first band's time, its geometric length in water
+    /// and the water's group index per band (empty without water), which part the bands' times.
     pub(super) fn add_bands(
         &mut self,
-        length: f64,
+        (length, water, group): (f64, f64, &[f64]),
         energy: f64,
         order: usize,
         class: usize,
         r: &BandVec,
     ) {
         self.add(length, energy * r[0], order, class);
-        for (a, f) in self.bands.iter_mut().zip(&r[1..]) {
-            a.add(length, energy * f, order, class);
+        for (b, (a, f)) in self.bands.iter_mut().zip(&r[1..]).enumerate() {
+            let slower = match (group.first(), group.get(b + 1)) {
+                (Some(first), Some(g)) if water > 0.0 => (g - first) * water,
+                _ => 0.0,
+            };
+            a.add(length + slower, energy * f, order, class);
         }
     }
 
@@ -268,7 +279,7 @@ impl Accum {
         zero(&mut t.order_sum, setup.max_order as usize);
         zero(&mut t.order_sq, setup.max_order as usize);
         (t.outside, t.total_sq, t.rays, t.paths) = (0.0, 0.0, 0, 0);
-        (t.solar_sum, t.solar_sq, t.queries) = (0.0, 0.0, 0);
+        (t.solar_sum, t.solar_sq, t.queries, t.non_finite) = (0.0, 0.0, 0, 0);
         self.t0 = setup.gate.t0;
         self.sub_dt = setup.gate.dt / sub_bins as f64;
         self.sub_bins = sub_bins;
@@ -280,7 +291,10 @@ impl Accum {
 
     /// A solar path carrying `power` watts (the sun is continuous: no time, no bin).
     pub(super) fn add_solar(&mut self, power: f64) {
-        if power > 0.0 && power.is_finite() {
+        if !power.is_finite() {
+            debug_assert!(false, "a solar contribution of {power} W");
+            self.tally.non_finite += 1;
+        } else if power > 0.0 {
             self.ray_solar += power;
             self.tally.paths += 1;
         }
@@ -288,7 +302,12 @@ impl Accum {
 
     /// A path of `length` metres and `order` surface interactions carrying `energy` joules.
     pub(super) fn add(&mut self, length: f64, energy: f64, order: usize, class: usize) {
-        if !(energy > 0.0 && energy.is_finite()) || order == 0 {
+        if !(energy.is_finite() && length.is_finite()) {
+            debug_assert!(false, "a contribution of {energy} J at {length} m");
+            self.tally.non_finite += 1;
+            return;
+        }
+        if energy <= 0.0 || order == 0 {
             return;
         }
         let x = (length / crate::C - self.t0) / self.sub_dt;

@@ -438,6 +438,8 @@ fn read_waveforms_with(
                 rays: rays.value(i),
                 paths_per_ray: ppr.value(i),
                 wavelength_nm: bands.as_ref().map(|a| a.value(i)),
+                // not in the files: the simulate stage's log reports them
+                non_finite: 0,
             };
         }
         done += b.num_rows();
@@ -582,6 +584,7 @@ mod tests {
             rays: 4,
             paths_per_ray: 1.0,
             wavelength_nm: None,
+            non_finite: 0,
         }
     }
 

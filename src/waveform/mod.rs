@@ -56,6 +56,9 @@ pub struct Waveform {
     /// The band of this row in a run of several bands (column `wavelength_nm`); `None` with
     /// one band, whose files have no such column.
     pub wavelength_nm: Option<f64>,
+    /// Contributions left out for a weight that was not a finite number (not in the files:
+    /// the run log reports them).
+    pub non_finite: u64,
 }
 
 /// rRMSE of a waveform `w` against a reference over the bins `over`: the RMS of their
@@ -375,6 +378,7 @@ pub fn waveform(
         rays: tally.rays as u32,
         paths_per_ray: (tally.paths as f64 / n) as f32,
         wavelength_nm: None,
+        non_finite: tally.non_finite,
     }
 }
 

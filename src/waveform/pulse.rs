@@ -72,8 +72,9 @@ impl<'a> PulseSimulator<'a> {
         let mut near = scene.bounds_near(p.origin, p.direction);
         if let Some(w) = &scene.water {
             // light is slower in the water column: the gate reaches as far as a path down to
-            // the bottom of the box takes, as if the box were deeper by (n - 1) × depth
-            near.0.z -= (w.n - 1.0) * (w.z - near.0.z).max(0.0);
+            // the bottom of the box takes, as if the box were deeper by (n_g - 1) × depth
+            let n_g = w.n_group.iter().cloned().fold(1.0, f64::max);
+            near.0.z -= (n_g - 1.0) * (w.z - near.0.z).max(0.0);
         }
         let gate = Gate::for_pulse(inst, p.origin, p.direction, near);
         let sun = self.sun.map(|s| {

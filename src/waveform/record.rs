@@ -109,16 +109,61 @@ impl Recorder {
             .collect();
         Record {
             samples,
-            background: self.digitise_mean(background),
+            background: self.expected_sample(background),
         }
     }
 
-    /// The background in record units: a mean, so not rounded.
-    fn digitise_mean(&self, pe: f64) -> f64 {
-        match &self.digitiser {
-            Some(d) => (d.offset + d.gain * pe).clamp(0.0, d.saturation()),
-            None => pe,
+    /// The mean of a recorded sample whose mean photoelectrons are `pe` (the background: solar
+    /// and dark), in record units: E[c] over the noise, not c of the mean. With a digitiser the
+    /// rounding and the clipping at 0 and at saturation bend the mean: a background near the
+    /// offset's bottom, where clipping at 0 lifts the noise's lower half, would otherwise be
+    /// under-estimated and its subtraction leave a positive bias in every bin.
+    ///
+    /// With noise, e = k + σ_e z with k ~ Poisson(pe), z ~ N(0, 1), and c = clip(round(o + g e)),
+    /// so E[c | k] = Σ_{m=1}^{sat} P(o + g e ≥ m − ½) = Σ_m Φ((o + g k − m + ½) / (g σ_e)),
+    /// summed over k's distribution (a Gaussian of variance pe + σ_e² when pe is large, where
+    /// the sum over k would take thousands of terms).
+    pub fn expected_sample(&self, pe: f64) -> f64 {
+        let Some(d) = &self.digitiser else {
+            // Poisson and Gaussian noise have mean 0 about pe: no bias without a digitiser
+            return pe;
+        };
+        let Some(sd) = self.electronic_sd else {
+            // without noise the record is the mean waveform, digitised
+            return self.digitise(pe);
+        };
+        let sat = d.saturation();
+        // E[clip(round(a + b z))] for z ~ N(0, 1): levels far below a - 9b all count, those
+        // far above none
+        let mean_of = |a: f64, b: f64| -> f64 {
+            if b <= 0.0 {
+                return (a.round()).clamp(0.0, sat);
+            }
+            let lo = (a - 9.0 * b).floor().max(1.0);
+            let hi = (a + 9.0 * b).ceil().min(sat);
+            let mut e = (lo - 1.0).clamp(0.0, sat);
+            let mut m = lo;
+            while m <= hi {
+                e += super::normal_cdf((a - m + 0.5) / b);
+                m += 1.0;
+            }
+            e
+        };
+        let pe = pe.max(0.0);
+        if pe > 100.0 {
+            return mean_of(d.offset + d.gain * pe, d.gain * (pe + sd * sd).sqrt());
         }
+        // Poisson weights from k = 0 up, to 12 standard deviations past the mean
+        let top = (pe + 12.0 * pe.sqrt() + 20.0).ceil() as u64;
+        let mut p = (-pe).exp();
+        let mut e = 0.0;
+        for k in 0..=top {
+            if k > 0 {
+                p *= pe / k as f64;
+            }
+            e += p * mean_of(d.offset + d.gain * k as f64, d.gain * sd);
+        }
+        e
     }
 
     /// Variance of each bin of [`Recorder::laser_photons`] besides the laser photons' own
@@ -437,6 +482,68 @@ mod tests {
             );
         }
         assert!((rec.background - (3.0 + 4.0 * (0.25 * 2.0 + 1.0))).abs() < 1e-12);
+    }
+
+    /// The background the record's laser photons are taken from is the mean of a sample with
+    /// no laser signal, clipping and rounding included: over 200,000 noise-only samples (a
+    /// digitiser whose offset sits near 0, where clipping at 0 bends the mean; and one whose
+    /// saturation clips the top), their mean is the estimate within 3 SE; with no noise it is
+    /// the digitised background exactly.
+    #[test]
+    fn background_estimate_is_the_mean_of_noise_only_samples() {
+        for (offset, gain, bits, sd, solar) in [
+            (0.5, 1.0, 12, 2.0, 0.3),
+            (1.0, 2.0, 12, 1.5, 2.0),
+            (3.0, 4.0, 4, 1.0, 1.5),
+            (0.0, 0.7, 10, 3.0, 150.0),
+            (0.0, 0.7, 10, 3.0, 400.0),
+        ] {
+            let mut r = recorder();
+            r.quantum_efficiency = 0.5;
+            r.electronic_sd = Some(sd);
+            r.digitiser = Some(Digitiser {
+                gain,
+                offset,
+                bits,
+                saturation: None,
+            });
+            let bins = 2000;
+            let w = Waveform {
+                bin_ns: 1.0,
+                laser_photons: vec![0.0; bins],
+                solar_photons_per_bin: solar,
+                ..Waveform::default()
+            };
+            let (mut sum, mut sum2, mut n) = (0.0f64, 0.0f64, 0.0f64);
+            let mut background = 0.0;
+            for id in 0..100u64 {
+                let rec = r.record(&Waveform {
+                    pulse_id: id,
+                    ..w.clone()
+                });
+                background = rec.background;
+                for &c in &rec.samples {
+                    sum += c as f64;
+                    sum2 += (c as f64).powi(2);
+                    n += 1.0;
+                }
+            }
+            let mean = sum / n;
+            let se = ((sum2 / n - mean * mean) / n).sqrt();
+            assert!(
+                (mean - background).abs() < 3.0 * se,
+                "offset {offset}, gain {gain}, {bits} bits, sd {sd}, solar {solar}: mean {mean} \
+                 against the estimate {background} (SE {se})"
+            );
+        }
+        let mut r = recorder();
+        r.digitiser = Some(Digitiser {
+            gain: 2.0,
+            offset: 0.2,
+            bits: 8,
+            saturation: None,
+        });
+        assert_eq!(r.expected_sample(1.3), r.digitise(1.3));
     }
 
     #[test]

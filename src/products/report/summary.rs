@@ -183,6 +183,7 @@ mod tests {
             rays: 2,
             paths_per_ray: 1.5,
             wavelength_nm: None,
+            non_finite: 0,
         };
         let mut t = WaveformTotals::default();
         t.add(&w(0.25));

@@ -109,7 +109,7 @@ pub const CAMPAIGNS: [(&str, &str, BenchScene); 8] = [
     ),
     (
         "als_town",
-        "town, airborne discrete return at 19 rays per pulse, method auto (issue 11's survey)",
+        "town, airborne discrete return at 19 rays per pulse, method auto",
         BenchScene::Town,
     ),
 ];

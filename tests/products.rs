@@ -557,3 +557,48 @@ fn simulation_noise_against_photon_noise_falls_as_one_over_rays() {
         "{a} ± {sa} against {b} ± {sb}"
     );
 }
+
+/// Two returns that the waveform separates are never merged: noise-free waveforms of two
+/// Gaussians (analytic, bin-integrated), the weaker 5-50 % of the stronger, 1.5 to 5 pulse
+/// FWHMs apart, decompose into two returns, each centre within 1 cm of its Gaussian's
+/// (1 ns bins: 15 cm of range).
+#[test]
+fn two_gaussians_give_two_returns_at_their_centres() {
+    use lidarsim::products::returns::{decompose, Decomposition, Receiver};
+    use lidarsim::waveform::normal_cdf;
+    let sigma = 3.0f64;
+    let fwhm = 2.0 * (2.0 * 2f64.ln()).sqrt() * sigma;
+    let bin_m = 1e-9 * C / 2.0;
+    let receiver = Receiver {
+        sigma_bins: sigma,
+        footprint_edge_sigmas: None,
+        noise_floor: 0.0,
+    };
+    for ratio in [0.05, 0.1, 0.2, 0.3, 0.5] {
+        for separation in [1.5, 2.0, 2.5, 3.0, 4.0, 5.0] {
+            let (c1, c2) = (100.3, 100.3 + separation * fwhm);
+            let bin = |c: f64, a: f64, i: usize| {
+                let (x0, x1) = ((i as f64 - c) / sigma, (i as f64 + 1.0 - c) / sigma);
+                a * (normal_cdf(x1) - normal_cdf(x0))
+            };
+            let n = 260;
+            let y: Vec<f32> = (0..n)
+                .map(|i| (bin(c1, 1e5, i) + bin(c2, ratio * 1e5, i)) as f32)
+                .collect();
+            let zero = vec![0.0f32; n];
+            let comps = decompose(&y, &zero, &zero, 5.0, 4, Decomposition::Gaussian, &receiver);
+            let centres: Vec<f64> = comps.iter().map(|c| c.centre_bin).collect();
+            assert_eq!(
+                comps.len(),
+                2,
+                "ratio {ratio}, {separation} FWHM: {centres:?}"
+            );
+            for (got, want) in centres.iter().zip([c1, c2]) {
+                assert!(
+                    (got - want).abs() * bin_m < 0.01,
+                    "ratio {ratio}, {separation} FWHM: {got} against {want}"
+                );
+            }
+        }
+    }
+}

@@ -97,3 +97,21 @@ def test_damaged_files_are_data_errors(tmp_path):
     assert e.value.advice
     with pytest.raises(lidarsim.InputError):
         run.photons()  # a discrete-return run writes none: the message says which stage would
+
+
+def test_the_stubs_name_every_public_name():
+    """lidarsim/__init__.pyi (stubgen's, with the attributes of Waveform) declares every name
+    the package exports, and every attribute a Waveform has."""
+    import ast
+    from pathlib import Path
+
+    stub = ast.parse((Path(lidarsim.__file__).parent / "__init__.pyi").read_text())
+    declared = set()
+    for node in ast.walk(stub):
+        if isinstance(node, (ast.FunctionDef, ast.ClassDef)):
+            declared.add(node.name)
+        elif isinstance(node, ast.AnnAssign) and isinstance(node.target, ast.Name):
+            declared.add(node.target.id)
+    missing = [n for n in lidarsim.__all__ if n not in declared and n not in dir(lidarsim.errors)]
+    assert not missing, missing
+    assert not [a for a in lidarsim.Waveform.__slots__ if a not in declared]

@@ -51,11 +51,7 @@ fn to_py(py: Python<'_>, e: &lidarsim::Error) -> PyErr {
 /// Runs `f`, turning its error into the package's exception and a panic into a
 /// `LidarsimError` (never a Rust panic across into Python).
 fn guarded<T>(py: Python<'_>, f: impl FnOnce() -> lidarsim::Result<T>) -> PyResult<T> {
-    match catch_unwind(AssertUnwindSafe(f)) {
-        Ok(Ok(v)) => Ok(v),
-        Ok(Err(e)) => Err(to_py(py, &e)),
-        Err(panic) => Err(internal(py, &panic)),
-    }
+    settle(py, catch_unwind(AssertUnwindSafe(f)))
 }
 
 /// `f` with the interpreter released (other Python threads go on), guarded as [`guarded`].
@@ -63,28 +59,29 @@ fn detached<T: Send>(
     py: Python<'_>,
     f: impl FnOnce() -> lidarsim::Result<T> + Send,
 ) -> PyResult<T> {
-    let r = py.detach(|| catch_unwind(AssertUnwindSafe(f)));
+    settle(py, py.detach(|| catch_unwind(AssertUnwindSafe(f))))
+}
+
+/// What a guarded call came to, as Python sees it: its value, the package's exception for
+/// its error, or a `LidarsimError` for a panic (a bug, not the user's input).
+fn settle<T>(py: Python<'_>, r: std::thread::Result<lidarsim::Result<T>>) -> PyResult<T> {
     match r {
         Ok(Ok(v)) => Ok(v),
         Ok(Err(e)) => Err(to_py(py, &e)),
-        Err(panic) => Err(internal(py, &panic)),
+        Err(panic) => {
+            let what = panic
+                .downcast_ref::<&str>()
+                .map(|s| s.to_string())
+                .or_else(|| panic.downcast_ref::<String>().cloned())
+                .unwrap_or_else(|| "a panic".into());
+            let message = format!("internal error (please report): {what}");
+            let made = py
+                .import("lidarsim.errors")
+                .and_then(|m| m.getattr("LidarsimError"))
+                .and_then(|c| c.call1((message,)));
+            Err(made.map_or_else(|why| why, PyErr::from_value))
+        }
     }
-}
-
-fn internal(py: Python<'_>, panic: &Box<dyn std::any::Any + Send>) -> PyErr {
-    let what = panic
-        .downcast_ref::<&str>()
-        .map(|s| s.to_string())
-        .or_else(|| panic.downcast_ref::<String>().cloned())
-        .unwrap_or_else(|| "a panic".into());
-    let e = lidarsim::Error::msg(format!("internal error (please report): {what}"));
-    let err = to_py(py, &e);
-    // a bug, not the user's input: the base class, not InputError
-    py.import("lidarsim.errors")
-        .and_then(|m| m.getattr("LidarsimError"))
-        .and_then(|c| c.call1((e.to_string(),)))
-        .map(PyErr::from_value)
-        .unwrap_or(err)
 }
 
 /// A YAML value from JSON text the package wrote.
@@ -235,11 +232,7 @@ fn run<'py>(
     if let Some(e) = stopped {
         return Err(e);
     }
-    let s = match result {
-        Ok(Ok(s)) => s,
-        Ok(Err(e)) => return Err(to_py(py, &e)),
-        Err(panic) => return Err(internal(py, &panic)),
-    };
+    let s = settle(py, result)?;
     let d = PyDict::new(py);
     d.set_item("out", s.out.display().to_string())?;
     d.set_item("pulses", s.pulses)?;

@@ -92,6 +92,14 @@ pub struct Instrument {
     pub max_returns: u32,
     #[serde(default = "default_threshold")]
     pub detection_threshold_photons: f64,
+    /// Probability that a gate of noise alone gives a false return, which sets the detection
+    /// threshold of records with noise (see [`Instrument::false_alarm_rate`]); absent: 1e-3.
+    #[serde(
+        default,
+        rename = "false_alarm_rate",
+        skip_serializing_if = "Option::is_none"
+    )]
+    pub false_alarm_rate_per_pulse: Option<f64>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub quantum_efficiency: Option<f64>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -118,6 +126,13 @@ pub struct Instrument {
 }
 
 impl Instrument {
+    /// Probability per pulse that a record of noise alone yields a return: the configured
+    /// `false_alarm_rate`, or 1e-3. It applies to records with noise only (see `noise`).
+    pub fn false_alarm_rate(&self) -> f64 {
+        self.false_alarm_rate_per_pulse
+            .unwrap_or(DEFAULT_FALSE_ALARM_RATE)
+    }
+
     /// |receiver_offset_m|, m: how much longer than 2R a path may be.
     pub fn receiver_offset_length(&self) -> f64 {
         self.receiver_offset_m
@@ -166,6 +181,9 @@ fn default_bin_ns() -> f64 {
 fn default_max_returns() -> u32 {
     4
 }
+/// False returns per pulse from a gate of noise alone, unless the campaign says otherwise.
+pub const DEFAULT_FALSE_ALARM_RATE: f64 = 1e-3;
+
 fn default_threshold() -> f64 {
     5.0
 }
@@ -753,6 +771,18 @@ impl Campaign {
             "instrument.detection_threshold_photons",
             i.detection_threshold_photons,
         )?;
+        if let Some(a) = i.false_alarm_rate_per_pulse {
+            c.finite("instrument.false_alarm_rate", a)?;
+            if !(a > 0.0 && a < 1.0) {
+                return Err(doc.error(
+                    "instrument.false_alarm_rate",
+                    format!(
+                        "must lie strictly between 0 and 1 (false returns per pulse from noise \
+                         alone; default 0.001), found {a}"
+                    ),
+                ));
+            }
+        }
         if let Some(q) = i.quantum_efficiency {
             c.within(
                 "instrument.quantum_efficiency",

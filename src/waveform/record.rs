@@ -172,6 +172,12 @@ impl Recorder {
     /// each over q² back at the detector; 0 for the mean waveform.
     pub fn noise_floor_photons(&self, w: &Waveform) -> f64 {
         let q = self.quantum_efficiency;
+        self.noise_floor_photoelectrons(w) / (q * q)
+    }
+
+    /// [`Recorder::noise_floor_photons`] in photoelectrons², the detector's own units, where
+    /// the laser's shot noise is Poisson: variance equal to the mean.
+    pub fn noise_floor_photoelectrons(&self, w: &Waveform) -> f64 {
         let mut pe = 0.0;
         if let Some(sd) = self.electronic_sd {
             pe += sd * sd + self.mean_photoelectrons_background(w);
@@ -179,7 +185,7 @@ impl Recorder {
         if let Some(d) = &self.digitiser {
             pe += 1.0 / (12.0 * d.gain * d.gain);
         }
-        pe / (q * q)
+        pe
     }
 
     /// Mean background (solar and dark) photoelectrons per bin.
@@ -188,9 +194,20 @@ impl Recorder {
             + self.dark_count_hz * w.bin_ns as f64 * 1e-9
     }
 
-    /// The laser photons the decomposition sees in a record: back to photons at the
-    /// detector, background removed.
+    /// The laser photons in a record: back to photons at the detector, background removed.
     pub fn laser_photons(&self, r: &Record) -> Vec<f32> {
+        let q = self.quantum_efficiency;
+        self.laser_photoelectrons(r)
+            .into_iter()
+            .map(|v| (v as f64 / q) as f32)
+            .collect()
+    }
+
+    /// The laser photoelectrons in a record, background removed: what the decomposition sees
+    /// of a noisy record, in the units whose shot noise is Poisson (divided by q, a signal of
+    /// L photons would have the variance L / q, not L). Samples below the background stay
+    /// negative.
+    pub fn laser_photoelectrons(&self, r: &Record) -> Vec<f32> {
         let (gain, offset) = self
             .digitiser
             .as_ref()
@@ -198,7 +215,7 @@ impl Recorder {
         let bg_pe = (r.background - offset) / gain;
         r.samples
             .iter()
-            .map(|&c| (((c as f64 - offset) / gain - bg_pe) / self.quantum_efficiency) as f32)
+            .map(|&c| ((c as f64 - offset) / gain - bg_pe) as f32)
             .collect()
     }
 }

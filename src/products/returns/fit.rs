@@ -6,6 +6,7 @@ use super::{
     blend, Component, Noise, Threshold, COLLAPSED_SIGMA, MAX_JOINT, MIN_DEVIANCE_GAIN, SIGMA_FLOOR,
 };
 use crate::waveform::bin_masses_into;
+use std::borrow::Cow;
 
 /// A Gaussian's parameters during the fit: centre, sigma (bins), area (photons).
 pub(super) type Params = [f64; 3];
@@ -118,7 +119,7 @@ pub(super) fn fit_all(
             if others.is_empty() && (first == Some((lo, hi)) || inside) {
                 continue;
             }
-            let win = Window::new(y, lo, hi, Some(&others));
+            let win = Window::new(y, lo, hi, Some(&others), noise.floor);
             if let Some((p, _)) = fit_clean(&win, start, floor)
                 .filter(|(p, _)| p.iter().any(|q| q[2] > threshold.area))
             {
@@ -192,11 +193,12 @@ fn fit_group(
     let Some((lo, hi)) = bounds(&seeds, hint, y.len()) else {
         return Vec::new();
     };
-    let win = Window::new(y, lo, hi, Some(others));
+    let win = Window::new(y, lo, hi, Some(others), noise.floor);
     // One return alone in its window starts from the window's moments, which are a
     // bin-integrated Gaussian's parameters (to e^(-2π²σ²), σ in bins) when it is one: the
     // solver's first step then shows it converged.
-    let start = match (&seeds[..], others.is_empty()) {
+    // A record's noise has moments of its own across the window, so it starts from the seed.
+    let start = match (&seeds[..], others.is_empty() && win.shift == 0.0) {
         ([_], true) => moments(&win, floor).map_or_else(|| seeds.clone(), |m| vec![m]),
         _ => seeds.clone(),
     };
@@ -242,7 +244,8 @@ fn fit_group(
             let (a, b) = (j.saturating_sub(half), (j + half + 1).min(r.len()));
             let area: f64 = r[a..b].iter().sum();
             let lo = win.offset as usize;
-            let mut var = m[a..b].iter().sum::<f64>() + 1.0 + noise.floor * (b - a) as f64;
+            // the model holds the noise's variance (the window's shift) in every bin
+            let mut var = m[a..b].iter().sum::<f64>() + 1.0;
             if win.offset + j as f64 + 0.5 > earliest {
                 var += noise.mc_var(lo + a, lo + b);
             }
@@ -439,20 +442,37 @@ fn span(p: &Params, offset: f64, n: f64) -> (usize, usize) {
 }
 
 /// The bins a group is fitted on.
+///
+/// A record with noise besides its photons' own (electronic noise, the background's shot
+/// noise, rounding: variance `shift` per bin) is fitted as a shifted Poisson count: y + shift
+/// against m + shift. Its variance, m + shift, is the record's, so the deviance weighs each
+/// bin by its real noise and the likelihood-ratio test of an extra component keeps its χ²
+/// calibration; a plain Poisson deviance would take the noise for signal and breed
+/// components. Negative samples (noise below the background) are kept, not rectified, down
+/// to -shift, below which a shifted count cannot go.
 pub(super) struct Window<'a> {
-    pub(super) y: &'a [f64],
+    /// The shifted samples, y + shift (the samples themselves for a noise-free waveform).
+    pub(super) y: Cow<'a, [f64]>,
     /// Bin index of y[0].
     pub(super) offset: f64,
     /// Fixed part of the model: the other groups' components that reach into this window,
-    /// plus a floor that keeps the model positive so the likelihood stays finite.
+    /// plus the shift and a floor that keeps the model positive so the likelihood stays
+    /// finite.
     pub(super) base: Vec<f64>,
+    /// The noise variance per bin added to the samples and the model.
+    pub(super) shift: f64,
 }
 
 impl<'a> Window<'a> {
-    fn new(y: &'a [f64], lo: usize, hi: usize, others: Option<&[Params]>) -> Self {
+    fn new(y: &'a [f64], lo: usize, hi: usize, others: Option<&[Params]>, shift: f64) -> Self {
         let y = &y[lo..hi];
         let eps = 1e-9 * (1.0 + y.iter().cloned().fold(0.0, f64::max));
-        let mut base = vec![eps; y.len()];
+        let y: Cow<'a, [f64]> = if shift > 0.0 {
+            Cow::Owned(y.iter().map(|&v| (v + shift).max(0.0)).collect())
+        } else {
+            Cow::Borrowed(y)
+        };
+        let mut base = vec![eps + shift; y.len()];
         if let Some(o) = others {
             add_gaussians(&mut base, lo as f64, o);
         }
@@ -460,6 +480,7 @@ impl<'a> Window<'a> {
             y,
             offset: lo as f64,
             base,
+            shift,
         }
     }
 }

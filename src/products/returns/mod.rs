@@ -12,6 +12,7 @@
 //! waveform the optimum is still the exact parameters. Any background (solar, dark) must be
 //! subtracted by the caller: the model has no baseline.
 
+mod alarm;
 mod detect;
 mod fit;
 mod solve;
@@ -48,6 +49,10 @@ pub struct Receiver {
     /// electronic noise, the background's shot noise and the digitiser's rounding; 0 for the
     /// mean waveform.
     pub noise_floor: f64,
+    /// For a record with noise: the probability that a gate of noise alone yields a return,
+    /// which sets the level the matched-filtered record must reach ([`alarm`]); None: the
+    /// threshold alone decides (a mean waveform, or a record without noise).
+    pub false_alarm_rate: Option<f64>,
 }
 
 /// One return of a waveform, in bin units.
@@ -197,6 +202,9 @@ pub fn decompose(
         0.0
     };
     let f = coarsening(hint);
+    let alarm_rate = receiver
+        .false_alarm_rate
+        .filter(|a| a.is_finite() && *a > 0.0 && floor > 0.0);
     // The bins around the signal only, on the coarse grid's boundaries: a gate of hundreds of
     // bins holds a return or two, and the zeros far from them change nothing (the smoothing,
     // the fit's windows and the residual search reach a few sigmas) but cost their passes.
@@ -206,9 +214,11 @@ pub fn decompose(
     let margin = (SPAN_MARGIN_SIGMAS * hint).ceil() as usize + SPAN_MARGIN_BINS;
     let lo = first.saturating_sub(margin) / f * f;
     let hi = (last + 1 + margin).min(photons.len());
+    // a record's noise below its background is kept, not rectified: set to zero, it would
+    // lift every return's area and every noise bump's level
     let y: Vec<f64> = photons[lo..hi]
         .iter()
-        .map(|&v| if signal(v) { v as f64 } else { 0.0 })
+        .map(|&v| if v.is_finite() { v as f64 } else { 0.0 })
         .collect();
     let mc_se: Vec<f64> = mc_se_photons
         .get(lo.min(mc_se_photons.len())..hi.min(mc_se_photons.len()))
@@ -252,6 +262,8 @@ pub fn decompose(
             floor,
             quantum,
             leaves: &leaves,
+            alarm: alarm_rate
+                .map(|a| alarm::alarm_level(y.len(), hint, floor, a, threshold.per_bin)),
         };
         return decompose_bins(&y, threshold, max_returns, method, &noise)
             .into_iter()
@@ -275,6 +287,8 @@ pub fn decompose(
         floor: floor * k,
         quantum,
         leaves: &coarse_leaves,
+        alarm: alarm_rate
+            .map(|a| alarm::alarm_level(coarse.len(), hint / k, floor * k, a, threshold.per_bin)),
     };
     decompose_bins(&coarse, threshold, max_returns, method, &noise)
         .into_iter()
@@ -330,7 +344,57 @@ fn decompose_bins(
     noise: &Noise,
 ) -> Vec<Component> {
     let hint = noise.pulse_sigma;
-    let peaks = detect_peaks(y, threshold.per_bin, hint);
+    // a record with noise: a summit must reach the false-alarm level, which the filter's
+    // weighted average of the bins around it reaches only if one of them does
+    let mut peaks = detect_peaks(y, noise.alarm.unwrap_or(threshold.per_bin), hint);
+    // what the matched filter does not see above the false-alarm level is noise: no seed
+    let alarmed = noise.alarm.map(|u| (u, alarm::matched(y, hint)));
+    let seen = |c: &Component| {
+        alarmed
+            .as_ref()
+            .is_none_or(|(u, s)| above_alarm(c, *u, s, hint))
+    };
+    peaks.retain(|c| seen(c));
+    // a seed's area summed between the noise's valleys may fall short of what the filter
+    // measures (the least-squares area of a Gaussian of its σ there): the larger is kept, so
+    // a seed that reaches the level stands out from the noise as its excursion does
+    if let Some((_, s)) = &alarmed {
+        for p in &mut peaks {
+            let level = alarm::summit_near(s, p.centre_bin, 0.5);
+            let area = level * 2.0 * std::f64::consts::PI.sqrt() * hint.max(COLLAPSED_SIGMA);
+            if area > p.area_photons {
+                p.area_photons = area;
+                p.amplitude = area / (p.sigma_bins * (2.0 * std::f64::consts::PI).sqrt());
+            }
+        }
+    }
+    // every excursion of the filtered record above the level is a return's seed, where the
+    // smoothed maxima missed it (a broad bump of noise has no raw summit that stands out)
+    if let Some((u, s)) = &alarmed {
+        for alarm::Excursion {
+            first,
+            last,
+            at,
+            level,
+        } in alarm::excursions(s, *u)
+        {
+            let reach = hint.max(1.0);
+            let (from, to) = (first as f64 - reach, (last + 1) as f64 + reach);
+            if !peaks.iter().any(|p| (from..=to).contains(&p.centre_bin)) {
+                let sigma = hint.max(COLLAPSED_SIGMA);
+                // a Gaussian of the filter's σ whose filtered summit is `level`
+                let area = level * 2.0 * std::f64::consts::PI.sqrt() * sigma;
+                peaks.push(Component {
+                    centre_bin: at,
+                    sigma_bins: sigma,
+                    area_photons: area,
+                    amplitude: area / (sigma * (2.0 * std::f64::consts::PI).sqrt()),
+                    one_surface: false,
+                });
+            }
+        }
+        peaks.sort_by(|a, b| a.centre_bin.total_cmp(&b.centre_bin));
+    }
     // a comb's return is its rays' light, which no Gaussian's fit would describe better: it
     // is kept as gathered, the light the fit must leave to it
     let mut combs = Vec::new();
@@ -348,7 +412,17 @@ fn decompose_bins(
         method == Decomposition::Gaussian,
         None,
     );
+    let comps = match noise.alarm {
+        Some(u) => alarm::standing_out(comps, y, u, hint),
+        None => comps,
+    };
     select(comps, threshold.area, max_returns)
+}
+
+/// Whether the matched-filtered record `s` reaches the false-alarm level `u` near a seed: within
+/// the filter's width and a bin (see [`alarm::standing_out`], which judges the returns).
+fn above_alarm(c: &Component, u: f64, s: &[f64], sigma: f64) -> bool {
+    alarm::summit_near(s, c.centre_bin, sigma.max(1.0) + 1.0) >= u
 }
 
 /// The detection threshold in its two uses: a level per bin (a peak's height, a run of
@@ -398,6 +472,9 @@ pub(super) struct Noise<'a> {
     /// convolution; empty: none known): a canopy's light, whose comb of few rays is leaves
     /// at many ranges rather than one surface's sampling.
     pub(super) leaves: &'a [f64],
+    /// The level the matched-filtered record must reach for a return (see [`alarm`]); None:
+    /// no false-alarm rule (a waveform without noise).
+    pub(super) alarm: Option<f64>,
 }
 
 impl Noise<'_> {

@@ -144,9 +144,9 @@ impl Window<'_> {
         // loops unrolled and unchecked (the general loop's index checks are a measurable
         // share of the fit's time); the same sums in the same order, so the same bits
         match g.len() {
-            3 => scoring_sized(3, self.y, jac, m, h, g),
-            6 => scoring_sized(6, self.y, jac, m, h, g),
-            np => scoring_sparse(np, self.y, jac, m, h, g),
+            3 => scoring_sized(3, &self.y, jac, m, h, g),
+            6 => scoring_sized(6, &self.y, jac, m, h, g),
+            np => scoring_sparse(np, &self.y, jac, m, h, g),
         }
     }
 

@@ -9,6 +9,7 @@ fn rx(sigma_bins: f64) -> Receiver {
         sigma_bins,
         footprint_edge_sigmas: Some(2.0),
         noise_floor: 0.0,
+        false_alarm_rate: None,
     }
 }
 
@@ -321,8 +322,9 @@ fn bad_input_gives_no_returns_and_no_panic() {
 }
 
 /// A weak return (150 photons, 23 a bin at its peak) 5 sigmas after a strong one: two returns
-/// to a detector with shot noise alone, one to a detector whose electronic noise (σ_e = 12
-/// photons a bin, a floor of 144 photons²) buries it, the search for a return in the fit's
+/// to a detector with shot noise alone, one to a detector whose electronic noise (σ_e = 40
+/// photons a bin, a floor of 1600 photons²: over the return's matched width of 2√π σ = 9 bins
+/// an error of 121 photons, under the 2 standard errors a return must exceed) buries it, the search for a return in the fit's
 /// residual weighing the excess against that noise too. The strong return's fit then holds
 /// the weak one's light, its centre pulled by a tenth of a sigma at most.
 #[test]
@@ -344,7 +346,7 @@ fn the_configured_noise_decides_what_is_resolved() {
     let quiet = decompose(&y, &[], &[], 5.0, 4, Decomposition::Gaussian, &rx(sigma));
     assert_eq!(quiet.len(), 2, "{quiet:?}");
     let noisy = Receiver {
-        noise_floor: 144.0,
+        noise_floor: 1600.0,
         ..rx(sigma)
     };
     let c = decompose(&y, &[], &[], 5.0, 4, Decomposition::Gaussian, &noisy);
@@ -654,6 +656,7 @@ fn fine_gates_are_decomposed_on_coarser_bins_without_loss() {
                 floor: 0.0,
                 quantum: 0.0,
                 leaves: &[],
+                alarm: None,
             };
             let on_fine = decompose_bins(&fine, th, 4, Decomposition::Gaussian, &noise);
             missed_fine += usize::from(on_fine.len() != count);

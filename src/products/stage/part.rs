@@ -111,53 +111,75 @@ pub(super) fn components(loaded: &Loaded, w: &Waveform) -> Vec<Component> {
     decomposed(loaded, w).0
 }
 
-/// [`components`], with the photons they were fitted to and the return's sigma in bins.
+/// [`components`], with the samples they were fitted to and the return's sigma in bins.
+///
+/// A record is decomposed in photoelectrons, the detector's own units, where the laser's
+/// shot noise is Poisson (variance = mean) and the electronic and background noise adds its
+/// floor: the fit's likelihood, its test for an extra component and every significance test
+/// then weigh the noise the record has. The components' areas are then given back in photons
+/// at the detector (divided by the quantum efficiency q), as the mean waveform's are.
 fn decomposed<'w>(loaded: &Loaded, w: &'w Waveform) -> (Vec<Component>, Cow<'w, [f32]>, f64) {
     let c = &loaded.campaign;
     let inst = &c.instrument;
     let hv = crate::photon_energy_j(band_of(loaded, w));
-    // photons per bin of the gate from energies over the span of bins the light reached, as
-    // the waveform holds them (zero outside)
+    let band = c.wavelength_nm.index_of(w.wavelength_nm);
+    let recorder = Recorder::new(inst, SplitMix64::band_seed(c.seed, band));
+    let recorded = recorder.changes_returns();
+    // photons (photoelectrons for a record) per bin of the gate from energies over the span
+    // of bins the light reached, as the waveform holds them (zero outside)
+    let q = if recorded {
+        recorder.quantum_efficiency
+    } else {
+        1.0
+    };
     let photons_of = |energies: &[f32]| {
         let mut v = vec![0.0f32; w.laser_photons.len()];
         let span = w.span_first_bin.min(v.len())..v.len();
         for (m, &e) in v[span].iter_mut().zip(energies) {
-            *m = (e as f64 / hv) as f32;
+            *m = (q * e as f64 / hv) as f32;
         }
         v
     };
     let mc_se = photons_of(&w.impulse_energy_se_j);
     let leaves = photons_of(&w.class_energy_j[SurfaceClass::Vegetation.index()]);
-    let band = c.wavelength_nm.index_of(w.wavelength_nm);
-    let recorder = Recorder::new(inst, SplitMix64::band_seed(c.seed, band));
-    let (photons, sigma_s) = if recorder.changes_returns() {
-        let recorded = recorder.laser_photons(&recorder.record(w));
+    let (samples, sigma_s, receiver_noise) = if recorded {
+        let pe = recorder.laser_photoelectrons(&recorder.record(w));
         (
-            Cow::Owned(recorded),
+            Cow::Owned(pe),
             recorder.return_sigma_s(pulse_sigma_s(inst)),
+            recorder.noise_floor_photoelectrons(w),
         )
     } else {
         (
             Cow::Borrowed(w.laser_photons.as_slice()),
             pulse_sigma_s(inst),
+            0.0,
         )
     };
     let sigma_bins = sigma_s / (inst.bin_ns * 1e-9);
     let receiver = Receiver {
         sigma_bins,
         footprint_edge_sigmas: Some(crate::sensor::footprint_edge_sigmas(inst)),
-        noise_floor: recorder.noise_floor_photons(w),
+        noise_floor: receiver_noise,
+        false_alarm_rate: recorder
+            .electronic_sd
+            .is_some()
+            .then(|| inst.false_alarm_rate()),
     };
-    let comps = decompose(
-        &photons,
+    let mut comps = decompose(
+        &samples,
         &mc_se,
         &leaves,
-        inst.detection_threshold_photons,
+        q * inst.detection_threshold_photons,
         inst.max_returns as usize,
         Decomposition::Gaussian,
         &receiver,
     );
-    (comps, photons, sigma_bins)
+    for k in &mut comps {
+        k.area_photons /= q;
+        k.amplitude /= q;
+    }
+    (comps, samples, sigma_bins)
 }
 
 /// The wavelength of a waveform row, nm: its band's, or the campaign's.

@@ -743,3 +743,56 @@ fn a_plane_gives_one_unbiased_return_per_pulse_through_a_noisy_detector() {
         }
     }
 }
+
+/// The bundled first run's pulse 1 (16 rays over the small forest), as a user runs it: its
+/// waveform has a peak of 4.0e6 photons from about ten rays on leaves and, a metre later past
+/// a stretch no ray reached, one of 6e5 photons from three rays at one range. Each peak's
+/// Monte Carlo error is of its own size, yet the gap between them says they are two surfaces:
+/// two returns, as far apart in height as the summits are in range (to one bin's range) along
+/// the pulse's direction.
+#[test]
+fn the_first_runs_second_surface_is_a_return_of_its_own() {
+    let dir = tmp("products-first-run");
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let text = std::fs::read_to_string(root.join("pipelines/first_run.yaml"))
+        .unwrap()
+        .replace(
+            "../scenes/small_forest/forest.yaml",
+            &root
+                .join("scenes/small_forest/forest.yaml")
+                .display()
+                .to_string(),
+        );
+    let out = run_campaign(&dir, &text, None);
+    let w = all_waveforms(&out)
+        .into_iter()
+        .find(|w| w.pulse_id == 1)
+        .unwrap();
+    let y = &w.laser_photons;
+    let top = y.iter().cloned().fold(0.0f32, f32::max);
+    // the summits: local maxima above a tenth of the highest, refined by a parabola
+    let summits: Vec<f64> = (1..y.len() - 1)
+        .filter(|&k| y[k] > 0.1 * top && y[k] > y[k - 1] && y[k] >= y[k + 1])
+        .map(|k| {
+            let (a, b, c) = (y[k - 1] as f64, y[k] as f64, y[k + 1] as f64);
+            k as f64 + 0.5 + 0.5 * (a - c) / (a - 2.0 * b + c)
+        })
+        .collect();
+    let points: Vec<_> = read_las(&out.join("points.laz"))
+        .unwrap()
+        .into_iter()
+        .filter(|p| p.pulse_id == 1)
+        .collect();
+    let zs: Vec<f64> = points.iter().map(|p| p.z).collect();
+    println!("summits at bins {summits:?}, returns at heights {zs:?}");
+    assert_eq!(summits.len(), 2, "the waveform's peaks: {summits:?}");
+    assert_eq!(points.len(), 2, "returns at heights {zs:?}");
+    let bin_m = w.bin_ns as f64 * 1e-9 * lidarsim::C / 2.0;
+    let cos = (points[0].scan_angle_deg as f64).to_radians().cos();
+    let want = (summits[1] - summits[0]) * bin_m * cos;
+    let got = zs[0] - zs[1];
+    assert!(
+        (got - want).abs() < bin_m,
+        "returns {got} m apart in height, the summits {want} m"
+    );
+}

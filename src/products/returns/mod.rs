@@ -506,6 +506,18 @@ impl Noise<'_> {
         var.max(0.0)
     }
 
+    /// Rays whose light makes a component, area² / (its Monte Carlo variance), at least 1;
+    /// infinite for an exact waveform.
+    pub(super) fn rays(&self, c: &Component) -> f64 {
+        let (lo, hi) = light_bins(c);
+        let var = self.mc_var(lo, hi);
+        if var > 0.0 {
+            (c.area_photons.powi(2) / var).max(1.0)
+        } else {
+            f64::INFINITY
+        }
+    }
+
     /// Whether most of a component's light (within its sigma) came first off leaves.
     pub(super) fn leafy(&self, c: &Component) -> bool {
         let (lo, hi) = light_bins(c);
@@ -634,7 +646,9 @@ pub(super) fn resolve(
                 comb.push(run.to_vec());
             }
         } else {
-            // each weak component joins the significant one nearest in time
+            // each weak component joins the significant one nearest in time, unless the rays
+            // left the stretch between them empty (see `unsampled_gap`): then it is light of
+            // a surface of its own, which few rays found, a return as its photons make it
             let mut parts: Vec<Vec<Component>> = strong.iter().map(|&k| vec![run[k]]).collect();
             for (k, c) in run.iter().enumerate() {
                 if strong.contains(&k) {
@@ -647,8 +661,19 @@ pub(super) fn resolve(
                             .total_cmp(&(run[strong[b]].centre_bin - c.centre_bin).abs())
                     })
                     .unwrap_or(0);
-                parts[nearest].push(*c);
+                let s = &run[strong[nearest]];
+                let (first, second) = if s.centre_bin <= c.centre_bin {
+                    (s, c)
+                } else {
+                    (c, s)
+                };
+                if noise.rays(c) >= SURFACE_RAYS && unsampled_gap(first, second, noise) {
+                    parts.push(vec![*c]);
+                } else {
+                    parts[nearest].push(*c);
+                }
             }
+            parts.sort_by(|p, q| p[0].centre_bin.total_cmp(&q[0].centre_bin));
             // light of a hard surface before the first return, within its spread, is its
             // own (a leaf there is the canopy's first surface)
             if let Some(first) = parts.first_mut() {
@@ -700,6 +725,11 @@ fn claim(ret: &Component, runs: &mut Vec<Vec<Component>>, noise: &Noise) -> Vec<
     *runs = kept;
     claimed.into_iter().flatten().collect()
 }
+
+/// Rays a component's light must hold to be a surface of its own beyond a stretch the rays
+/// left empty (see [`resolve`]): one ray's light may be one rare multiple-scattering path,
+/// whose range is a path's length, not a surface's; several rays at one range found a surface.
+const SURFACE_RAYS: f64 = 2.0;
 
 /// Tail probability below which a gap in a comb parts it (see [`flush_comb`]).
 const COMB_GAP_TAIL: f64 = 1e-3;
@@ -923,7 +953,11 @@ fn apart(a: &Component, b: &Component, y: &[f64], noise: &Noise) -> bool {
 /// Whether the waveform between the centres of `a` and `b` (a first) dips below the lower of
 /// its values at them by more than [`MIN_SIGNIFICANCE`] standard errors of the trough (photon,
 /// detector and simulation noise): Sparrow's criterion, the noise setting the depth a detector
-/// sees.
+/// sees. Where the simulation's noise alone hides the dip, the rays decide: a stretch between
+/// them that no ray reached, far longer than their spacing makes likely ([`unsampled_gap`]),
+/// is a gap of the light, so a dip deeper than the photon and detector noise is a dip (two
+/// clusters of leaves a metre apart, each hit by a few rays, are two returns however large
+/// each one's Monte Carlo error).
 fn dips(a: &Component, b: &Component, y: &[f64], noise: &Noise) -> bool {
     let at = |c: &Component| (c.centre_bin.max(0.0) as usize).min(y.len().saturating_sub(1));
     let (i, j) = (at(a), at(b));
@@ -975,7 +1009,35 @@ fn dips(a: &Component, b: &Component, y: &[f64], noise: &Noise) -> bool {
             .mc_se_convolved(k)
             .powi(2)
             .max(noise.compound_var(ys, s));
-    ys - trough > MIN_SIGNIFICANCE * var.sqrt()
+    let depth = ys - trough;
+    depth > MIN_SIGNIFICANCE * var.sqrt()
+        || (depth > MIN_SIGNIFICANCE * (vs + vt).sqrt() && unsampled_gap(a, b, noise))
+}
+
+/// Whether the rays left a stretch between the centres of `a` and `b` empty (no Monte Carlo
+/// error in any of its bins: no ray's light) for longer than their spacing makes likely: the
+/// rays of both, n = Σ area² / (Monte Carlo variance of the area), spread as a homogeneous
+/// Poisson process over the bins from one centre to the other would leave a gap of g bins
+/// with probability about (n − 1) e^{−λ g}, λ = (n − 1) / span, which must fall below
+/// [`COMB_GAP_TAIL`], as for the gaps that part a comb ([`flush_comb`]).
+fn unsampled_gap(a: &Component, b: &Component, noise: &Noise) -> bool {
+    let se = noise.mc_se;
+    let at = |c: &Component| (c.centre_bin.max(0.0) as usize).min(se.len());
+    let (i, j) = (at(a), at(b));
+    if se.is_empty() || j <= i + 1 {
+        return false;
+    }
+    let (mut gap, mut run) = (0usize, 0usize);
+    for &v in &se[i + 1..j] {
+        run = if v > 0.0 { 0 } else { run + 1 };
+        gap = gap.max(run);
+    }
+    let n = noise.rays(a) + noise.rays(b);
+    if gap == 0 || !n.is_finite() {
+        return false;
+    }
+    let rate = (n - 1.0).max(1.0) / (j - i) as f64;
+    (n - 1.0).max(1.0) * (-rate * gap as f64).exp() < COMB_GAP_TAIL
 }
 
 /// One component with the area, centroid and spread (second moment) of several.

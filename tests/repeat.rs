@@ -244,3 +244,141 @@ fn a_repeated_scene_has_a_reference_dsm_everywhere() {
         .iter()
         .all(|p| (p.z.abs() < 0.05) || ((p.z - 3.0).abs() < 0.05)));
 }
+
+/// A tile whose leaves overhang its ground by 0.85 m on every side (a crown wider than its
+/// plot), repeated with the ground's extent as its period (the default), equals the 5 x 5
+/// tiled copy in which the neighbours' leaves overlap: bdpt and forward over the repeated
+/// scene against bdpt over the tiled one, per order and per bin within 3 combined standard
+/// errors. Its DSM reference over three periods has no gap and is the tiled copy's.
+#[test]
+fn overhanging_leaves_wrap_into_the_period() {
+    let dir = tmp("repeat_overhang");
+    let obj = random_leaves(
+        12_000,
+        0x5851_F42D_4C95_7F2D,
+        [-2.85, -2.85, 1.0],
+        [2.85, 2.85, 2.0],
+    );
+    write(&dir, "leaves.obj", &obj);
+    let materials = "materials:\n  soil: { reflectance: 0.3 }\n  leaf: { reflectance: 0.45, transmittance: 0.45 }\n";
+    write(
+        &dir,
+        "repeated.yaml",
+        &format!("name: overhang\nrepeat: true\n{materials}objects:\n  - plane: {{ z: 0, extent: [[-2, -2], [2, 2]], material: soil }}\n  - mesh: {{ file: leaves.obj, material: leaf }}\n"),
+    );
+    let rows: String = [-8, -4, 0, 4, 8]
+        .iter()
+        .flat_map(|x| [-8, -4, 0, 4, 8].map(|y| format!("{x} {y}\n")))
+        .collect();
+    write(&dir, "tiles.csv", &rows);
+    write(
+        &dir,
+        "tiled.yaml",
+        &format!("name: tiled\n{materials}objects:\n  - plane: {{ z: 0, extent: [[-10, -10], [10, 10]], material: soil }}\n  - mesh: {{ file: leaves.obj, material: leaf, instances: tiles.csv }}\n"),
+    );
+    let inst = Inst {
+        fp_mrad: 20.0,
+        fov_mrad: 25.0,
+        area: 0.1,
+        energy: 0.001,
+        fwhm_ns: 2.0,
+        ..Inst::default()
+    };
+    // the beam's axis 0.3 m inside the period's edge, where its light meets the wrapped
+    // leaves of the next period as much as the tile's own
+    let c = |scene: &str, method: &str| {
+        campaign(
+            &dir.join(scene),
+            &inst,
+            [1.7, -0.7, 100.0],
+            [0.0, 0.0, -1.0],
+            method,
+            400_000,
+            100,
+        )
+    };
+    let t = run(&tmp("repeat_overhang_t"), &c("tiled.yaml", "bdpt"), None).remove(0);
+    for method in ["bdpt", "forward"] {
+        let r = run(&tmp("repeat_overhang_r"), &c("repeated.yaml", method), None).remove(0);
+        compare_orders(
+            &format!("overhanging repeated {method}/tiled bdpt"),
+            &r,
+            &t,
+            4,
+        );
+        compare_bins(&format!("overhanging repeated {method}/tiled bdpt"), &r, &t);
+    }
+
+    use lidarsim::scene::top_surface::Grid;
+    use lidarsim::scene::Scene;
+    let repeated = Scene::load(&dir.join("repeated.yaml"), 1064.0).unwrap();
+    let tiled = Scene::load(&dir.join("tiled.yaml"), 1064.0).unwrap();
+    let (lo, hi) = repeated.period().unwrap();
+    assert_eq!((lo.x, lo.y, hi.x, hi.y), (-2.0, -2.0, 2.0, 2.0));
+    // 12 m x 12 m of 0.25 m cells centred on the tiled copy's middle
+    let grid = Grid {
+        x0: -6.0,
+        y0: -6.0,
+        cell: 0.25,
+        nx: 48,
+        ny: 48,
+    };
+    let (a, b) = (
+        repeated.top_surface_grid(&grid),
+        tiled.top_surface_grid(&grid),
+    );
+    assert!(
+        a.iter().all(|z| z.is_finite()),
+        "the repeated reference has gaps"
+    );
+    for (k, (za, zb)) in a.iter().zip(&b).enumerate() {
+        assert!(
+            (za - zb).abs() < 1e-5,
+            "cell {k}: {za} against the tiled {zb}"
+        );
+    }
+}
+
+/// The period as the scene file gives it: a repeated plane of 10 m with `period` 5 m wide is
+/// the same infinite plane, its period the one given; a period on a scene that does not
+/// repeat, or an empty one, is refused at its key.
+#[test]
+fn a_given_period_is_the_period() {
+    use lidarsim::scene::Scene;
+    let dir = tmp("repeat_period");
+    let scene = |name: &str, extra: &str| {
+        write(
+            &dir,
+            name,
+            &format!("name: p\n{extra}materials:\n  soil: {{ reflectance: 0.3 }}\nobjects:\n  - plane: {{ z: 0, extent: [[-5, -5], [5, 5]], material: soil }}\n"),
+        )
+    };
+    let given = scene("given.yaml", "repeat: true\nperiod: [[0, 0], [5, 2.5]]\n");
+    let s = Scene::load(&given, 1064.0).unwrap();
+    let (lo, hi) = s.period().unwrap();
+    assert_eq!((lo.x, lo.y, hi.x, hi.y), (0.0, 0.0, 5.0, 2.5));
+    for (name, extra, says) in [
+        (
+            "lonely.yaml",
+            "period: [[0, 0], [5, 5]]\n",
+            "add repeat: true",
+        ),
+        (
+            "empty.yaml",
+            "repeat: true\nperiod: [[0, 0], [0, 5]]\n",
+            "x1 > x0",
+        ),
+    ] {
+        let path = scene(name, extra);
+        let Err(e) = Scene::load(&path, 1064.0) else {
+            panic!("{name}: loaded")
+        };
+        let e = e.to_string();
+        println!("{e}");
+        assert!(
+            e.contains(name) && e.contains("period") && e.contains(says),
+            "{e}"
+        );
+        assert!(e.contains(":2:") || e.contains(":3:"), "no line in {e}");
+    }
+}

@@ -258,6 +258,7 @@ fn bad_rpv_parameters_are_located_errors() {
         k: 0.75,
         theta: -0.2,
         rho_c: Some(0.4),
+        limit: None,
     };
-    assert!(ok.max_albedo(0.25).0 < 1.0);
+    assert!(ok.max_albedo(0.25, 0.0, 80.0).0 < 1.0);
 }

@@ -175,6 +175,9 @@ impl SceneCache {
             s.memory_bytes as f64 / 1e6,
             t.elapsed().as_secs_f64()
         ));
+        for w in scene.warnings() {
+            log(&format!("warning: {w}"));
+        }
         self.scenes.push((path.to_path_buf(), key, scene));
         Ok(&self.scenes.last().expect("just pushed").2)
     }

@@ -8,7 +8,7 @@ use serde::Deserialize;
 use std::collections::BTreeMap;
 use std::fmt;
 
-use super::rpv::Rpv;
+use super::rpv::{Rpv, MAX_CHECKED_DEG, MAX_REFUSED_DEG};
 use super::SurfaceClass;
 
 #[derive(Debug, Deserialize)]
@@ -19,9 +19,14 @@ pub(crate) struct SceneFile {
     pub materials: BTreeMap<String, MaterialSpec>,
     #[serde(default)]
     pub objects: Vec<ObjectSpec>,
-    /// The x-y bounding box is one period of an infinite landscape (DART's repeated scene).
+    /// The scene is one period of an infinite landscape (DART's repeated scene).
     #[serde(default)]
     pub repeat: bool,
+    /// The period's x-y rectangle [[x0, y0], [x1, y1]]; absent: the extent of the ground
+    /// objects (planes, heightfields), else of all geometry. Geometry that overhangs it wraps
+    /// into it.
+    #[serde(default)]
+    pub period: Option<[[f64; 2]; 2]>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -280,9 +285,10 @@ fn resolve_rpv(
             Some(s) => Some(value("rho_c", s, 0.0, 1.0)?),
             None => None,
         },
+        limit: None,
     };
     for (side, r) in ["front", "back"].into_iter().zip(rho0) {
-        let (albedo, deg) = rpv.max_albedo(r);
+        let (albedo, deg) = rpv.max_albedo(r, 0.0, f64::from(MAX_REFUSED_DEG));
         // the quadrature is good to about 1e-3 (docs/physics.md, "Glossy surfaces: RPV")
         if albedo > 1.0 + 2e-3 {
             return Err(doc.error(
@@ -292,6 +298,14 @@ fn resolve_rpv(
                 ),
             ));
         }
+    }
+    // beyond it, up to grazing incidence, RPV's growth is the model's: held to 1, not refused
+    let grazing = rho0.map(|r| {
+        rpv.max_albedo(r, f64::from(MAX_REFUSED_DEG), MAX_CHECKED_DEG)
+            .0
+    });
+    if grazing.iter().any(|&a| a > 1.0 + 2e-3) {
+        return Ok(rpv.limited());
     }
     Ok(rpv)
 }

@@ -298,7 +298,9 @@ pub(crate) fn load(path: &Path, wavelengths_nm: &[f64]) -> Result<Scene> {
     };
     let slots = assign_surfaces(&doc, &plans, &read, &materials)?;
     units.number_slots(&slots);
-    let placed = place_instances(&plans, &units, &meshes);
+    let mut placed = place_instances(&plans, &units, &meshes);
+    let period = period_of(&doc, &file, &placed)?;
+    let wrapped = file.repeat && wrap_into_period(&doc, &mut placed, period)?;
     if placed.len() >= u32::MAX as usize {
         return Err(Error::file(path, "too many instances"));
     }
@@ -326,6 +328,9 @@ pub(crate) fn load(path: &Path, wavelengths_nm: &[f64]) -> Result<Scene> {
     files.dedup();
     Ok(Scene {
         repeat: file.repeat,
+        period_lo: period.0,
+        period_hi: period.1,
+        wrapped,
         name: file.name,
         files,
         surfaces: slots.surfaces,
@@ -692,6 +697,7 @@ fn build_meshes(units: &Units, sources: &[Source], scene: &Path) -> Result<(Vec<
 }
 
 /// One instance placed in the world, in f64.
+#[derive(Clone, Copy)]
 struct PlacedInstance {
     translation: DVec3,
     cos: f64,
@@ -701,6 +707,108 @@ struct PlacedInstance {
     hi: DVec3,
     mesh: u32,
     surfaces: u32,
+    /// A plane's or heightfield's: the ground, whose extent is a repeated scene's period by
+    /// default.
+    ground: bool,
+}
+
+/// Most copies of one instance that wrapping it into a repeated scene's period may add: a
+/// period far smaller than its geometry is more likely a mistake than a landscape.
+const MAX_WRAPS: i64 = 1024;
+
+/// A repeated scene's period (x-y rectangle): the `period` key, else the ground's extent,
+/// else all geometry's.
+fn period_of(
+    doc: &Doc,
+    file: &SceneFile,
+    placed: &[PlacedInstance],
+) -> Result<(glam::DVec2, glam::DVec2)> {
+    if let Some([a, b]) = file.period {
+        let ok = a.iter().chain(&b).all(|v| v.is_finite()) && b[0] > a[0] && b[1] > a[1];
+        if !ok {
+            return Err(doc.error(
+                "period",
+                format!(
+                    "expected [[x0, y0], [x1, y1]] with x1 > x0 and y1 > y0, found {a:?}, {b:?}"
+                ),
+            ));
+        }
+        if !file.repeat {
+            return Err(doc.error(
+                "period",
+                "a period belongs to a repeated scene: add repeat: true, or remove period",
+            ));
+        }
+        return Ok((glam::DVec2::from(a), glam::DVec2::from(b)));
+    }
+    let extent = |ground_only: bool| {
+        placed.iter().filter(|p| p.ground || !ground_only).fold(
+            None,
+            |acc: Option<(DVec3, DVec3)>, p| {
+                Some(acc.map_or((p.lo, p.hi), |(lo, hi)| (lo.min(p.lo), hi.max(p.hi))))
+            },
+        )
+    };
+    let (lo, hi) = extent(true)
+        .or_else(|| extent(false))
+        .unwrap_or((DVec3::ZERO, DVec3::ZERO));
+    Ok((lo.truncate(), hi.truncate()))
+}
+
+/// Copies of the instances that overhang a repeated scene's period, moved by whole periods
+/// so that each copy overlaps it: the scene's own geometry then holds every piece of every
+/// period's geometry that lies in its period, and a query of one period's column finds what
+/// any copy puts there. A flat period side (zero width) does not repeat.
+fn wrap_into_period(
+    doc: &Doc,
+    placed: &mut Vec<PlacedInstance>,
+    (lo, hi): (glam::DVec2, glam::DVec2),
+) -> Result<bool> {
+    let w = hi - lo;
+    let mut added = Vec::new();
+    for p in placed.iter() {
+        // the whole periods k for which p moved by k overlaps [lo, hi) with area
+        let range = |plo: f64, phi: f64, lo: f64, hi: f64, w: f64| -> (i64, i64) {
+            if w <= 0.0 {
+                return (0, 0);
+            }
+            (
+                ((lo - phi) / w).floor() as i64 + 1,
+                ((hi - plo) / w).ceil() as i64 - 1,
+            )
+        };
+        let (x0, x1) = range(p.lo.x, p.hi.x, lo.x, hi.x, w.x);
+        let (y0, y1) = range(p.lo.y, p.hi.y, lo.y, hi.y, w.y);
+        if (x1 - x0 + 1).max(0) * (y1 - y0 + 1).max(0) > MAX_WRAPS {
+            return Err(doc.error(
+                "period",
+                format!(
+                    "an object reaching {:.1} .. {:.1} m spans more than {MAX_WRAPS} periods of {:.3} x {:.3} m: give a larger period",
+                    p.lo.truncate(),
+                    p.hi.truncate(),
+                    w.x,
+                    w.y
+                ),
+            ));
+        }
+        for kx in x0..=x1 {
+            for ky in y0..=y1 {
+                if kx == 0 && ky == 0 {
+                    continue;
+                }
+                let shift = DVec3::new(kx as f64 * w.x, ky as f64 * w.y, 0.0);
+                added.push(PlacedInstance {
+                    translation: p.translation + shift,
+                    lo: p.lo + shift,
+                    hi: p.hi + shift,
+                    ..*p
+                });
+            }
+        }
+    }
+    let wrapped = !added.is_empty();
+    placed.extend(added);
+    Ok(wrapped)
 }
 
 /// World transforms and bounds of every instance of every object, in f64.
@@ -741,6 +849,7 @@ fn place_instances(plans: &[ObjectPlan], units: &Units, meshes: &[Blas]) -> Vec<
                 hi,
                 mesh,
                 surfaces: base,
+                ground: !plans[objects[0]].is_mesh,
             });
         }
     }

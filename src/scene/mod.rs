@@ -24,7 +24,7 @@ pub use table::{parse_instances, InstanceRow};
 
 use crate::error::Result;
 use bvh::{make_ray, Blas, WatertightRay, BACKOFF};
-use glam::{DVec3, Vec3, Vec3A};
+use glam::{DVec2, DVec3, Vec3, Vec3A};
 use obvhs::cwbvh::CwBvh;
 use obvhs::ray::RayHit;
 use std::collections::BTreeMap;
@@ -252,8 +252,15 @@ pub struct Scene {
     pub(crate) declared: Declared,
     /// Every query while on (`start_ray_log`): the bench replays them against the bare BVH.
     ray_log: Option<std::sync::Mutex<Vec<LoggedRay>>>,
-    /// `repeat: true`: the x-y box `world_lo..world_hi` is one period of an infinite landscape.
+    /// `repeat: true`: the scene is one period of an infinite landscape.
     repeat: bool,
+    /// The period's x-y rectangle (see [`Scene::period`]).
+    period_lo: DVec2,
+    period_hi: DVec2,
+    /// Copies of overhanging geometry were added, moved by whole periods, so the geometry
+    /// reaches beyond the period: a query of one period's column must stop at its far side
+    /// (see [`Scene::intersect`]).
+    wrapped: bool,
 }
 
 /// The scene file's own counts, kept for [`SceneStats`].
@@ -429,11 +436,27 @@ impl Scene {
             return self.intersect_copy(origin, dir, t_max, skip);
         }
         let mut found = None;
-        self.copies_along(origin, dir, t_max, |shift, first, _| {
+        self.copies_along(origin, dir, t_max, |shift, first, _, (enter, exit)| {
             let skip = if first { skip } else { FacetId::NONE };
+            if !self.wrapped {
+                found = self
+                    .intersect_copy(origin - shift, dir, t_max, skip)
+                    .map(|h| Hit {
+                        position: h.position + shift,
+                        ..h
+                    });
+                return found.is_some();
+            }
+            // Wrapped geometry reaches past the column on both sides: a hit beyond it may
+            // not be the nearest, which the next column holds, and one before it lies in a
+            // column already searched (the facet the ray leaves among them), so only the
+            // ray's stretch within the column is asked.
+            let from = if first { 0.0 } else { enter.max(0.0) };
+            let start = origin + dir * from;
             found = self
-                .intersect_copy(origin - shift, dir, t_max, skip)
+                .intersect_copy(start - shift, dir, t_max.min(exit) - from, skip)
                 .map(|h| Hit {
+                    t: h.t + from,
                     position: h.position + shift,
                     ..h
                 });
@@ -442,19 +465,21 @@ impl Scene {
         found
     }
 
-    /// The copies of a repeated scene that the ray `origin + t dir`, 0 < t < t_max, crosses
-    /// within the scene's heights, in the order it meets them, as the shift (whole periods in
-    /// x and y) that moves each onto the scene's own box; `visit(shift, first, last)` returns
-    /// true to stop. A copy's geometry lies within its own column, so a query of the shifted
-    /// ray against the scene finds exactly that copy's facets.
+    /// The periods of a repeated scene whose columns the ray `origin + t dir`, 0 < t < t_max,
+    /// crosses within the scene's heights, in the order it meets them, as the shift (whole
+    /// periods in x and y) that moves each onto the scene's own period; `visit(shift, first,
+    /// last, (enter, exit))` returns true to stop, `enter` and `exit` the ray's parameters
+    /// where it enters and leaves the column. The scene's geometry holds every piece of every copy that lies in its own
+    /// period (overhanging parts wrapped in, see `load`), so a query of the shifted ray
+    /// against the scene finds what lies in that column.
     fn copies_along(
         &self,
         origin: DVec3,
         dir: DVec3,
         t_max: f64,
-        mut visit: impl FnMut(DVec3, bool, bool) -> bool,
+        mut visit: impl FnMut(DVec3, bool, bool, (f64, f64)) -> bool,
     ) {
-        let (lo, hi) = (self.world_lo, self.world_hi);
+        let (lo, hi) = (self.period_lo, self.period_hi);
         let (zlo, zhi) = (self.clip_lo.z, self.clip_hi.z);
         let (t0, t1) = if dir.z == 0.0 {
             if origin.z < zlo || origin.z > zhi {
@@ -482,15 +507,17 @@ impl Scene {
                 (lo + k * w - o) / d
             }
         };
+        let mut enter = t0;
         for n in 0..MAX_PERIODS {
             let tx = exit(kx, origin.x, dir.x, lo.x, period.x);
             let ty = exit(ky, origin.y, dir.y, lo.y, period.y);
             let next = tx.min(ty);
             let last = next.is_nan() || next >= t1;
             let shift = DVec3::new(kx * period.x.max(0.0), ky * period.y.max(0.0), 0.0);
-            if visit(shift, n == 0, last) || last {
+            if visit(shift, n == 0, last, (enter, next)) || last {
                 return;
             }
+            enter = next;
             if tx <= ty {
                 kx += dir.x.signum();
             } else {
@@ -592,7 +619,7 @@ impl Scene {
         let mut beyond = (self.clip_hi - self.clip_lo).length() + (a - self.clip_lo).length() + 1.0;
         if self.repeat {
             let dz = (self.clip_hi.z - self.clip_lo.z) + (a.z - self.clip_lo.z).abs() + 1.0;
-            let periods = (self.world_hi - self.world_lo).truncate().length() * MAX_PERIODS as f64;
+            let periods = (self.period_hi - self.period_lo).length() * MAX_PERIODS as f64;
             beyond = (dz / dir.z.abs()).min(periods).max(beyond);
         }
         self.occluded(a, a + dir * beyond, skip_a, FacetId::NONE)
@@ -620,10 +647,19 @@ impl Scene {
             return false;
         }
         let mut blocked = false;
-        self.copies_along(a, (b - a) / len, len, |shift, first, last| {
+        let dir = (b - a) / len;
+        self.copies_along(a, dir, len, |shift, first, last, (enter, exit)| {
             let sa = if first { skip_a } else { FacetId::NONE };
             let sb = if last { skip_b } else { FacetId::NONE };
-            blocked = self.occluded_copy(a - shift, b - shift, sa, sb);
+            if !self.wrapped {
+                blocked = self.occluded_copy(a - shift, b - shift, sa, sb);
+                return blocked;
+            }
+            // the segment's stretch within the column (see `intersect`): wrapped geometry
+            // past it is another column's, the facets at a and b among it
+            let from = if first { a } else { a + dir * enter.max(0.0) };
+            let to = if last { b } else { a + dir * exit.min(len) };
+            blocked = self.occluded_copy(from - shift, to - shift, sa, sb);
             blocked
         });
         blocked
@@ -717,24 +753,53 @@ impl Scene {
             .unwrap_or_default()
     }
 
-    /// World-space bounding box (min, max) of all geometry: one period of a repeated scene.
+    /// World-space bounding box (min, max) of all geometry (of a repeated scene, its period's
+    /// geometry with the overhanging parts of the neighbouring periods wrapped in).
     pub fn bounds(&self) -> (DVec3, DVec3) {
         (self.world_lo, self.world_hi)
     }
 
-    /// `repeat: true`: the x-y box of [`Scene::bounds`] is one period of an infinite landscape.
+    /// What a run over the scene should say of it: RPV materials whose BRDF is held to an
+    /// albedo of 1 near grazing incidence.
+    pub fn warnings(&self) -> Vec<String> {
+        let mut out: Vec<String> = self
+            .surfaces
+            .iter()
+            .filter(|s| s.rpv.iter().chain(&s.band_rpv).any(|r| r.limit.is_some()))
+            .map(|s| {
+                format!(
+                    "material {}: its RPV albedo exceeds 1 between {}° and {}° of incidence (a property of RPV with k < 1); its BRDF is divided there by the albedo, which keeps it reciprocal and conserves energy",
+                    s.name,
+                    rpv::MAX_REFUSED_DEG,
+                    rpv::MAX_CHECKED_DEG
+                )
+            })
+            .collect();
+        out.dedup();
+        out
+    }
+
+    /// `repeat: true`: the scene is one period ([`Scene::period`]) of an infinite landscape.
     pub fn is_repeated(&self) -> bool {
         self.repeat
     }
 
+    /// The x-y rectangle of a repeated scene's period: the scene file's `period`, else the
+    /// ground's extent (planes, heightfields), else all geometry's; None when not repeated.
+    pub fn period(&self) -> Option<(DVec2, DVec2)> {
+        self.repeat.then_some((self.period_lo, self.period_hi))
+    }
+
     /// The copy of the scene's box that a beam from `origin` along `dir` crosses at the
     /// scene's mid-height (or that holds `origin`, for a beam along the ground): the box a
-    /// pulse's range gate and sun are sized by. [`Scene::bounds`] when not repeated.
+    /// pulse's range gate and sun are sized by, the geometry's box moved by the periods that
+    /// bring the scene's own period under that point. [`Scene::bounds`] when not repeated.
     pub fn bounds_near(&self, origin: DVec3, dir: DVec3) -> (DVec3, DVec3) {
         let (lo, hi) = (self.world_lo, self.world_hi);
         if !self.repeat {
             return (lo, hi);
         }
+        let (plo, phi) = (self.period_lo, self.period_hi);
         let mid = 0.5 * (lo.z + hi.z);
         let at = if dir.z != 0.0
             && ((mid - origin.z) / dir.z).is_finite()
@@ -744,7 +809,7 @@ impl Scene {
         } else {
             origin
         };
-        let period = hi - lo;
+        let period = phi - plo;
         let k = |x: f64, lo: f64, w: f64| {
             if w > 0.0 {
                 ((x - lo) / w).floor() * w
@@ -752,7 +817,7 @@ impl Scene {
                 0.0
             }
         };
-        let shift = DVec3::new(k(at.x, lo.x, period.x), k(at.y, lo.y, period.y), 0.0);
+        let shift = DVec3::new(k(at.x, plo.x, period.x), k(at.y, plo.y, period.y), 0.0);
         (lo + shift, hi + shift)
     }
 

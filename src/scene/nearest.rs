@@ -17,19 +17,20 @@ impl Scene {
             return self.nearest_copy(at, reach);
         }
         let (lo, hi) = (self.world_lo, self.world_hi);
-        let period = hi - lo;
-        // the copies whose column comes within `reach` of the point, as whole periods
-        let cells = |x: f64, lo: f64, w: f64| {
+        let period = self.period_hi - self.period_lo;
+        // the copies whose geometry (which may overhang its period) comes within `reach` of
+        // the point, as whole periods
+        let cells = |x: f64, lo: f64, hi: f64, w: f64| {
             if w > 0.0 {
-                let a = ((x - reach - lo) / w).floor();
-                let b = ((x + reach - lo) / w).floor();
+                let a = ((x - reach - hi) / w).floor();
+                let b = ((x + reach - lo) / w).ceil();
                 (a as i64, b as i64)
             } else {
                 (0, 0)
             }
         };
-        let (ax, bx) = cells(at.x, lo.x, period.x);
-        let (ay, by) = cells(at.y, lo.y, period.y);
+        let (ax, bx) = cells(at.x, lo.x, hi.x, period.x);
+        let (ay, by) = cells(at.y, lo.y, hi.y, period.y);
         let mut best = reach;
         for kx in ax..=bx {
             for ky in ay..=by {

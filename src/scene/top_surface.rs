@@ -135,7 +135,9 @@ impl Scene {
         let gx1 = grid.x0 + grid.nx as f64 * grid.cell;
         let gy1 = grid.y0 + grid.ny as f64 * grid.cell;
         let (lo, hi) = self.bounds();
-        let period = hi - lo;
+        let period = self
+            .period()
+            .map_or(hi.truncate() - lo.truncate(), |(a, b)| b - a);
         let range = |g0: f64, g1: f64, lo: f64, hi: f64, w: f64| -> (i64, i64) {
             if !self.is_repeated() || w <= 0.0 {
                 return (0, 0);

@@ -190,7 +190,12 @@ fn rpv_sampling_weights_integrate_to_the_albedo() {
     ];
     let mut rng = Rng::new(5, 0, 0);
     for (rho0, k, theta, rho_c) in cases {
-        let shape = Rpv { k, theta, rho_c };
+        let shape = Rpv {
+            k,
+            theta,
+            rho_c,
+            limit: None,
+        };
         let s = Surface {
             name: "rpv".into(),
             reflectance: rho0,

@@ -58,14 +58,12 @@ fn a_repeated_patch_is_an_infinite_plane() {
     }
 }
 
-/// A 4 m x 4 m tile of leaves over soil, its x-y box exactly the ground's.
-fn tile(dir: &std::path::Path) {
-    let obj = random_leaves(
-        12_000,
-        0x9E37_79B9_7F4A_7C15,
-        [-1.85, -1.85, 1.0],
-        [1.85, 1.85, 2.0],
-    );
+/// A 4 m x 4 m tile of soil under a slab of leaves reaching `half` m from its centre (1.85: its
+/// x-y box within the ground's; more: overhanging it), as `repeated.yaml` (`repeat: true`, the
+/// ground's extent its period) and `tiled.yaml` (a 5 x 5 tiled copy, the neighbours' leaves
+/// overlapping where they overhang).
+fn tile(dir: &std::path::Path, half: f64, seed: u64) {
+    let obj = random_leaves(12_000, seed, [-half, -half, 1.0], [half, half, 2.0]);
     write(dir, "leaves.obj", &obj);
     let materials = "materials:\n  soil: { reflectance: 0.3 }\n  leaf: { reflectance: 0.45, transmittance: 0.45 }\n";
     write(
@@ -85,21 +83,26 @@ fn tile(dir: &std::path::Path) {
     );
 }
 
-/// A repeated slab of leaves: forward, backward and bdpt agree per order and per bin within
-/// 3 combined standard errors, and equal a 5 x 5 tiled copy of the slab (the beam and the
-/// field of view, 4 and 5 m across, see two periods; the tiled copy's edges are 8 m away).
-#[test]
-fn a_repeated_slab_is_its_tiled_copy() {
-    let dir = tmp("repeat_slab");
-    tile(&dir);
-    let inst = Inst {
+/// The instrument over the slab: beam and field of view 4 and 5 m across at 100 m.
+fn slab_inst() -> Inst {
+    Inst {
         fp_mrad: 20.0,
         fov_mrad: 25.0,
         area: 0.1,
         energy: 0.001,
         fwhm_ns: 2.0,
         ..Inst::default()
-    };
+    }
+}
+
+/// A repeated slab of leaves: forward, backward and bdpt agree per order and per bin within
+/// 3 combined standard errors, and equal a 5 x 5 tiled copy of the slab (the beam and the
+/// field of view, 4 and 5 m across, see two periods; the tiled copy's edges are 8 m away).
+#[test]
+fn a_repeated_slab_is_its_tiled_copy() {
+    let dir = tmp("repeat_slab");
+    tile(&dir, 1.85, 0x9E37_79B9_7F4A_7C15);
+    let inst = slab_inst();
     let c = |scene: &str, m: &str, rays: u64| {
         campaign(
             &dir.join(scene),
@@ -253,37 +256,8 @@ fn a_repeated_scene_has_a_reference_dsm_everywhere() {
 #[test]
 fn overhanging_leaves_wrap_into_the_period() {
     let dir = tmp("repeat_overhang");
-    let obj = random_leaves(
-        12_000,
-        0x5851_F42D_4C95_7F2D,
-        [-2.85, -2.85, 1.0],
-        [2.85, 2.85, 2.0],
-    );
-    write(&dir, "leaves.obj", &obj);
-    let materials = "materials:\n  soil: { reflectance: 0.3 }\n  leaf: { reflectance: 0.45, transmittance: 0.45 }\n";
-    write(
-        &dir,
-        "repeated.yaml",
-        &format!("name: overhang\nrepeat: true\n{materials}objects:\n  - plane: {{ z: 0, extent: [[-2, -2], [2, 2]], material: soil }}\n  - mesh: {{ file: leaves.obj, material: leaf }}\n"),
-    );
-    let rows: String = [-8, -4, 0, 4, 8]
-        .iter()
-        .flat_map(|x| [-8, -4, 0, 4, 8].map(|y| format!("{x} {y}\n")))
-        .collect();
-    write(&dir, "tiles.csv", &rows);
-    write(
-        &dir,
-        "tiled.yaml",
-        &format!("name: tiled\n{materials}objects:\n  - plane: {{ z: 0, extent: [[-10, -10], [10, 10]], material: soil }}\n  - mesh: {{ file: leaves.obj, material: leaf, instances: tiles.csv }}\n"),
-    );
-    let inst = Inst {
-        fp_mrad: 20.0,
-        fov_mrad: 25.0,
-        area: 0.1,
-        energy: 0.001,
-        fwhm_ns: 2.0,
-        ..Inst::default()
-    };
+    tile(&dir, 2.85, 0x5851_F42D_4C95_7F2D);
+    let inst = slab_inst();
     // the beam's axis 0.3 m inside the period's edge, where its light meets the wrapped
     // leaves of the next period as much as the tile's own
     let c = |scene: &str, method: &str| {

@@ -198,20 +198,33 @@ fn surface_and_bottom_returns_match_fresnel_and_beer_lambert() {
 /// discrete return lies n_g d below the surface as a range in vacuum (the point a survey
 /// writes before its refraction correction), with n_g the group index at the band (about 1.355
 /// at 532 nm, Quan and Fry's dispersion on top of the phase index 1.33; the phase index would
-/// put it 2 % shallower), within one bin's range, at 1, 5 and 20 m of water; and a given
-/// `group_index` is the one used.
+/// put it 2 % shallower), within one bin's range, at 1, 5 and 20 m of water; a given
+/// `group_index` is the one used; and a phase index by band ({ 532: 1.36, 1064: 1.33 }) gives
+/// the 532 nm run its own default group index, 2 bins deeper at 10 m than 1.33's.
 #[test]
 fn the_bottom_return_lies_at_the_group_index() {
     let n_g = lidarsim::scene::water_group_index(N, 532.0);
     assert!((1.35..1.36).contains(&n_g), "{n_g}");
-    for (depth, given) in [(1.0, None), (5.0, None), (20.0, None), (5.0, Some(1.40))] {
+    let cases = [
+        (1.0, None, None),
+        (5.0, None, None),
+        (20.0, None, None),
+        (5.0, Some(1.40), None),
+        (10.0, None, Some(1.36)),
+    ];
+    for (depth, given, phase_532) in cases {
         let dir = tmp(&format!("water_group_{depth}_{}", given.is_some()));
-        let index = given.map_or(String::new(), |g: f64| format!(", group_index: {g}"));
+        let mut index = given.map_or(String::new(), |g: f64| format!(", group_index: {g}"));
+        let phase = match phase_532 {
+            Some(p) => format!("{{ 532: {p}, 1064: {N} }}"),
+            None => N.to_string(),
+        };
+        index = format!(", refractive_index: {phase}{index}");
         let scene = write(
             &dir,
             "lake.yaml",
             &format!(
-                "name: lake\nmaterials:\n  sand: {{ reflectance: 0.3 }}\nobjects:\n  - water: {{ z: 0, extent: [[-50, -50], [50, 50]], refractive_index: {N}, attenuation_per_m: 0.05{index} }}\n  - plane: {{ z: {}, extent: [[-50, -50], [50, 50]], material: sand }}\n",
+                "name: lake\nmaterials:\n  sand: {{ reflectance: 0.3 }}\nobjects:\n  - water: {{ z: 0, extent: [[-50, -50], [50, 50]], attenuation_per_m: 0.05{index} }}\n  - plane: {{ z: {}, extent: [[-50, -50], [50, 50]], material: sand }}\n",
                 -depth
             ),
         );
@@ -238,7 +251,15 @@ fn the_bottom_return_lies_at_the_group_index() {
         run_cli(&camp, &out, None);
         let points = lidarsim::products::points::las::read_las(&out.join("points.las")).unwrap();
         let bottom = points.iter().map(|p| p.z).fold(f64::INFINITY, f64::min);
-        let n = given.unwrap_or(n_g);
+        let own = phase_532.map(|p| lidarsim::scene::water_group_index(p, 532.0));
+        let n = given.or(own).unwrap_or(n_g);
+        if own.is_some() {
+            let bin_m = inst.bin_ns * 1e-9 * C / 2.0;
+            assert!(
+                (n - n_g) * depth > 1.5 * bin_m,
+                "the test tells the indexes apart"
+            );
+        }
         let (want, phase) = (-n * depth, -N * depth);
         let bin_m = inst.bin_ns * 1e-9 * C / 2.0;
         println!("{depth} m: bottom point at {bottom:.4} m, n_g d gives {want:.4}, the phase index {phase:.4}");
@@ -260,7 +281,9 @@ fn the_bottom_return_lies_at_the_group_index() {
 /// paths with the least attenuating band's water, so the green bottom return is the
 /// single-band green run's within 3 combined SE (before, the paths carried the first band's
 /// attenuation and every band's weight underflowed to 0 beyond about 8 m), the infrared sees
-/// no bottom, and no value of either run is NaN or infinite.
+/// no bottom, no value of either run is NaN or infinite, and the run log counts the
+/// infrared's weights that fell below the smallest double (e^-898 over 20 m of water) and
+/// none of the green's.
 #[test]
 fn an_opaque_first_band_leaves_the_others_bottom_return_whole() {
     for depth in [10.0, 20.0] {
@@ -291,7 +314,16 @@ fn an_opaque_first_band_leaves_the_others_bottom_return_whole() {
         for sub in ["two", "one"] {
             std::fs::create_dir_all(dir.join(sub)).unwrap();
         }
-        let two = run(&dir.join("two"), &text("[1064, 532]"), None);
+        // through the command, whose log reports the weights lost to underflow
+        let campaign_path = write(&dir.join("two"), "campaign.yaml", &text("[1064, 532]"));
+        let log = run_cli(&campaign_path, &dir.join("two/run"), None);
+        let two = all_waveforms(&dir.join("two/run"));
+        let lost = log
+            .lines()
+            .find(|l| l.contains("warning: band 1064 nm:"))
+            .unwrap_or_else(|| panic!("{depth} m: no underflow reported for 1064 nm in\n{log}"));
+        println!("{depth} m: {lost}");
+        assert!(!log.contains("warning: band 532 nm:"), "{log}");
         let one = run(&dir.join("one"), &text("532"), None).remove(0);
         let green = two.iter().find(|w| w.wavelength_nm == Some(532.0)).unwrap();
         let infrared = two

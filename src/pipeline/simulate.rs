@@ -46,6 +46,7 @@ pub(super) fn simulate_parts(
     let mut written = 0usize;
     let mut stopped = None;
     let bands = loaded.campaign.wavelength_nm.all().len();
+    let mut underflows = vec![0u64; bands];
     // Part k is written while part k + 1 is simulated, as two halves of one rayon join: the
     // same threads do both, so no core waits for a writer (a writer thread beside the workers
     // would leave the cores idle whenever encoding is slower than simulating), and at most
@@ -83,6 +84,9 @@ pub(super) fn simulate_parts(
             .map(|w| w.rays as u64)
             .sum::<u64>();
         non_finite += waveforms.iter().map(|w| w.non_finite).sum::<u64>();
+        for (k, w) in waveforms.iter().enumerate() {
+            underflows[k % bands] += w.underflows;
+        }
         done_pulses += pulses.len();
         let elapsed = clock.wall_s();
         let rate = done_pulses as f64 / elapsed;
@@ -112,6 +116,13 @@ pub(super) fn simulate_parts(
         log(&format!(
             "warning: {non_finite} contributions whose weight was not a finite number were left out of the waveforms: this is a bug, please report it with the campaign"
         ));
+    }
+    for (nm, n) in loaded.campaign.wavelength_nm.all().iter().zip(&underflows) {
+        if *n > 0 {
+            log(&format!(
+                "warning: band {nm} nm: {n} path weights fell below the smallest double (light under about 1e-308 of the path's other bands, so none a detector could record) and count as 0"
+            ));
+        }
     }
     let secs = clock.wall_s();
     if done_pulses > 0 {

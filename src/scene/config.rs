@@ -75,9 +75,10 @@ pub(crate) struct WaterSpec {
     pub extent: [[f64; 2]; 2],
     /// Beam attenuation coefficient of the water column, per metre, by wavelength.
     pub attenuation_per_m: Spectral,
-    /// The phase index, which steers refraction; default 1.33.
+    /// The phase index, which steers refraction, per band or one number; default 1.33. A run
+    /// of several bands refracts every path with its first band's.
     #[serde(default)]
-    pub refractive_index: Option<f64>,
+    pub refractive_index: Option<Spectral>,
     /// The group index, per band or one number: light in the column travels at c / n_g.
     /// Default: the phase index plus the dispersion of Quan and Fry's water index at the band
     /// ([`crate::scene::water_group_index`]).

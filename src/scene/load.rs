@@ -148,20 +148,33 @@ fn water_body(doc: &Doc, file: &SceneFile, wavelengths_nm: &[f64]) -> Result<Opt
         }
         let [a, b] = w.extent;
         check_rectangle(doc, &key, "water", w.z, w.extent)?;
-        let n = w.refractive_index.unwrap_or(1.33);
-        if !(n.is_finite() && n > 1.0 && n <= 3.0) {
-            return Err(doc.error(
-                &format!("{key}.refractive_index"),
-                format!("expected a refractive index above 1 and at most 3, found {n}"),
-            ));
-        }
-        let n_group = wavelengths_nm
+        // the phase index of each band; the first band's steers every path's refraction
+        let phase = wavelengths_nm
             .iter()
             .map(|&nm| {
+                let at = format!("{key}.refractive_index");
+                let n = match &w.refractive_index {
+                    Some(s) => s.at(nm).map_err(|why| doc.error(&at, why))?,
+                    None => 1.33,
+                };
+                if !(n.is_finite() && n > 1.0 && n <= 3.0) {
+                    return Err(doc.error(
+                        &at,
+                        format!("expected a refractive index above 1 and at most 3 at {nm} nm, found {n}"),
+                    ));
+                }
+                Ok(n)
+            })
+            .collect::<Result<Vec<f64>>>()?;
+        let n = phase.first().copied().unwrap_or(1.33);
+        let n_group = wavelengths_nm
+            .iter()
+            .zip(&phase)
+            .map(|(&nm, &n_band)| {
                 let at = format!("{key}.group_index");
                 let g = match &w.group_index {
                     Some(s) => s.at(nm).map_err(|why| doc.error(&at, why))?,
-                    None => super::water_group_index(n, nm),
+                    None => super::water_group_index(n_band, nm),
                 };
                 if !(g.is_finite() && (1.0..=3.0).contains(&g)) {
                     return Err(doc.error(
@@ -207,6 +220,7 @@ fn water_body(doc: &Doc, file: &SceneFile, wavelengths_nm: &[f64]) -> Result<Opt
             lo: [a[0].min(b[0]), a[1].min(b[1])],
             hi: [a[0].max(b[0]), a[1].max(b[1])],
             n,
+            n_bands: phase,
             n_group,
             attenuation_min: attenuation.iter().cloned().fold(f64::INFINITY, f64::min),
             attenuation,

@@ -131,6 +131,9 @@ pub struct WaterBody {
     pub hi: [f64; 2],
     /// The phase index: refraction.
     pub n: f64,
+    /// The phase index of each band (the first is `n`): a run of several bands refracts its
+    /// paths with the first's, each band's own serves its default group index.
+    pub n_bands: Vec<f64>,
     /// The group index per band: the time light takes in the column.
     pub n_group: Vec<f64>,
     /// Beam attenuation per band, per metre.
@@ -776,6 +779,20 @@ impl Scene {
             })
             .collect();
         out.dedup();
+        if let Some(w) = self
+            .water
+            .as_ref()
+            .filter(|w| w.n_bands.iter().any(|&n| n != w.n))
+        {
+            out.push(format!(
+                "the water's refractive index differs between the bands ({}): every path refracts with the first band's, one geometry for all (each band's own index sets its default group index, so its times)",
+                w.n_bands
+                    .iter()
+                    .map(|n| n.to_string())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ));
+        }
         out
     }
 

@@ -23,6 +23,49 @@ use crate::campaign::spectral::MAX_BANDS;
 use crate::scene::{Rpv, Scene, WaterBody};
 use glam::DVec3;
 
+thread_local! {
+    /// Band weights this thread's paths lost to underflow since the last
+    /// [`take_underflows`]: a factor (water's or the atmosphere's attenuation, a ratio of
+    /// BSDFs) that is positive but brought a positive weight to 0.
+    static UNDERFLOWS: std::cell::Cell<[u64; MAX_BANDS]> = const { std::cell::Cell::new([0; MAX_BANDS]) };
+}
+
+/// The band weights lost to underflow on this thread since the last call, and zero again: a
+/// chunk of rays is traced on one thread, which takes them at its end.
+pub fn take_underflows() -> [u64; MAX_BANDS] {
+    UNDERFLOWS.with(|c| c.replace([0; MAX_BANDS]))
+}
+
+/// `r[b] × f` for a ratio of BSDFs f, counting a positive weight that a positive f brings
+/// to 0 (f = 0 is a band that does not scatter there: no loss).
+#[inline]
+fn scale(r: &mut BandVec, b: usize, f: f64) {
+    let before = r[b];
+    r[b] *= f;
+    if r[b] == 0.0 && before > 0.0 && f > 0.0 {
+        underflowed(b);
+    }
+}
+
+/// `r[b] × t` for a transmittance t of a finite optical depth, which is never 0 but may
+/// underflow to it: a positive weight brought to 0 is counted.
+#[inline]
+fn attenuate(r: &mut BandVec, b: usize, t: f64) {
+    let before = r[b];
+    r[b] *= t;
+    if r[b] == 0.0 && before > 0.0 {
+        underflowed(b);
+    }
+}
+
+fn underflowed(b: usize) {
+    UNDERFLOWS.with(|c| {
+        let mut n = c.get();
+        n[b] += 1;
+        c.set(n);
+    });
+}
+
 /// One factor per band (lanes past the campaign's bands are unused).
 pub type BandVec = [f64; MAX_BANDS];
 
@@ -121,18 +164,18 @@ impl Bands {
         if let (Some(rpv), true) = (&self.rpv[surface as usize], event < 2) {
             let brf = |(shape, rho): &(Rpv, [f64; 2])| shape.brf(rho[event], n, a, b);
             let sampled = brf(&rpv.sampled);
-            for (x, band) in r.iter_mut().zip(&rpv.bands) {
-                *x *= if sampled > 0.0 {
-                    brf(band) / sampled
+            for (b, band) in rpv.bands.iter().enumerate() {
+                if sampled > 0.0 {
+                    scale(r, b, brf(band) / sampled);
                 } else {
-                    0.0
-                };
+                    r[b] = 0.0;
+                }
             }
             return;
         }
         let row = &self.surface[surface as usize * self.count..][..self.count];
-        for (x, f) in r.iter_mut().zip(row) {
-            *x *= f[event];
+        for (b, f) in row.iter().enumerate() {
+            scale(r, b, f[event]);
         }
     }
 
@@ -144,18 +187,19 @@ impl Bands {
         if let Some((w, extra)) = &self.water {
             if w.holds(a.p, b) {
                 let len = (b - a.p).length();
-                for (x, c) in r.iter_mut().zip(extra) {
-                    *x *= (-c * len).exp();
+                for (k, c) in extra.iter().enumerate() {
+                    attenuate(r, k, (-c * len).exp());
                 }
                 return;
             }
         }
-        for (x, atm) in r.iter_mut().zip(&self.atmosphere).skip(1) {
-            *x *= if a.kind == VertexKind::Sun {
+        for (k, atm) in self.atmosphere.iter().enumerate().skip(1) {
+            let t = if a.kind == VertexKind::Sun {
                 atm.transmittance_to_top(b, -a.n)
             } else {
                 atm.transmittance(a.p, b)
             };
+            attenuate(r, k, t);
         }
     }
 
@@ -171,7 +215,10 @@ impl Bands {
     ) -> BandVec {
         let (s, t) = (light.len(), cam.len());
         let (x, y) = (&light[s - 1], &cam[t - 1]);
-        let mut r: BandVec = std::array::from_fn(|b| lr[b] * cr[b]);
+        let mut r: BandVec = *lr;
+        for (b, &c) in cr.iter().enumerate() {
+            scale(&mut r, b, c);
+        }
         let w = if s == 1 && x.kind == VertexKind::Sun {
             setup.sun.map_or(DVec3::ZERO, |sun| sun.dir)
         } else {

@@ -278,6 +278,9 @@ pub fn simulate_pulse_in<'s>(setup: &PulseSetup, rays: u64, scratch: &'s mut Scr
             trace_ray(setup, &first, &mut rng, acc, bufs);
             acc.end_ray();
         }
+        if setup.bands.is_some() {
+            acc.add_underflows(&bands::take_underflows());
+        }
     };
     if chunks == 1 {
         // the common case of a campaign pulse: its one chunk is the total (adding it to

@@ -39,6 +39,10 @@ pub struct Tally {
     /// Contributions whose weight was not a finite number (NaN or infinite), left out of every
     /// sum: none is expected, and the run log says so when one is.
     pub non_finite: u64,
+    /// Path weights of this band that fell below the smallest double while the path's other
+    /// bands carried light (its light along them under ~1e-308 of theirs): counted as 0, and
+    /// reported by the run log (see [`bands`](super::bands)).
+    pub underflows: u64,
     /// Bins [lo, hi) that received energy in the gate (lo = hi: none). Every per-bin and
     /// per-sub-bin sum is zero outside them, so a pulse of few paths in a long gate (3152
     /// bins of 0.067 ns over a forest) is reset and turned into a waveform over its span only.
@@ -60,6 +64,7 @@ impl Tally {
             paths: 0,
             queries: 0,
             non_finite: 0,
+            underflows: 0,
             solar_sum: 0.0,
             solar_sq: 0.0,
             lit: (0, 0),
@@ -103,6 +108,7 @@ impl Tally {
         self.solar_sq += o.solar_sq;
         self.queries += o.queries;
         self.non_finite += o.non_finite;
+        self.underflows += o.underflows;
         self.light(o.lit.0, o.lit.1);
     }
 
@@ -231,6 +237,14 @@ impl Accum {
         }
     }
 
+    /// Adds each band's count of weights lost to underflow (see [`super::bands::take_underflows`]).
+    pub(super) fn add_underflows(&mut self, lost: &[u64]) {
+        self.tally.underflows += lost[0];
+        for (a, n) in self.bands.iter_mut().zip(&lost[1..]) {
+            a.tally.underflows += n;
+        }
+    }
+
     /// [`Accum::add_solar`] in every band.
     pub(super) fn add_solar_bands(&mut self, power: f64, r: &BandVec) {
         self.add_solar(power * r[0]);
@@ -280,6 +294,7 @@ impl Accum {
         zero(&mut t.order_sq, setup.max_order as usize);
         (t.outside, t.total_sq, t.rays, t.paths) = (0.0, 0.0, 0, 0);
         (t.solar_sum, t.solar_sq, t.queries, t.non_finite) = (0.0, 0.0, 0, 0);
+        t.underflows = 0;
         self.t0 = setup.gate.t0;
         self.sub_dt = setup.gate.dt / sub_bins as f64;
         self.sub_bins = sub_bins;

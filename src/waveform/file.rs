@@ -440,6 +440,7 @@ fn read_waveforms_with(
                 wavelength_nm: bands.as_ref().map(|a| a.value(i)),
                 // not in the files: the simulate stage's log reports them
                 non_finite: 0,
+                underflows: 0,
             };
         }
         done += b.num_rows();
@@ -585,6 +586,7 @@ mod tests {
             paths_per_ray: 1.0,
             wavelength_nm: None,
             non_finite: 0,
+            underflows: 0,
         }
     }
 

@@ -59,6 +59,9 @@ pub struct Waveform {
     /// Contributions left out for a weight that was not a finite number (not in the files:
     /// the run log reports them).
     pub non_finite: u64,
+    /// Path weights of this band lost to underflow (see `Tally::underflows`; not in the files:
+    /// the run log reports them).
+    pub underflows: u64,
 }
 
 /// rRMSE of a waveform `w` against a reference over the bins `over`: the RMS of their
@@ -379,6 +382,7 @@ pub fn waveform(
         paths_per_ray: (tally.paths as f64 / n) as f32,
         wavelength_nm: None,
         non_finite: tally.non_finite,
+        underflows: tally.underflows,
     }
 }
 

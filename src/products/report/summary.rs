@@ -184,6 +184,7 @@ mod tests {
             paths_per_ray: 1.5,
             wavelength_nm: None,
             non_finite: 0,
+            underflows: 0,
         };
         let mut t = WaveformTotals::default();
         t.add(&w(0.25));

@@ -51,6 +51,15 @@ fn all_waveforms(out: &Path) -> Vec<lidarsim::waveform::Waveform> {
 
 const ORIGIN: [f64; 3] = [500_000.0, 4_800_000.0, 120.0];
 
+/// The campaigns' frame's inverse projection to WGS 84.
+fn wgs84() -> lidarsim::campaign::frame::ToWgs84 {
+    lidarsim::campaign::frame::ToWgs84::new(&lidarsim::campaign::Frame {
+        crs: "EPSG:32631".into(),
+        origin: ORIGIN,
+    })
+    .unwrap()
+}
+
 /// A waveform instrument along a nadir track 500 m over a plane of reflectance 0.4.
 fn track_campaign(name: &str, pulses_step: f64, extra: &str) -> String {
     format!(
@@ -99,12 +108,12 @@ fn l1b_holds_the_waveforms_where_the_plane_is() {
         }
         // nadir: bins step one bin's range down, the first at the centre of bin 0
         assert!(((e0[i] - e1[i]) - (n - 1) as f64 * bin_m).abs() < 1e-6);
-        assert!((lat[i] - ORIGIN[1]).abs() < 1e-6, "{}", lat[i]);
-        assert!(
-            (lon[i] - (ORIGIN[0] - 40.0 + 2.0 * i as f64)).abs() < 1e-6,
-            "{}",
-            lon[i]
-        );
+        // degrees on WGS 84: the frame's inverse projection of the beam's nadir point (pyproj
+        // checks that projection in `h5py_reads_both_files_as_mission_users_do`)
+        let (la, lo) = wgs84().degrees(-40.0 + 2.0 * i as f64, 0.0);
+        assert!((lat[i] - la).abs() < 1e-9, "{} against {la}", lat[i]);
+        assert!((lon[i] - lo).abs() < 1e-9, "{} against {lo}", lon[i]);
+        assert!((43.0..44.0).contains(&lat[i]) && (1.0..4.0).contains(&lon[i]));
         // the peak bin's height is the plane's, within a bin
         let peak = (0..n)
             .max_by(|&a, &b| w.laser_photons[a].total_cmp(&w.laser_photons[b]))
@@ -295,6 +304,7 @@ fn atl03_photons_are_the_parquet_photons() {
     let reader =
         parquet::arrow::arrow_reader::ParquetRecordBatchReader::try_new(file, 1 << 16).unwrap();
     let (mut rows, mut by_source) = (0usize, [0usize; 3]);
+    let to = wgs84();
     for batch in reader {
         let batch = batch.unwrap();
         let col = |name: &str| batch.column_by_name(name).unwrap().clone();
@@ -327,8 +337,8 @@ fn atl03_photons_are_the_parquet_photons() {
             let r = rows + k;
             assert_eq!(pulse[r], id.value(k));
             assert_eq!(truth[r], s.value(k));
-            assert!((lon[r] - (x.value(k) + ORIGIN[0])).abs() < 1e-6);
-            assert!((lat[r] - (y.value(k) + ORIGIN[1])).abs() < 1e-6);
+            let (la, lo) = to.degrees(x.value(k), y.value(k));
+            assert!((lon[r] - lo).abs() < 1e-9 && (lat[r] - la).abs() < 1e-9);
             assert!((h[r] - (z.value(k) + ORIGIN[2])).abs() < 1e-9);
             let want = if s.value(k) == 0 { 4 } else { 0 };
             assert!(conf[5 * r..5 * r + 5].iter().all(|&c| c == want));
@@ -365,10 +375,12 @@ fn atl03_photons_are_the_parquet_photons() {
 
 /// h5py reads both files, and readers in the style of the missions' users find the plane:
 /// rGEDI-like (elevation from bin 0 and the last bin, noise mean removed) and ATL03-like
-/// (signal photons by signal_conf_ph >= 3).
+/// (signal photons by signal_conf_ph >= 3). Latitudes and longitudes are pyproj's inverse
+/// projection of the frame's UTM coordinates of the same points within 1e-8 degrees (the
+/// photons' x, y from photons.parquet; each L1B shot's nadir track point).
 #[test]
 fn h5py_reads_both_files_as_mission_users_do() {
-    if !python_with("h5py, numpy", "h5py") {
+    if !python_with("h5py, numpy, pyproj", "h5py pyproj") {
         return;
     }
     let dir = tmp("mission_h5py");
@@ -399,6 +411,7 @@ fn h5py_reads_both_files_as_mission_users_do() {
     let script = format!(
         r#"
 import sys, h5py, numpy as np
+from pyproj import Transformer
 d = sys.argv[1]
 bin_m = 299792458.0 * 1e-9 / 2
 with h5py.File(d + "/gedi/waveforms_l1b.h5", "r") as f:
@@ -422,6 +435,13 @@ with h5py.File(d + "/gedi/waveforms_l1b.h5", "r") as f:
         assert s.sum() > 3, (i, s.sum())
         h = np.sum(z[s] * w[s]) / np.sum(w[s])
         assert abs(h - {h0}) < bin_m, (i, h)
+    lat, lon = b["geolocation/latitude_bin0"][:], b["geolocation/longitude_bin0"][:]
+    # the track runs from x = -40 m at y = 0, a shot every 4 m, straight down
+    x = {e0x} - 40.0 + 4.0 * np.arange(len(lat))
+    t = Transformer.from_crs("EPSG:32631", "EPSG:4326", always_xy=True)
+    lo, la = t.transform(x, np.full(len(lat), {n0}))
+    assert np.max(np.abs(lat - la)) < 1e-8 and np.max(np.abs(lon - lo)) < 1e-8, (lat - la, lon - lo)
+    print("L1B against pyproj: largest differences", np.max(np.abs(lat - la)), np.max(np.abs(lon - lo)), "degrees")
 with h5py.File(d + "/atl/photons_atl03.h5", "r") as f:
     g = f["gt1l/heights"]
     for k in ["h_ph", "lat_ph", "lon_ph", "delta_time", "dist_ph_along", "dist_ph_across",
@@ -433,9 +453,16 @@ with h5py.File(d + "/atl/photons_atl03.h5", "r") as f:
     sig = conf[:, 0] >= 3
     assert sig.sum() > 50 and (~sig).sum() > 50, (sig.sum(), (~sig).sum())
     assert abs(np.median(h[sig]) - {h0}) < bin_m, np.median(h[sig])
+    # the photons' degrees against pyproj's inverse of their UTM coordinates, which pyproj
+    # itself gives back from the degrees: a round trip to 1e-3 m
+    t = Transformer.from_crs("EPSG:4326", "EPSG:32631", always_xy=True)
+    e, n = t.transform(g["lon_ph"][:], g["lat_ph"][:])
+    assert np.all(np.abs(n - {n0}) < 30) and np.all(np.abs(e - {e0x}) < 100), (e, n)
 print("h5py ok")
 "#,
-        h0 = ORIGIN[2]
+        h0 = ORIGIN[2],
+        e0x = ORIGIN[0],
+        n0 = ORIGIN[1],
     );
     run_python(&script, &dir);
 }

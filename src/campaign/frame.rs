@@ -53,6 +53,44 @@ impl Frame {
     }
 }
 
+/// The inverse projection of a frame's CRS to WGS 84 longitude and latitude, degrees:
+/// `proj4rs` (a pure Rust port of proj4js) fed the CRS's proj4 definition from the
+/// `crs-definitions` tables. The mission files (GEDI, ICESat-2) hold degrees, as the real
+/// products do.
+pub struct ToWgs84 {
+    from: proj4rs::proj::Proj,
+    to: proj4rs::proj::Proj,
+    origin: [f64; 3],
+}
+
+impl ToWgs84 {
+    /// The converter of `frame`, or why its CRS has none.
+    pub fn new(frame: &Frame) -> std::result::Result<ToWgs84, String> {
+        let (code, _) = frame.resolve()?;
+        let def = crs_definitions::from_code(code)
+            .ok_or_else(|| format!("EPSG:{code} is not a CRS this build knows"))?;
+        let from = proj4rs::proj::Proj::from_proj_string(def.proj4)
+            .map_err(|e| format!("EPSG:{code} ({}): {e}", def.proj4))?;
+        let to = proj4rs::proj::Proj::from_proj_string("+proj=longlat +datum=WGS84 +no_defs")
+            .map_err(|e| format!("WGS 84: {e}"))?;
+        Ok(ToWgs84 {
+            from,
+            to,
+            origin: frame.origin,
+        })
+    }
+
+    /// (latitude, longitude) in degrees of the local point (x, y) (metres from the frame's
+    /// origin); NaN where the projection has no inverse there.
+    pub fn degrees(&self, x: f64, y: f64) -> (f64, f64) {
+        let mut p = (x + self.origin[0], y + self.origin[1], 0.0);
+        match proj4rs::transform::transform(&self.from, &self.to, &mut p) {
+            Ok(()) if p.0.is_finite() && p.1.is_finite() => (p.1.to_degrees(), p.0.to_degrees()),
+            _ => (f64::NAN, f64::NAN),
+        }
+    }
+}
+
 /// Whether a PROJCS's own linear unit (its last top-level UNIT) is the metre.
 fn projected_in_metres(wkt: &str) -> bool {
     // the GEOGCS inside a PROJCS has an angular UNIT; the PROJCS's own UNIT comes after it

@@ -218,6 +218,7 @@ pub fn run_python(script: &str, arg: &Path) {
         .args(["-c", script, arg.to_str().unwrap()])
         .output()
         .unwrap();
+    print!("{}", String::from_utf8_lossy(&o.stdout));
     assert!(
         o.status.success(),
         "{}{}",

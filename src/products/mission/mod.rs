@@ -4,10 +4,11 @@
 //! products (`rx_sample_start_index` counts from 1, `signal_conf_ph` is N x 5); the
 //! simulation defines the values as the output contract (docs/outputs.md) says.
 //!
-//! Coordinates: with a `frame`, `latitude*`/`lat_ph` hold the northing and
-//! `longitude*`/`lon_ph` the easting in the frame's CRS, heights are local z + the origin's
-//! height (campaign.md: every coordinate a product writes is local + origin); without one,
-//! local y, x and z. Each file names the CRS in its root attributes.
+//! Coordinates: with a `frame`, `latitude*`/`lat_ph` and `longitude*`/`lon_ph` are degrees
+//! on WGS 84, the inverse projection of the frame's CRS at local + origin (as the real
+//! products hold them), and heights are local z + the origin's height (ellipsoidal, as the
+//! frame's origin is); without one, local y, x and z in metres, which the root attribute
+//! `coordinates` says. Each file names the CRS in its root attributes.
 
 pub mod h5;
 
@@ -15,6 +16,7 @@ pub mod h5;
 pub const L1B_FILE: &str = "waveforms_l1b.h5";
 pub const ATL03_FILE: &str = "photons_atl03.h5";
 
+use crate::campaign::frame::ToWgs84;
 use crate::campaign::Frame;
 use crate::error::{Error, Result};
 use crate::plan::Pulse;
@@ -48,21 +50,55 @@ fn root_attrs(
             attrs.push((
                 "coordinates",
                 format!(
-                    "latitude = northing, longitude = easting, in metres of {}; heights in metres",
+                    "latitude and longitude in degrees on WGS 84 (the inverse projection of {}); heights in metres above the WGS 84 ellipsoid",
                     f.crs
                 ),
             ));
         }
         None => attrs.push((
             "coordinates",
-            "local scene metres: latitude = y, longitude = x, heights = z (no frame set)".into(),
+            "local scene metres, no frame set: latitude = y, longitude = x (metres, not degrees), heights = z".into(),
         )),
     }
     Ok(attrs)
 }
 
-fn shift_of(frame: Option<&Frame>) -> DVec3 {
-    frame.map_or(DVec3::ZERO, |f| DVec3::from_array(f.origin))
+/// How a local point becomes a file's latitude, longitude and height (see the module's
+/// comment).
+enum Geo {
+    Local,
+    Frame { to: Box<ToWgs84>, height: f64 },
+}
+
+impl Geo {
+    fn new(frame: Option<&Frame>) -> Result<Geo> {
+        Ok(match frame {
+            None => Geo::Local,
+            Some(f) => Geo::Frame {
+                to: Box::new(ToWgs84::new(f).map_err(Error::msg)?),
+                height: f.origin[2],
+            },
+        })
+    }
+
+    /// (latitude, longitude, height) of the local point `p`.
+    fn of(&self, p: DVec3) -> (f64, f64, f64) {
+        match self {
+            Geo::Local => (p.y, p.x, p.z),
+            Geo::Frame { to, height } => {
+                let (lat, lon) = to.degrees(p.x, p.y);
+                (lat, lon, p.z + height)
+            }
+        }
+    }
+
+    /// The units attribute of latitudes and longitudes.
+    fn angle_units(&self) -> &'static str {
+        match self {
+            Geo::Local => "m",
+            Geo::Frame { .. } => "degrees",
+        }
+    }
 }
 
 /// GEDI's beam names for the first beams (BEAM0000, BEAM0001, BEAM0010, ...): the beam index
@@ -85,7 +121,7 @@ pub struct L1b {
     h5: H5Writer,
     /// Samples written so far per beam: rx, tx.
     beams: BTreeMap<u32, (u64, u64)>,
-    shift: DVec3,
+    geo: Geo,
     pulse_sigma_s: f64,
     units: &'static str,
     threshold: f64,
@@ -105,7 +141,7 @@ impl L1b {
         Ok(L1b {
             h5: H5Writer::create(path, &attrs)?,
             beams: BTreeMap::new(),
-            shift: shift_of(frame),
+            geo: Geo::new(frame)?,
             pulse_sigma_s,
             units: if counts { "counts" } else { "photoelectrons" },
             threshold: threshold_photons,
@@ -123,6 +159,7 @@ impl L1b {
         )?;
         self.h5.group(&format!("{name}/geolocation"), &[])?;
         let u = self.units;
+        let units = self.geo.angle_units();
         let f = |path: &str, kind, units, description| {
             Field::new(&name, path, kind, units, description)
         };
@@ -139,10 +176,10 @@ impl L1b {
             f("stale_return_flag", Kind::U8, "1", "1: no sample of the mean waveform reaches the detection threshold"),
             f("geolocation/elevation_bin0", Kind::F64, "m", "height of the centre of the first sample, on the beam axis"),
             f("geolocation/elevation_lastbin", Kind::F64, "m", "height of the centre of the last sample, on the beam axis"),
-            f("geolocation/latitude_bin0", Kind::F64, "see /@coordinates", "northing (local y without a frame) of the first sample"),
-            f("geolocation/longitude_bin0", Kind::F64, "see /@coordinates", "easting (local x without a frame) of the first sample"),
-            f("geolocation/latitude_lastbin", Kind::F64, "see /@coordinates", "northing (local y without a frame) of the last sample"),
-            f("geolocation/longitude_lastbin", Kind::F64, "see /@coordinates", "easting (local x without a frame) of the last sample"),
+            f("geolocation/latitude_bin0", Kind::F64, units, "latitude of the centre of the first sample (local y without a frame: see /@coordinates)"),
+            f("geolocation/longitude_bin0", Kind::F64, units, "longitude of the centre of the first sample (local x without a frame: see /@coordinates)"),
+            f("geolocation/latitude_lastbin", Kind::F64, units, "latitude of the centre of the last sample (local y without a frame: see /@coordinates)"),
+            f("geolocation/longitude_lastbin", Kind::F64, units, "longitude of the centre of the last sample (local x without a frame: see /@coordinates)"),
         ])?;
         self.beams.insert(line, (0, 0));
         Ok(name)
@@ -156,7 +193,8 @@ impl L1b {
         // centre of sample k: t0 + (k + ½) Δt after emission, at range c t / 2
         let at = |k: usize| {
             let t = (w.t0_ns + (k as f64 + 0.5) * w.bin_ns as f64) * 1e-9;
-            pulse.origin + pulse.direction * (crate::C * t / 2.0) + self.shift
+            self.geo
+                .of(pulse.origin + pulse.direction * (crate::C * t / 2.0))
         };
         let (first, last) = (at(0), at(n.saturating_sub(1)));
         let stale = !w
@@ -175,12 +213,12 @@ impl L1b {
         h.push_f64(&format!("{b}/noise_mean_corrected"), &[record.background])?;
         h.push_u8(&format!("{b}/stale_return_flag"), &[u8::from(stale)])?;
         let g = format!("{b}/geolocation");
-        h.push_f64(&format!("{g}/elevation_bin0"), &[first.z])?;
-        h.push_f64(&format!("{g}/elevation_lastbin"), &[last.z])?;
-        h.push_f64(&format!("{g}/latitude_bin0"), &[first.y])?;
-        h.push_f64(&format!("{g}/longitude_bin0"), &[first.x])?;
-        h.push_f64(&format!("{g}/latitude_lastbin"), &[last.y])?;
-        h.push_f64(&format!("{g}/longitude_lastbin"), &[last.x])?;
+        h.push_f64(&format!("{g}/elevation_bin0"), &[first.2])?;
+        h.push_f64(&format!("{g}/elevation_lastbin"), &[last.2])?;
+        h.push_f64(&format!("{g}/latitude_bin0"), &[first.0])?;
+        h.push_f64(&format!("{g}/longitude_bin0"), &[first.1])?;
+        h.push_f64(&format!("{g}/latitude_lastbin"), &[last.0])?;
+        h.push_f64(&format!("{g}/longitude_lastbin"), &[last.1])?;
         self.beams
             .insert(pulse.line, (rx_next + n as u64, tx_next + tx.len() as u64));
         Ok(())
@@ -203,7 +241,7 @@ struct Track {
 pub struct Atl03 {
     h5: H5Writer,
     tracks: BTreeMap<u32, Track>,
-    shift: DVec3,
+    geo: Geo,
 }
 
 /// `signal_conf_ph`: high confidence (4) for laser photons, noise (0) for solar and dark
@@ -222,7 +260,7 @@ impl Atl03 {
         Ok(Atl03 {
             h5: H5Writer::create(path, &attrs)?,
             tracks: BTreeMap::new(),
-            shift: shift_of(frame),
+            geo: Geo::new(frame)?,
         })
     }
 
@@ -240,13 +278,14 @@ impl Atl03 {
         )?;
         self.h5.group(&format!("{name}/heights"), &[])?;
         let group = format!("{name}/heights");
+        let units = self.geo.angle_units();
         let f = |path: &str, kind, units, description| {
             Field::new(&group, path, kind, units, description)
         };
         self.h5.datasets(&[
             f("h_ph", Kind::F64, "m", "height of the photon event"),
-            f("lat_ph", Kind::F64, "see /@coordinates", "northing (local y without a frame) of the photon event"),
-            f("lon_ph", Kind::F64, "see /@coordinates", "easting (local x without a frame) of the photon event"),
+            f("lat_ph", Kind::F64, units, "latitude of the photon event (local y without a frame: see /@coordinates)"),
+            f("lon_ph", Kind::F64, units, "longitude of the photon event (local x without a frame: see /@coordinates)"),
             f("delta_time", Kind::F64, "seconds", "time of the photon event: the pulse's gps_time_s plus its time of flight"),
             f("dist_ph_along", Kind::F64, "m", "along-track distance from the track's first pulse"),
             f("dist_ph_across", Kind::F64, "m", "across-track distance from the pulse's nadir point, positive to the left of the track"),
@@ -289,9 +328,10 @@ impl Atl03 {
         );
         for (k, r) in rows.iter().enumerate() {
             let p = DVec3::new(r.x, r.y, r.z);
-            h.push(p.z + self.shift.z);
-            lat.push(p.y + self.shift.y);
-            lon.push(p.x + self.shift.x);
+            let (la, lo, z) = self.geo.of(p);
+            h.push(z);
+            lat.push(la);
+            lon.push(lo);
             time.push(pulse.gps_time_s + r.time_ns * 1e-9);
             let from_first = (p - track.first).truncate();
             let off = (p - pulse.origin).truncate();

@@ -56,16 +56,16 @@ pub fn report(
     let s = scene.stats();
     let mut text = format!("# Run report: {}\n\n", c.name);
     text += &format!(
-        "| | |\n| --- | --- |\n| scene | {} ({} instances, {} triangles) |\n| instrument | {:?}, {} nm, {} J, footprint {} mrad, field of view {} mrad |\n| method | {:?}, {} rays per pulse, max order {} |\n| pulses | {} |\n| rays | {} |\n| simulation wall time | {:.2} s ({:.1} pulses/s) |\n| effective paths per ray | {:.2} |\n| mean received energy per pulse | {:.4e} J |\n| multiple scattering share | {:.1}% |\n",
+        "| | |\n| --- | --- |\n| scene | {} ({} instances, {} triangles) |\n| instrument | {}, {} nm, {} J, footprint {} mrad, field of view {} mrad |\n| method | {}, {} rays per pulse, max order {} |\n| pulses | {} |\n| rays | {} |\n| simulation wall time | {:.2} s ({:.1} pulses/s) |\n| effective paths per ray | {:.2} |\n| mean received energy per pulse | {:.4e} J |\n| multiple scattering share | {:.1}% |\n",
         scene.name,
         s.instances,
         s.instanced_triangles,
-        c.instrument.kind,
+        as_written(&c.instrument.kind),
         c.wavelength_nm,
         c.instrument.pulse_energy_j,
         c.instrument.footprint_half_angle_mrad,
         c.instrument.fov_half_angle_mrad,
-        c.simulation.method,
+        as_written(&c.simulation.method),
         c.simulation.rays_per_pulse,
         c.simulation.max_order,
         pulses,
@@ -127,8 +127,9 @@ fn noise_line(c: &crate::campaign::Campaign, totals: &WaveformTotals) -> Option<
     }
     let ratio = qe * qe * var / (hv * hv) / photons;
     let mut text = format!(
-        "| simulation noise against photon noise | {ratio:.3e}: the Monte Carlo variance of the pulses' expected photons, summed, over their Poisson variance ({:.3e} photons per pulse after the quantum efficiency, before any dead time); it falls as 1 / rays |\n",
-        photons / totals.pulses.max(1) as f64
+        "| simulation noise against photon noise | {ratio:.3e}: the Monte Carlo variance of the pulses' expected photons, summed, over their Poisson variance ({:.3e} photons per pulse after the quantum efficiency, before any dead time); it falls as 1 / rays. {} |\n",
+        photons / totals.pulses.max(1) as f64,
+        noise_advice(ratio, c.simulation.rays_per_pulse)
     );
     // the sun's photons over the gates, where there are any: a background whose simulation
     // noise matters against its own photon noise, not against the laser's
@@ -141,6 +142,31 @@ fn noise_line(c: &crate::campaign::Campaign, totals: &WaveformTotals) -> Option<
         );
     }
     Some(text)
+}
+
+/// What a user should make of the simulation's noise against the photons' (`ratio`, at `rays`
+/// a pulse): under 1, a recorded waveform's noise is mostly the photons' own; above, the rays
+/// that would bring it to 1, and what the products do meanwhile.
+fn noise_advice(ratio: f64, rays: u64) -> String {
+    if !(ratio.is_finite() && ratio > 0.0) {
+        return String::new();
+    }
+    if ratio <= 1.0 {
+        return "At most 1: a recorded waveform's noise is mostly the photons' own.".into();
+    }
+    let needed = rays as f64 * ratio;
+    format!(
+        "Above 1, each simulated waveform is noisier than a detector would record it: about {needed:.3e} rays a pulse would bring the ratio to 1, for a study of single waveforms. Points and DSMs need far fewer: the decomposition weighs the simulation's noise when it judges a return (docs/outputs.md, \"Discrete returns\")."
+    )
+}
+
+/// A campaign value as a user writes it in the campaign file (`discrete_return`, not the
+/// type's own name).
+fn as_written<T: serde::Serialize>(v: &T) -> String {
+    match serde_yaml::to_value(v) {
+        Ok(serde_yaml::Value::String(s)) => s,
+        _ => String::from("?"),
+    }
 }
 
 /// The mission-shaped files in a run folder, and what the waveform record holds.

@@ -123,6 +123,15 @@ fn l1b_holds_the_waveforms_where_the_plane_is() {
     }
     assert_eq!(start[0], 1);
     assert_eq!(start[1], 1 + count[0] as u64);
+    // times in the missions' epoch: GPS seconds (from gps_start_s, 0 here) less 2018-01-01's
+    let epoch = f64s(&f, "ancillary/master_time_epoch");
+    assert_eq!(epoch, vec![1_198_800_018.0]);
+    let dt = f64s(&f, &format!("{b}/delta_time"));
+    assert!(dt.windows(2).all(|w| w[1] > w[0]), "{dt:?}");
+    assert!(
+        dt.iter().all(|t| (0.0..1e4).contains(&(t + epoch[0]))),
+        "{dt:?}"
+    );
     let tx = f32s(&f, &format!("{b}/txwaveform"));
     let tx_count = u32s(&f, &format!("{b}/tx_sample_count"));
     let one: f32 = tx[..tx_count[0] as usize].iter().sum();
@@ -291,7 +300,13 @@ fn atl03_photons_are_the_parquet_photons() {
     let lat = f64s(&f, &format!("{g}/lat_ph"));
     let lon = f64s(&f, &format!("{g}/lon_ph"));
     let along = f64s(&f, &format!("{g}/dist_ph_along"));
-    let pulse = u64s(&f, &format!("{g}/ph_id_pulse"));
+    let in_frame = f
+        .dataset(&format!("{g}/ph_id_pulse"))
+        .and_then(|d| d.read_u8())
+        .unwrap();
+    let frame_count = u32s(&f, &format!("{g}/pce_mframe_cnt"));
+    let epoch = f64s(&f, "ancillary_data/atlas_sdp_gps_epoch");
+    assert_eq!(epoch, vec![1_198_800_018.0]);
     let truth = f
         .dataset(&format!("{g}/truth_source"))
         .and_then(|d| d.read_u8())
@@ -335,7 +350,9 @@ fn atl03_photons_are_the_parquet_photons() {
             .unwrap();
         for k in 0..batch.num_rows() {
             let r = rows + k;
-            assert_eq!(pulse[r], id.value(k));
+            // pulses counted in major frames of 200, as ATLAS counts them
+            let pulse = 200 * frame_count[r] as u64 + in_frame[r] as u64 - 1;
+            assert_eq!(pulse, id.value(k));
             assert_eq!(truth[r], s.value(k));
             let (la, lo) = to.degrees(x.value(k), y.value(k));
             assert!((lon[r] - lo).abs() < 1e-9 && (lat[r] - la).abs() < 1e-9);

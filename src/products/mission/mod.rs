@@ -63,6 +63,20 @@ fn root_attrs(
     Ok(attrs)
 }
 
+/// The one-element dataset `group/name` holding [`MISSION_EPOCH_GPS_S`], as both missions'
+/// files hold their epoch.
+fn epoch(h5: &mut H5Writer, group: &str, name: &str) -> Result<()> {
+    h5.group(group, &[])?;
+    h5.datasets(&[Field::new(
+        group,
+        name,
+        Kind::F64,
+        "seconds",
+        "GPS seconds (since 1980-01-06T00:00:00Z) of 2018-01-01T00:00:00Z: delta_time is GPS time less this",
+    )])?;
+    h5.push_f64(&format!("{group}/{name}"), &[MISSION_EPOCH_GPS_S])
+}
+
 /// How a local point becomes a file's latitude, longitude and height (see the module's
 /// comment).
 enum Geo {
@@ -101,10 +115,24 @@ impl Geo {
     }
 }
 
-/// GEDI's beam names for the first beams (BEAM0000, BEAM0001, BEAM0010, ...): the beam index
-/// in binary.
+/// GPS seconds (since 1980-01-06) of 2018-01-01T00:00:00 UTC, the GEDI and ATLAS epoch: the
+/// mission files' `delta_time` is GPS time less this (ATL03's
+/// `/ancillary_data/atlas_sdp_gps_epoch`, GEDI's `ancillary/master_time_epoch`).
+pub const MISSION_EPOCH_GPS_S: f64 = 1_198_800_018.0;
+
+/// GEDI's eight beams as its files name them, in the order of a campaign's beams.
+const GEDI_BEAMS: [&str; 8] = [
+    "BEAM0000", "BEAM0001", "BEAM0010", "BEAM0011", "BEAM0101", "BEAM0110", "BEAM1000", "BEAM1011",
+];
+
+/// The L1B group of the campaign's beam `line`: GEDI's names for the first eight, then the
+/// beam index in five or more binary digits (a ninth beam has no GEDI name; five digits never
+/// meet one of GEDI's four, and BEAM followed by digits keeps readers that match `BEAM\d+`
+/// working).
 pub fn beam_name(line: u32) -> String {
-    format!("BEAM{line:04b}")
+    GEDI_BEAMS
+        .get(line as usize)
+        .map_or_else(|| format!("BEAM{line:05b}"), |s| s.to_string())
 }
 
 /// ICESat-2's ground tracks gt1l, gt1r, gt2l, ... for beams 0, 1, 2, ...
@@ -138,8 +166,10 @@ impl L1b {
         threshold_photons: f64,
     ) -> Result<L1b> {
         let attrs = root_attrs(campaign, frame, "GEDI01_B-like (simulated)")?;
+        let mut h5 = H5Writer::create(path, &attrs)?;
+        epoch(&mut h5, "ancillary", "master_time_epoch")?;
         Ok(L1b {
-            h5: H5Writer::create(path, &attrs)?,
+            h5,
             beams: BTreeMap::new(),
             geo: Geo::new(frame)?,
             pulse_sigma_s,
@@ -171,7 +201,7 @@ impl L1b {
             f("tx_sample_count", Kind::U32, "1", "samples of each shot's transmitted waveform"),
             f("tx_sample_start_index", Kind::U64, "1", "index of each shot's first sample in txwaveform, counted from 1"),
             f("shot_number", Kind::U64, "1", "the campaign's pulse_id"),
-            f("delta_time", Kind::F64, "seconds", "the pulse's gps_time_s"),
+            f("delta_time", Kind::F64, "seconds since 2018-01-01", "transmit time of the shot: the pulse's GPS seconds less ancillary/master_time_epoch"),
             f("noise_mean_corrected", Kind::F64, u, "mean of a sample without laser signal: solar background and dark counts"),
             f("stale_return_flag", Kind::U8, "1", "1: no sample of the mean waveform reaches the detection threshold"),
             f("geolocation/elevation_bin0", Kind::F64, "m", "height of the centre of the first sample, on the beam axis"),
@@ -209,7 +239,10 @@ impl L1b {
         h.push_u32(&format!("{b}/tx_sample_count"), &[tx.len() as u32])?;
         h.push_u64(&format!("{b}/tx_sample_start_index"), &[tx_next + 1])?;
         h.push_u64(&format!("{b}/shot_number"), &[pulse.id])?;
-        h.push_f64(&format!("{b}/delta_time"), &[pulse.gps_time_s])?;
+        h.push_f64(
+            &format!("{b}/delta_time"),
+            &[pulse.gps_time_s - MISSION_EPOCH_GPS_S],
+        )?;
         h.push_f64(&format!("{b}/noise_mean_corrected"), &[record.background])?;
         h.push_u8(&format!("{b}/stale_return_flag"), &[u8::from(stale)])?;
         let g = format!("{b}/geolocation");
@@ -257,8 +290,10 @@ pub fn signal_confidence(source: u8) -> i8 {
 impl Atl03 {
     pub fn create(path: &Path, campaign: &str, frame: Option<&Frame>) -> Result<Atl03> {
         let attrs = root_attrs(campaign, frame, "ATL03-like (simulated)")?;
+        let mut h5 = H5Writer::create(path, &attrs)?;
+        epoch(&mut h5, "ancillary_data", "atlas_sdp_gps_epoch")?;
         Ok(Atl03 {
-            h5: H5Writer::create(path, &attrs)?,
+            h5,
             tracks: BTreeMap::new(),
             geo: Geo::new(frame)?,
         })
@@ -286,10 +321,11 @@ impl Atl03 {
             f("h_ph", Kind::F64, "m", "height of the photon event"),
             f("lat_ph", Kind::F64, units, "latitude of the photon event (local y without a frame: see /@coordinates)"),
             f("lon_ph", Kind::F64, units, "longitude of the photon event (local x without a frame: see /@coordinates)"),
-            f("delta_time", Kind::F64, "seconds", "time of the photon event: the pulse's gps_time_s plus its time of flight"),
+            f("delta_time", Kind::F64, "seconds since 2018-01-01", "transmit time of the shot the photon belongs to, GPS seconds less atlas_sdp_gps_epoch"),
             f("dist_ph_along", Kind::F64, "m", "along-track distance from the track's first pulse"),
             f("dist_ph_across", Kind::F64, "m", "across-track distance from the pulse's nadir point, positive to the left of the track"),
-            f("ph_id_pulse", Kind::U64, "1", "the campaign's pulse_id"),
+            f("ph_id_pulse", Kind::U8, "1", "the shot within its major frame of 200, counted from 1: pulse_id % 200 + 1"),
+            f("pce_mframe_cnt", Kind::U32, "1", "the major frame of 200 shots: pulse_id // 200"),
             f("ph_id_count", Kind::U8, "1", "photon event number within the pulse, counted from 1"),
             f("quality_ph", Kind::I8, "1", "0: nominal (always)"),
             f("truth_source", Kind::U8, "1", "not in the real product: the simulation's truth, 0 laser, 1 solar, 2 dark"),
@@ -332,7 +368,7 @@ impl Atl03 {
             h.push(z);
             lat.push(la);
             lon.push(lo);
-            time.push(pulse.gps_time_s + r.time_ns * 1e-9);
+            time.push(pulse.gps_time_s - MISSION_EPOCH_GPS_S);
             let from_first = (p - track.first).truncate();
             let off = (p - pulse.origin).truncate();
             match unit {
@@ -356,7 +392,14 @@ impl Atl03 {
         hw.push_f64(&format!("{b}/delta_time"), &time)?;
         hw.push_f64(&format!("{b}/dist_ph_along"), &d_along)?;
         hw.push_f64(&format!("{b}/dist_ph_across"), &d_across)?;
-        hw.push_u64(&format!("{b}/ph_id_pulse"), &vec![pulse.id; n])?;
+        hw.push_u8(
+            &format!("{b}/ph_id_pulse"),
+            &vec![(pulse.id % 200 + 1) as u8; n],
+        )?;
+        hw.push_u32(
+            &format!("{b}/pce_mframe_cnt"),
+            &vec![(pulse.id / 200).min(u64::from(u32::MAX)) as u32; n],
+        )?;
         hw.push_u8(&format!("{b}/ph_id_count"), &count)?;
         hw.push_i8(&format!("{b}/quality_ph"), &vec![0; n])?;
         hw.push_u8(&format!("{b}/truth_source"), &sources)
@@ -381,5 +424,31 @@ impl Atl03 {
             self.h5.matrix_i8(&field, track.sources.len(), 5, &conf)?;
         }
         self.h5.finish()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The campaign's beams take GEDI's eight names in order (not their binary indexes: the
+    /// fifth is BEAM0101, not BEAM0100), and a ninth a name of its own (five digits).
+    #[test]
+    fn beams_take_gedis_names() {
+        let names: Vec<String> = (0..9).map(beam_name).collect();
+        assert_eq!(
+            names,
+            [
+                "BEAM0000",
+                "BEAM0001",
+                "BEAM0010",
+                "BEAM0011",
+                "BEAM0101",
+                "BEAM0110",
+                "BEAM1000",
+                "BEAM1011",
+                "BEAM01000"
+            ]
+        );
     }
 }

@@ -379,14 +379,48 @@ fn atl03_photons_are_the_parquet_photons() {
     sig.sort_by(f64::total_cmp);
     let median = sig[sig.len() / 2];
     assert!((median - ORIGIN[2]).abs() < C * 0.5e-9 / 2.0, "{median}");
+    // 20 m segments, as ATL03's geolocation/: their photon counts sum to the photons, each
+    // begins (1-based) where the one before ended, and a photon's distance from its segment's
+    // start plus that start is its distance along the track, which grows to the track's length
+    let geo = "gt1l/geolocation";
+    let count = f
+        .dataset(&format!("{geo}/segment_ph_cnt"))
+        .and_then(|d| d.read_i32())
+        .unwrap();
+    let beg = f
+        .dataset(&format!("{geo}/ph_index_beg"))
+        .and_then(|d| d.read_i64())
+        .unwrap();
+    let start = f64s(&f, &format!("{geo}/segment_dist_x"));
+    let id = f
+        .dataset(&format!("{geo}/segment_id"))
+        .and_then(|d| d.read_i32())
+        .unwrap();
+    // 80.6 m of track: segments 1 to 5
+    assert_eq!(id, vec![1, 2, 3, 4, 5], "{start:?}");
+    assert_eq!(count.iter().map(|&c| c as usize).sum::<usize>(), rows);
+    let mut next = 1i64;
+    let mut total = Vec::with_capacity(rows);
+    for s in 0..id.len() {
+        assert_eq!(start[s], 20.0 * s as f64);
+        if count[s] == 0 {
+            assert_eq!(beg[s], 0);
+            continue;
+        }
+        assert_eq!(beg[s], next, "segment {s}");
+        for r in beg[s] - 1..beg[s] - 1 + count[s] as i64 {
+            total.push(along[r as usize] + start[s]);
+        }
+        next += count[s] as i64;
+    }
     assert!(
-        along.windows(2).all(|w| w[1] >= w[0] - 1e-9),
+        total.windows(2).all(|w| w[1] >= w[0] - 1e-9),
         "along-track distance decreases"
     );
     assert!(
-        (along[rows - 1] - 80.0f64.hypot(10.0)).abs() < 1.0,
+        (total[rows - 1] - 80.0f64.hypot(10.0)).abs() < 1.0,
         "{}",
-        along[rows - 1]
+        total[rows - 1]
     );
 }
 
@@ -464,6 +498,10 @@ with h5py.File(d + "/atl/photons_atl03.h5", "r") as f:
     for k in ["h_ph", "lat_ph", "lon_ph", "delta_time", "dist_ph_along", "dist_ph_across",
               "ph_id_pulse", "ph_id_count", "quality_ph", "signal_conf_ph"]:
         assert k in g, k
+    s = f["gt1l/geolocation"]
+    assert s["segment_ph_cnt"][:].sum() == len(g["h_ph"]), "segment counts"
+    beg = s["ph_index_beg"][:]
+    assert beg[0] == 1 and s["segment_ph_cnt"].dtype == np.int32 and beg.dtype == np.int64
     conf = g["signal_conf_ph"][:]
     assert conf.ndim == 2 and conf.shape[1] == 5, conf.shape
     h = g["h_ph"][:]

@@ -20,13 +20,15 @@ pub enum Kind {
     U32,
     U8,
     I8,
+    I32,
+    I64,
 }
 
 impl Kind {
     fn size(self) -> usize {
         match self {
-            Kind::F64 | Kind::U64 => 8,
-            Kind::F32 | Kind::U32 => 4,
+            Kind::F64 | Kind::U64 | Kind::I64 => 8,
+            Kind::F32 | Kind::U32 | Kind::I32 => 4,
             Kind::U8 | Kind::I8 => 1,
         }
     }
@@ -132,6 +134,8 @@ impl H5Writer {
                         Kind::U32 => b.with_u32_data(&[]),
                         Kind::U8 => b.with_u8_data(&[]),
                         Kind::I8 => b.with_i8_data(&[]),
+                        Kind::I32 => b.with_i32_data(&[]),
+                        Kind::I64 => b.with_i64_data(&[]),
                     };
                     b.with_shape(&[0])
                         .with_maxshape(&[MaxExtent::Unlimited])
@@ -211,6 +215,20 @@ impl H5Writer {
 
     pub fn push_u8(&mut self, path: &str, v: &[u8]) -> Result<()> {
         self.push(path, v)
+    }
+
+    pub fn push_i32(&mut self, path: &str, v: &[i32]) -> Result<()> {
+        self.push(
+            path,
+            &v.iter().flat_map(|x| x.to_le_bytes()).collect::<Vec<u8>>(),
+        )
+    }
+
+    pub fn push_i64(&mut self, path: &str, v: &[i64]) -> Result<()> {
+        self.push(
+            path,
+            &v.iter().flat_map(|x| x.to_le_bytes()).collect::<Vec<u8>>(),
+        )
     }
 
     pub fn push_i8(&mut self, path: &str, v: &[i8]) -> Result<()> {

@@ -268,6 +268,25 @@ struct Track {
     name: String,
     first: DVec3,
     sources: Vec<u8>,
+    /// The 20 m segment the last pulse fell in, not yet written.
+    segment: Option<Segment>,
+}
+
+/// ATL03's along-track segment length, m.
+const SEGMENT_M: f64 = 20.0;
+
+/// One along-track segment of a ground track (ATL03's `geolocation/`): the photons of the
+/// pulses whose nadir point falls in it, which follow each other in the file.
+#[derive(Clone, Copy)]
+struct Segment {
+    /// Segment k spans [20 k, 20 (k + 1)) m of along-track distance from the track's first
+    /// pulse.
+    k: i64,
+    photons: u64,
+    /// 1-based index of its first photon in the track's photons (0: none yet, as ATL03 has it).
+    first: u64,
+    /// Its first photon's latitude, longitude and the shot's delta_time (NaN without photons).
+    reference: (f64, f64, f64),
 }
 
 /// `photons_atl03.h5`, written a pulse at a time.
@@ -275,6 +294,39 @@ pub struct Atl03 {
     h5: H5Writer,
     tracks: BTreeMap<u32, Track>,
     geo: Geo,
+}
+
+impl Segment {
+    fn empty(k: i64) -> Segment {
+        Segment {
+            k,
+            photons: 0,
+            first: 0,
+            reference: (f64::NAN, f64::NAN, f64::NAN),
+        }
+    }
+}
+
+/// Appends one row of `track`'s `geolocation/`.
+fn write_segment(h5: &mut H5Writer, track: &str, seg: &Segment) -> Result<()> {
+    let g = format!("{track}/geolocation");
+    h5.push_i32(
+        &format!("{g}/segment_id"),
+        &[(seg.k + 1).clamp(i64::from(i32::MIN), i64::from(i32::MAX)) as i32],
+    )?;
+    h5.push_f64(&format!("{g}/segment_dist_x"), &[SEGMENT_M * seg.k as f64])?;
+    h5.push_f64(&format!("{g}/segment_length"), &[SEGMENT_M])?;
+    h5.push_i32(
+        &format!("{g}/segment_ph_cnt"),
+        &[seg.photons.min(i32::MAX as u64) as i32],
+    )?;
+    h5.push_i64(
+        &format!("{g}/ph_index_beg"),
+        &[seg.first.min(i64::MAX as u64) as i64],
+    )?;
+    h5.push_f64(&format!("{g}/reference_photon_lat"), &[seg.reference.0])?;
+    h5.push_f64(&format!("{g}/reference_photon_lon"), &[seg.reference.1])?;
+    h5.push_f64(&format!("{g}/delta_time"), &[seg.reference.2])
 }
 
 /// `signal_conf_ph`: high confidence (4) for laser photons, noise (0) for solar and dark
@@ -322,7 +374,7 @@ impl Atl03 {
             f("lat_ph", Kind::F64, units, "latitude of the photon event (local y without a frame: see /@coordinates)"),
             f("lon_ph", Kind::F64, units, "longitude of the photon event (local x without a frame: see /@coordinates)"),
             f("delta_time", Kind::F64, "seconds since 2018-01-01", "transmit time of the shot the photon belongs to, GPS seconds less atlas_sdp_gps_epoch"),
-            f("dist_ph_along", Kind::F64, "m", "along-track distance from the track's first pulse"),
+            f("dist_ph_along", Kind::F64, "m", "along-track distance from the start of the photon's 20 m segment (geolocation/segment_dist_x)"),
             f("dist_ph_across", Kind::F64, "m", "across-track distance from the pulse's nadir point, positive to the left of the track"),
             f("ph_id_pulse", Kind::U8, "1", "the shot within its major frame of 200, counted from 1: pulse_id % 200 + 1"),
             f("pce_mframe_cnt", Kind::U32, "1", "the major frame of 200 shots: pulse_id // 200"),
@@ -330,12 +382,28 @@ impl Atl03 {
             f("quality_ph", Kind::I8, "1", "0: nominal (always)"),
             f("truth_source", Kind::U8, "1", "not in the real product: the simulation's truth, 0 laser, 1 solar, 2 dark"),
         ])?;
+        let group = format!("{name}/geolocation");
+        self.h5.group(&group, &[])?;
+        let f = |path: &str, kind, units, description| {
+            Field::new(&group, path, kind, units, description)
+        };
+        self.h5.datasets(&[
+            f("segment_id", Kind::I32, "1", "the segment's number along the track, from 1 at the track's first pulse (the real product counts from the equator)"),
+            f("segment_dist_x", Kind::F64, "m", "along-track distance of the segment's start from the track's first pulse"),
+            f("segment_length", Kind::F64, "m", "the segment's along-track length"),
+            f("segment_ph_cnt", Kind::I32, "1", "photon events in the segment: those of the pulses whose nadir point falls in it"),
+            f("ph_index_beg", Kind::I64, "1", "index of the segment's first photon in heights/, counted from 1 (0: none)"),
+            f("reference_photon_lat", Kind::F64, units, "latitude of the segment's first photon (NaN: none)"),
+            f("reference_photon_lon", Kind::F64, units, "longitude of the segment's first photon (NaN: none)"),
+            f("delta_time", Kind::F64, "seconds since 2018-01-01", "transmit time of the shot of the segment's first photon (NaN: none)"),
+        ])?;
         self.tracks.insert(
             pulse.line,
             Track {
                 name,
                 first: pulse.origin,
                 sources: Vec::new(),
+                segment: None,
             },
         );
         Ok(())
@@ -350,6 +418,21 @@ impl Atl03 {
         let b = format!("{}/heights", track.name);
         let along = (pulse.origin - track.first).truncate();
         let unit = along.try_normalize();
+        // the pulse's segment, by its nadir point's distance along the track; the one before
+        // is written once the track leaves it, with any it skipped (no pulse: no photons)
+        let k = (along.length() / SEGMENT_M).floor() as i64;
+        match track.segment {
+            Some(seg) if seg.k == k => {}
+            Some(seg) => {
+                write_segment(&mut self.h5, &track.name, &seg)?;
+                for skipped in seg.k + 1..k {
+                    write_segment(&mut self.h5, &track.name, &Segment::empty(skipped))?;
+                }
+                track.segment = Some(Segment::empty(k));
+            }
+            None => track.segment = Some(Segment::empty(k)),
+        }
+        let start = SEGMENT_M * k as f64;
         let n = rows.len();
         let (mut h, mut lat, mut lon, mut time) = (
             Vec::with_capacity(n),
@@ -373,16 +456,24 @@ impl Atl03 {
             let off = (p - pulse.origin).truncate();
             match unit {
                 Some(u) => {
-                    d_along.push(from_first.dot(u));
+                    d_along.push(from_first.dot(u) - start);
                     d_across.push(u.perp_dot(off));
                 }
                 None => {
-                    d_along.push(0.0);
+                    d_along.push(from_first.length() - start);
                     d_across.push(off.length());
                 }
             }
             count.push((k + 1).min(255) as u8);
             track.sources.push(r.source);
+        }
+        if let (Some(seg), false) = (track.segment.as_mut(), rows.is_empty()) {
+            if seg.photons == 0 {
+                // the photons before this pulse's, in the track: the one just pushed is last
+                seg.first = (track.sources.len() - n) as u64 + 1;
+                seg.reference = (lat[0], lon[0], pulse.gps_time_s - MISSION_EPOCH_GPS_S);
+            }
+            seg.photons += n as u64;
         }
         let sources: Vec<u8> = rows.iter().map(|r| r.source).collect();
         let hw = &mut self.h5;
@@ -409,6 +500,9 @@ impl Atl03 {
     /// only, so this one is written whole, 5 bytes a photon) and closes the file.
     pub fn finish(mut self) -> Result<()> {
         for track in std::mem::take(&mut self.tracks).into_values() {
+            if let Some(seg) = &track.segment {
+                write_segment(&mut self.h5, &track.name, seg)?;
+            }
             let conf: Vec<i8> = track
                 .sources
                 .iter()

@@ -61,6 +61,31 @@ struct Column {
     bytes: Vec<u8>,
 }
 
+/// A number's little-endian bytes, as HDF5's little-endian types store it.
+trait LittleEndian: Copy {
+    fn extend_le(self, out: &mut Vec<u8>);
+}
+
+macro_rules! little_endian {
+    ($($t:ty),*) => {$(
+        impl LittleEndian for $t {
+            fn extend_le(self, out: &mut Vec<u8>) {
+                out.extend_from_slice(&self.to_le_bytes());
+            }
+        }
+    )*};
+}
+little_endian!(f64, f32, u64, u32, i64, i32);
+
+/// The little-endian bytes of `v`, element after element.
+fn le_bytes<T: LittleEndian>(v: &[T]) -> Vec<u8> {
+    let mut out = Vec::with_capacity(std::mem::size_of_val(v));
+    for &x in v {
+        x.extend_le(&mut out);
+    }
+    out
+}
+
 /// Fields drop in order: the HDF5 session closes before `pending` removes an unfinished file.
 pub struct H5Writer {
     file: Option<File>,
@@ -186,49 +211,31 @@ impl H5Writer {
     }
 
     pub fn push_f64(&mut self, path: &str, v: &[f64]) -> Result<()> {
-        self.push(
-            path,
-            &v.iter().flat_map(|x| x.to_le_bytes()).collect::<Vec<u8>>(),
-        )
+        self.push(path, &le_bytes(v))
     }
 
     pub fn push_f32(&mut self, path: &str, v: &[f32]) -> Result<()> {
-        self.push(
-            path,
-            &v.iter().flat_map(|x| x.to_le_bytes()).collect::<Vec<u8>>(),
-        )
+        self.push(path, &le_bytes(v))
     }
 
     pub fn push_u64(&mut self, path: &str, v: &[u64]) -> Result<()> {
-        self.push(
-            path,
-            &v.iter().flat_map(|x| x.to_le_bytes()).collect::<Vec<u8>>(),
-        )
+        self.push(path, &le_bytes(v))
     }
 
     pub fn push_u32(&mut self, path: &str, v: &[u32]) -> Result<()> {
-        self.push(
-            path,
-            &v.iter().flat_map(|x| x.to_le_bytes()).collect::<Vec<u8>>(),
-        )
+        self.push(path, &le_bytes(v))
+    }
+
+    pub fn push_i32(&mut self, path: &str, v: &[i32]) -> Result<()> {
+        self.push(path, &le_bytes(v))
+    }
+
+    pub fn push_i64(&mut self, path: &str, v: &[i64]) -> Result<()> {
+        self.push(path, &le_bytes(v))
     }
 
     pub fn push_u8(&mut self, path: &str, v: &[u8]) -> Result<()> {
         self.push(path, v)
-    }
-
-    pub fn push_i32(&mut self, path: &str, v: &[i32]) -> Result<()> {
-        self.push(
-            path,
-            &v.iter().flat_map(|x| x.to_le_bytes()).collect::<Vec<u8>>(),
-        )
-    }
-
-    pub fn push_i64(&mut self, path: &str, v: &[i64]) -> Result<()> {
-        self.push(
-            path,
-            &v.iter().flat_map(|x| x.to_le_bytes()).collect::<Vec<u8>>(),
-        )
     }
 
     pub fn push_i8(&mut self, path: &str, v: &[i8]) -> Result<()> {

@@ -307,6 +307,11 @@ fn atl03_photons_are_the_parquet_photons() {
     let frame_count = u32s(&f, &format!("{g}/pce_mframe_cnt"));
     let epoch = f64s(&f, "ancillary_data/atlas_sdp_gps_epoch");
     assert_eq!(epoch, vec![1_198_800_018.0]);
+    let orient = f
+        .dataset("orbit_info/sc_orient")
+        .and_then(|d| d.read_i8())
+        .unwrap();
+    assert_eq!(orient, vec![0], "backward: gt1l is a strong beam");
     let truth = f
         .dataset(&format!("{g}/truth_source"))
         .and_then(|d| d.read_u8())
@@ -494,6 +499,9 @@ with h5py.File(d + "/gedi/waveforms_l1b.h5", "r") as f:
     assert np.max(np.abs(lat - la)) < 1e-8 and np.max(np.abs(lon - lo)) < 1e-8, (lat - la, lon - lo)
     print("L1B against pyproj: largest differences", np.max(np.abs(lat - la)), np.max(np.abs(lon - lo)), "degrees")
 with h5py.File(d + "/atl/photons_atl03.h5", "r") as f:
+    assert f.attrs["short_name"].decode() == "ATL03" and "simulated" in f.attrs, dict(f.attrs)
+    for k, dt in [("sc_orient", np.int8), ("rgt", np.int16), ("cycle_number", np.int8)]:
+        assert f["orbit_info/" + k].dtype == dt, k
     g = f["gt1l/heights"]
     for k in ["h_ph", "lat_ph", "lon_ph", "delta_time", "dist_ph_along", "dist_ph_across",
               "ph_id_pulse", "ph_id_count", "quality_ph", "signal_conf_ph"]:

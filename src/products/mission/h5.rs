@@ -20,6 +20,7 @@ pub enum Kind {
     U32,
     U8,
     I8,
+    I16,
     I32,
     I64,
 }
@@ -30,6 +31,7 @@ impl Kind {
             Kind::F64 | Kind::U64 | Kind::I64 => 8,
             Kind::F32 | Kind::U32 | Kind::I32 => 4,
             Kind::U8 | Kind::I8 => 1,
+            Kind::I16 => 2,
         }
     }
 }
@@ -75,7 +77,7 @@ macro_rules! little_endian {
         }
     )*};
 }
-little_endian!(f64, f32, u64, u32, i64, i32);
+little_endian!(f64, f32, u64, u32, i64, i32, i16);
 
 /// The little-endian bytes of `v`, element after element.
 fn le_bytes<T: LittleEndian>(v: &[T]) -> Vec<u8> {
@@ -159,6 +161,7 @@ impl H5Writer {
                         Kind::U32 => b.with_u32_data(&[]),
                         Kind::U8 => b.with_u8_data(&[]),
                         Kind::I8 => b.with_i8_data(&[]),
+                        Kind::I16 => b.with_i16_data(&[]),
                         Kind::I32 => b.with_i32_data(&[]),
                         Kind::I64 => b.with_i64_data(&[]),
                     };
@@ -231,6 +234,10 @@ impl H5Writer {
     }
 
     pub fn push_i64(&mut self, path: &str, v: &[i64]) -> Result<()> {
+        self.push(path, &le_bytes(v))
+    }
+
+    pub fn push_i16(&mut self, path: &str, v: &[i16]) -> Result<()> {
         self.push(path, &le_bytes(v))
     }
 

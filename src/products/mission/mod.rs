@@ -77,6 +77,21 @@ fn epoch(h5: &mut H5Writer, group: &str, name: &str) -> Result<()> {
     h5.push_f64(&format!("{group}/{name}"), &[MISSION_EPOCH_GPS_S])
 }
 
+/// ATL03's `/orbit_info`: `sc_orient` 0 (backward), under which ATLAS's left beams (gt1l, gt2l,
+/// gt3l) are the strong ones, as the campaign's first beam (gt1l) is; `rgt` and
+/// `cycle_number`, which a simulation has not, hold 0 and say so.
+fn orbit_info(h5: &mut H5Writer) -> Result<()> {
+    h5.group("orbit_info", &[])?;
+    h5.datasets(&[
+        Field::new("orbit_info", "sc_orient", Kind::I8, "1", "spacecraft orientation: 0 backward (the left beams gt1l, gt2l, gt3l strong), 1 forward, 2 transition; 0 here"),
+        Field::new("orbit_info", "rgt", Kind::I16, "1", "reference ground track: none in a simulation (0, outside ATLAS's 1-1387)"),
+        Field::new("orbit_info", "cycle_number", Kind::I8, "1", "91-day cycle: none in a simulation (0)"),
+    ])?;
+    h5.push_i8("orbit_info/sc_orient", &[0])?;
+    h5.push_i16("orbit_info/rgt", &[0])?;
+    h5.push_i8("orbit_info/cycle_number", &[0])
+}
+
 /// How a local point becomes a file's latitude, longitude and height (see the module's
 /// comment).
 enum Geo {
@@ -341,9 +356,17 @@ pub fn signal_confidence(source: u8) -> i8 {
 
 impl Atl03 {
     pub fn create(path: &Path, campaign: &str, frame: Option<&Frame>) -> Result<Atl03> {
-        let attrs = root_attrs(campaign, frame, "ATL03-like (simulated)")?;
+        let mut attrs = root_attrs(campaign, frame, "ATL03")?;
+        attrs.push((
+            "simulated",
+            format!(
+                "simulated by lidarsim {}, not an ATLAS granule: laid out as ATL03 so its readers open it",
+                env!("CARGO_PKG_VERSION")
+            ),
+        ));
         let mut h5 = H5Writer::create(path, &attrs)?;
         epoch(&mut h5, "ancillary_data", "atlas_sdp_gps_epoch")?;
+        orbit_info(&mut h5)?;
         Ok(Atl03 {
             h5,
             tracks: BTreeMap::new(),

@@ -166,17 +166,11 @@ impl Recorder {
         e
     }
 
-    /// Variance of each bin of [`Recorder::laser_photons`] besides the laser photons' own
-    /// shot noise, photons²: electronic noise and the background's shot noise when the record
-    /// is noisy, the digitiser's rounding (a uniform error of one count) when there is one,
-    /// each over q² back at the detector; 0 for the mean waveform.
-    pub fn noise_floor_photons(&self, w: &Waveform) -> f64 {
-        let q = self.quantum_efficiency;
-        self.noise_floor_photoelectrons(w) / (q * q)
-    }
-
-    /// [`Recorder::noise_floor_photons`] in photoelectrons², the detector's own units, where
-    /// the laser's shot noise is Poisson: variance equal to the mean.
+    /// Variance of each bin of [`Recorder::laser_photoelectrons`] besides the laser's own shot
+    /// noise, photoelectrons² (the detector's own units, where that shot noise is Poisson:
+    /// variance equal to the mean): electronic noise and the background's shot noise when the
+    /// record is noisy, the digitiser's rounding (a uniform error of one count) when there is
+    /// one; 0 for the mean waveform.
     pub fn noise_floor_photoelectrons(&self, w: &Waveform) -> f64 {
         let mut pe = 0.0;
         if let Some(sd) = self.electronic_sd {
@@ -192,15 +186,6 @@ impl Recorder {
     fn mean_photoelectrons_background(&self, w: &Waveform) -> f64 {
         self.quantum_efficiency * w.solar_photons_per_bin.max(0.0) as f64
             + self.dark_count_hz * w.bin_ns as f64 * 1e-9
-    }
-
-    /// The laser photons in a record: back to photons at the detector, background removed.
-    pub fn laser_photons(&self, r: &Record) -> Vec<f32> {
-        let q = self.quantum_efficiency;
-        self.laser_photoelectrons(r)
-            .into_iter()
-            .map(|v| (v as f64 / q) as f32)
-            .collect()
     }
 
     /// The laser photoelectrons in a record, background removed: what the decomposition sees
@@ -449,15 +434,17 @@ mod tests {
                 pulse_id: id,
                 ..w.clone()
             });
-            for v in r.laser_photons(&rec) {
+            // in photons at the detector: photoelectrons over q
+            for v in r.laser_photoelectrons(&rec) {
+                let v = v as f64 / r.quantum_efficiency;
                 n += 1.0;
-                sum += v as f64;
-                sum2 += (v as f64).powi(2);
+                sum += v;
+                sum2 += v.powi(2);
             }
         }
         let mean = sum / n;
         let var = (sum2 / n - mean * mean) * n / (n - 1.0);
-        let floor = r.noise_floor_photons(&w);
+        let floor = r.noise_floor_photoelectrons(&w) / r.quantum_efficiency.powi(2);
         // (1.5² + 0.5 × 3 + 1) / 0.5² + (1 / (12 × 16)) / 0.5²
         let want = (2.25 + 2.5 + 1.0 / 192.0) / 0.25;
         assert!((floor - want).abs() < 1e-12, "{floor} vs {want}");
@@ -469,7 +456,7 @@ mod tests {
         assert!(mean.abs() < 4.0 * (var / n).sqrt(), "mean {mean}");
         r.electronic_sd = None;
         r.digitiser = None;
-        assert_eq!(r.noise_floor_photons(&w), 0.0);
+        assert_eq!(r.noise_floor_photoelectrons(&w), 0.0);
     }
 
     #[test]
@@ -492,7 +479,9 @@ mod tests {
         });
         let rec = r.record(&w);
         // noise off: only the rounding of the counts is lost, at most half a count
-        for (got, want) in r.laser_photons(&rec).iter().zip(&w.laser_photons) {
+        let q = r.quantum_efficiency as f32;
+        let photons = r.laser_photoelectrons(&rec).into_iter().map(|v| v / q);
+        for (got, want) in photons.zip(&w.laser_photons) {
             assert!(
                 (got - want).abs() <= 0.5 / (4.0 * 0.25) + 1e-4,
                 "{got} vs {want}"

@@ -105,12 +105,18 @@ pub(super) fn summit_near(s: &[f64], centre: f64, reach: f64) -> f64 {
 /// centre, the excursion that makes it, from whose summit the fit of a bump of noise may
 /// wander that far. Without the others taken out, a bump of noise on a strong return's flank
 /// would ride on the return's own filtered light.
-pub(super) fn standing_out(comps: Vec<Component>, y: &[f64], u: f64, sigma: f64) -> Vec<Component> {
+/// `filtered` is [`matched`] of `y` itself, which a lone component is judged on.
+pub(super) fn standing_out(
+    comps: Vec<Component>,
+    y: &[f64],
+    filtered: &[f64],
+    u: f64,
+    sigma: f64,
+) -> Vec<Component> {
     if comps.len() < 2 {
-        let s = matched(y, sigma);
         return comps
             .into_iter()
-            .filter(|c| summit_near(&s, c.centre_bin, reach(c, sigma)) >= u)
+            .filter(|c| summit_near(filtered, c.centre_bin, reach(c, sigma)) >= u)
             .collect();
     }
     let params: Vec<Params> = comps

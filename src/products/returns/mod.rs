@@ -412,8 +412,8 @@ fn decompose_bins(
         method == Decomposition::Gaussian,
         None,
     );
-    let comps = match noise.alarm {
-        Some(u) => alarm::standing_out(comps, y, u, hint),
+    let comps = match &alarmed {
+        Some((u, s)) => alarm::standing_out(comps, y, s, *u, hint),
         None => comps,
     };
     select(comps, threshold.area, max_returns)

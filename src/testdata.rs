@@ -26,6 +26,21 @@ pub fn rami_dir() -> Option<PathBuf> {
     }
 }
 
+/// The real mission granules, `../shared/reference` beside the repository, when present;
+/// otherwise the test skips, saying so.
+pub fn reference_dir() -> Option<PathBuf> {
+    let d = repo().join("../shared/reference");
+    if d.join("gedi").is_dir() && d.join("icesat2").is_dir() {
+        Some(d)
+    } else {
+        skip(&format!(
+            "real GEDI and ATL03 granules not found at {}",
+            d.display()
+        ));
+        None
+    }
+}
+
 /// Says on stderr why a test cannot run for want of data; fails the test instead when
 /// `LIDARSIM_REQUIRE_DATA=1`.
 pub fn skip(why: &str) {

@@ -3,6 +3,7 @@
 //! waveforms with their fitted components. Text needs a font: DejaVu Sans ships in `assets/`
 //! and is compiled in, so no system font library is needed.
 
+pub mod mission;
 pub mod plot;
 
 use crate::error::{Error, Result};

@@ -171,9 +171,10 @@ fn as_written<T: serde::Serialize>(v: &T) -> String {
 
 /// The mission-shaped files in a run folder, and what the waveform record holds.
 fn mission_section(out: &Path, inst: &crate::campaign::Instrument, crs: Option<&str>) -> String {
-    let place = crs.map_or("local metres, no CRS".to_string(), |c| {
-        format!("latitude = northing and longitude = easting in {c}")
-    });
+    let place = crs.map_or(
+        "local metres, no frame: latitude = y, longitude = x".to_string(),
+        |c| format!("degrees on WGS 84 from {c}"),
+    );
     let mut text = String::new();
     if out.join(crate::products::mission::L1B_FILE).is_file() {
         let mut record = vec![];
@@ -197,14 +198,20 @@ fn mission_section(out: &Path, inst: &crate::campaign::Instrument, crs: Option<&
             ));
         }
         text += &format!(
-            "\nGEDI L1B-like waveforms for GEDI tools: `waveforms_l1b.h5` ({place}); the record has {}.\n",
+            "\nGEDI L1B- and L2A-like files for GEDI tools: `waveforms_l1b.h5` and `waveforms_l2a.h5` ({place}); the record has {}.\n",
             record.join(", ")
         );
+        if out.join("l2a_waveforms.png").is_file() {
+            text += "\nA few records against elevation, with the L2A ground (lowest mode) and RH98 beside the truth under the footprint (the scene's ground and highest point; dashed):\n\n![Records with the L2A ground and RH98 against the truth](l2a_waveforms.png)\n";
+        }
     }
     if out.join(crate::products::mission::ATL03_FILE).is_file() {
         text += &format!(
             "\nICESat-2 ATL03-like photons for ATL03 tools: `photons_atl03.h5` ({place}); `signal_conf_ph` is 4 for laser photons and 0 for solar and dark ones, and `truth_source` says which.\n"
         );
+        if out.join("atl03_photons.png").is_file() {
+            text += "\nThe first ground track's photons, height against along-track distance, coloured by their truth:\n\n![ATL03 photons by their truth](atl03_photons.png)\n";
+        }
     }
     text
 }

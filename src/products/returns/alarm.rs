@@ -37,7 +37,7 @@ fn weights(sigma: f64) -> Vec<f64> {
 /// The record filtered with the return's shape, s_i = Σ_j w_j y_{i+j-reach} / Σ w: bins
 /// beyond the gate count as zero, so s has the same variance everywhere but at the gate's
 /// ends, where it is lower (and false alarms rarer).
-pub(super) fn matched(y: &[f64], sigma: f64) -> Vec<f64> {
+pub(crate) fn matched(y: &[f64], sigma: f64) -> Vec<f64> {
     let w = weights(sigma);
     let reach = w.len() / 2;
     let total: f64 = w.iter().sum();
@@ -224,7 +224,7 @@ fn standard_level(bins: usize, sigma: f64, alpha: f64) -> f64 {
 /// level a gate of `bins` bins of noise alone (variance `noise_var` per bin) crosses `alpha`
 /// times on average and the filtered summit of a return whose own summit is `threshold` per
 /// bin (a return of σ equal to the filter's: √½ of its summit).
-pub(super) fn alarm_level(
+pub(crate) fn alarm_level(
     bins: usize,
     sigma: f64,
     noise_var: f64,

@@ -12,7 +12,7 @@
 //! waveform the optimum is still the exact parameters. Any background (solar, dark) must be
 //! subtracted by the caller: the model has no baseline.
 
-mod alarm;
+pub(crate) mod alarm;
 mod detect;
 mod fit;
 mod solve;

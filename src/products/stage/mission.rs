@@ -1,57 +1,184 @@
-//! The mission files' writers: `waveforms_l1b.h5` from the instrument's records of the first
-//! band, `photons_atl03.h5` from its photon events.
+//! The mission files' writers: `waveforms_l1b.h5` and `waveforms_l2a.h5` from the instrument's
+//! records of the first band, `photons_atl03.h5` from its photon events.
 
 use super::part::{Part, Writer};
 use crate::error::Result;
 use crate::plan::Plan;
-use crate::products::mission::{Atl03, L1b, ATL03_FILE, L1B_FILE};
+use crate::products::figures::mission::{atl03_photons, l2a_waveforms, PhotonDot, ShotFigure};
+use crate::products::mission::metrics::metrics;
+use crate::products::mission::track_name;
+use crate::products::mission::truth::under_footprint;
+use crate::products::mission::{
+    stale, Atl03, Gate, L1b, L2a, Shot, ATL03_FILE, L1B_FILE, L2A_FILE,
+};
 use crate::products::report::summary::ProductsSummary;
+use crate::scene::Scene;
 use crate::waveform::record::Recorder;
 use rayon::prelude::*;
 
-pub(super) struct L1bWriter<'a> {
-    pub file: L1b,
+/// `waveforms_l1b.h5` and `waveforms_l2a.h5`, from the same records.
+pub(super) struct WaveformFilesWriter<'a> {
+    pub l1b: L1b,
+    pub l2a: L2a,
     pub recorder: Recorder,
     pub plan: &'a Plan,
+    pub scene: &'a Scene,
+    pub out: &'a std::path::Path,
+    /// σ of the transmitted pulse, s; the threshold of `stale_return_flag`, photons.
+    pub pulse_sigma_s: f64,
+    pub threshold_photons: f64,
+    pub false_alarm_rate: f64,
+    /// The footprint's edge and the beam's σ, in tan-space.
+    pub edge_tan: f64,
+    pub sigma_tan: f64,
+    /// The frame's origin height (0 without a frame): local z to the files' heights.
+    pub height0: f64,
+    /// The shots `l2a_waveforms.png` shows (four spread over the campaign), as they come.
+    pub figure_ids: Vec<u64>,
+    pub figures: Vec<ShotFigure>,
 }
 
-impl Writer for L1bWriter<'_> {
+/// The waveform figure's shots: four pulses spread evenly over the plan.
+pub(super) fn figure_ids(pulses: usize) -> Vec<u64> {
+    let mut ids: Vec<u64> = (0..4).map(|j| (pulses * (2 * j + 1) / 8) as u64).collect();
+    ids.dedup();
+    ids
+}
+
+impl Writer for WaveformFilesWriter<'_> {
     fn add(&mut self, part: &Part) -> Result<()> {
-        let records: Vec<_> = part
+        let shots: Vec<_> = part
             .first
             .par_iter()
-            .map(|w| self.recorder.record(w))
+            .map(|w| {
+                let record = self.recorder.record(w);
+                let pulse = self.plan.pulse(w.pulse_id);
+                let floor = self.recorder.noise_floor_photoelectrons(w);
+                let gain = self.recorder.digitiser.as_ref().map_or(1.0, |d| d.gain);
+                let sigma_r =
+                    self.recorder.return_sigma_s(self.pulse_sigma_s) / (w.bin_ns as f64 * 1e-9);
+                let y: Vec<f64> = self
+                    .recorder
+                    .laser_photoelectrons(&record)
+                    .iter()
+                    .map(|&v| v as f64)
+                    .collect();
+                let found = metrics(&y, floor.sqrt(), sigma_r, self.false_alarm_rate);
+                let (mean, _) = self.recorder.mean_photoelectrons(w);
+                let truth_found = metrics(&mean, floor.sqrt(), sigma_r, self.false_alarm_rate);
+                let truth = under_footprint(self.scene, &pulse, self.edge_tan, self.sigma_tan);
+                let figure = self.figure_ids.contains(&w.pulse_id).then(|| {
+                    // the elevation of (fractional) sample k's centre
+                    let at = |k: f64| {
+                        let t = (w.t0_ns + (k + 0.5) * w.bin_ns as f64) * 1e-9;
+                        (pulse.origin + pulse.direction * (crate::C * t / 2.0)).z + self.height0
+                    };
+                    ShotFigure {
+                        pulse_id: w.pulse_id,
+                        elevation: (0..y.len()).map(|k| at(k as f64)).collect(),
+                        record: y.clone(),
+                        mean: mean.clone(),
+                        ground: found.as_ref().map(|m| at(m.ground)),
+                        rh98: found.as_ref().map(|m| at(m.rh[98])),
+                        truth_ground: truth.ground.map(|z| z + self.height0),
+                        truth_top: truth.canopy_top.map(|z| z + self.height0),
+                    }
+                });
+                let sd = gain * floor.sqrt();
+                (pulse, record, sd, found, truth_found, truth, figure)
+            })
             .collect();
-        for (w, r) in part.first.iter().zip(&records) {
-            self.file.add(&self.plan.pulse(w.pulse_id), w, r)?;
+        for (w, shot) in part.first.iter().zip(shots) {
+            let (pulse, record, sd, found, truth_found, truth, figure) = shot;
+            self.figures.extend(figure);
+            self.l1b.add(&pulse, w, &record, sd)?;
+            self.l2a.add(&Shot {
+                pulse: &pulse,
+                waveform: w,
+                found,
+                truth_found,
+                truth,
+                stale: stale(w, self.threshold_photons),
+            })?;
         }
         Ok(())
     }
 
     fn finish(self: Box<Self>, _: &mut ProductsSummary) -> Result<Vec<String>> {
-        self.file.finish()?;
-        Ok(vec![L1B_FILE.to_string()])
+        self.l1b.finish()?;
+        self.l2a.finish()?;
+        let mut files = vec![L1B_FILE.to_string(), L2A_FILE.to_string()];
+        if !self.figures.is_empty() {
+            l2a_waveforms(&self.out.join(L2A_FIGURE), &self.figures)?;
+            files.push(L2A_FIGURE.to_string());
+        }
+        Ok(files)
     }
 }
+
+/// The figures' files.
+pub const L2A_FIGURE: &str = "l2a_waveforms.png";
+pub const ATL03_FIGURE: &str = "atl03_photons.png";
+
+/// Most photons `atl03_photons.png` keeps: past this, every other is dropped and the step
+/// doubled, so memory stays fixed whatever the track's length (a dot is a pixel or two).
+const FIGURE_PHOTONS: usize = 200_000;
 
 pub(super) struct Atl03Writer<'a> {
     pub file: Atl03,
     pub plan: &'a Plan,
+    pub out: &'a std::path::Path,
+    /// The frame's origin height (0 without a frame).
+    pub height0: f64,
+    /// The first track's photons for the figure: every `step`-th, counted in `seen`.
+    pub dots: Vec<PhotonDot>,
+    pub step: usize,
+    pub seen: usize,
 }
 
 impl Writer for Atl03Writer<'_> {
     fn add(&mut self, part: &Part) -> Result<()> {
-        for rows in part
-            .first_photons()
-            .chunk_by(|a, b| a.pulse_id == b.pulse_id)
-        {
-            self.file.add(&self.plan.pulse(rows[0].pulse_id), rows)?;
+        // the photons come in pulse order, as the waveforms do; a pulse may have none
+        let mut photons = part.first_photons();
+        for w in &part.first {
+            let n = photons
+                .iter()
+                .position(|r| r.pulse_id != w.pulse_id)
+                .unwrap_or(photons.len());
+            let (rows, rest) = photons.split_at(n);
+            photons = rest;
+            if self.plan.pulse(w.pulse_id).line == 0 {
+                for r in rows {
+                    if self.seen.is_multiple_of(self.step) {
+                        self.dots.push(PhotonDot {
+                            along: r.along_track_m,
+                            height: r.z + self.height0,
+                            source: r.source,
+                        });
+                    }
+                    self.seen += 1;
+                    if self.dots.len() >= FIGURE_PHOTONS {
+                        self.dots = self.dots.iter().step_by(2).copied().collect();
+                        self.step *= 2;
+                    }
+                }
+            }
+            let gate = Gate {
+                start_s: w.t0_ns * 1e-9,
+                length_s: w.laser_photons.len() as f64 * w.bin_ns as f64 * 1e-9,
+            };
+            self.file.add(&self.plan.pulse(w.pulse_id), gate, rows)?;
         }
         Ok(())
     }
 
     fn finish(self: Box<Self>, _: &mut ProductsSummary) -> Result<Vec<String>> {
         self.file.finish()?;
-        Ok(vec![ATL03_FILE.to_string()])
+        let mut files = vec![ATL03_FILE.to_string()];
+        if !self.dots.is_empty() {
+            atl03_photons(&self.out.join(ATL03_FIGURE), &track_name(0), &self.dots)?;
+            files.push(ATL03_FIGURE.to_string());
+        }
+        Ok(files)
     }
 }

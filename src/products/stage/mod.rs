@@ -11,7 +11,7 @@ use crate::campaign::{InstrumentKind, Loaded};
 use crate::error::{Error, Result};
 use crate::fsutil::write_text_atomic;
 use crate::plan::Plan;
-use crate::products::mission::{Atl03, L1b, ATL03_FILE, L1B_FILE};
+use crate::products::mission::{Atl03, L1b, L2a, Setup, SunAngles, ATL03_FILE, L1B_FILE};
 use crate::products::report::summary::{ProductsSummary, WaveformTotals};
 use crate::progress::{log, progress};
 use crate::scene::Scene;
@@ -74,23 +74,58 @@ fn writers<'a>(
             bands,
             plan.len(),
         )));
-        let file = Atl03::create(&out.join(ATL03_FILE), &c.name, c.frame.as_ref())?;
-        list.push(Box::new(mission::Atl03Writer { file, plan }));
+        let sun = SunAngles::new(c.sun.as_ref());
+        let file = Atl03::create(&out.join(ATL03_FILE), &c.name, c.frame.as_ref(), sun)?;
+        list.push(Box::new(mission::Atl03Writer {
+            file,
+            plan,
+            out,
+            height0: c.frame.as_ref().map_or(0.0, |f| f.origin[2]),
+            dots: Vec::new(),
+            step: 1,
+            seen: 0,
+        }));
     }
     if want.l1b {
-        let file = L1b::create(
-            &out.join(L1B_FILE),
-            &c.name,
-            c.frame.as_ref(),
-            pulse_sigma_s(&c.instrument),
-            c.instrument.digitiser.is_some(),
-            c.instrument.detection_threshold_photons,
-        )?;
+        let setup = Setup {
+            campaign: &c.name,
+            frame: c.frame.as_ref(),
+            pulse_sigma_s: pulse_sigma_s(&c.instrument),
+            counts: c.instrument.digitiser.is_some(),
+            threshold_photons: c.instrument.detection_threshold_photons,
+            sun: SunAngles::new(c.sun.as_ref()),
+            first_gps_s: if !plan.is_empty() {
+                plan.pulse(0).gps_time_s
+            } else {
+                0.0
+            },
+            // 32 hex digits for the uuid of /METADATA
+            fingerprint: [b"uuid".as_slice(), b"file"]
+                .iter()
+                .map(|salt| {
+                    crate::fsutil::fingerprint(&[salt, c.name.as_bytes(), &c.seed.to_le_bytes()])
+                })
+                .collect(),
+        };
+        let l1b = L1b::create(&out.join(L1B_FILE), &setup)?;
+        let l2a = L2a::create(&out.join(crate::products::mission::L2A_FILE), &setup)?;
         let recorder = Recorder::new(&c.instrument, c.seed);
-        list.push(Box::new(mission::L1bWriter {
-            file,
+        let edge_tan = (c.instrument.footprint_half_angle_mrad * 1e-3).tan();
+        list.push(Box::new(mission::WaveformFilesWriter {
+            l1b,
+            l2a,
             recorder,
             plan,
+            scene,
+            out,
+            pulse_sigma_s: setup.pulse_sigma_s,
+            threshold_photons: setup.threshold_photons,
+            false_alarm_rate: c.instrument.false_alarm_rate(),
+            edge_tan,
+            sigma_tan: edge_tan / (-2.0 * c.instrument.edge_energy_fraction.ln()).sqrt(),
+            height0: c.frame.as_ref().map_or(0.0, |f| f.origin[2]),
+            figure_ids: mission::figure_ids(plan.len()),
+            figures: Vec::new(),
         }));
     }
     Ok(list)

@@ -391,6 +391,36 @@ fn spaceborne_multibeam_fires_every_beam_at_every_shot() {
     }
 }
 
+/// A beam's `relative_energy` scales its pulse: over a plane, the weak beam of a pair
+/// (0.25) returns a quarter of the strong beam's photons, shot by shot, within 3 standard
+/// errors of the shots' ratios (the Monte Carlo noise of each pulse's own rays).
+#[test]
+fn a_weak_beam_returns_a_quarter_of_the_strong_beams_light() {
+    let dir = tmp("e2e_weak_beam");
+    plane_scene(&dir, 0.3, 200.0);
+    let camp = write(
+        &dir,
+        "campaign.yaml",
+        "name: pair\nscene: plane.yaml\nseed: 3\nwavelength_nm: 532\ninstrument: { pulse_energy_j: 0.001, pulse_fwhm_ns: 1, footprint_half_angle_mrad: 0.05, fov_half_angle_mrad: 0.3, receiver_area_m2: 0.01, bin_ns: 0.5 }\nplatform: { kind: spaceborne, altitude_m: 500, ground_speed_m_s: 7000, prf_hz: 700, track: { start: [0, 0], end: [190, 0] }, beams: [ { cross_track_m: -45 }, { cross_track_m: 45, relative_energy: 0.25 } ] }\nsimulation: { method: forward, rays_per_pulse: 100, max_order: 1 }\n",
+    );
+    let out = dir.join("run");
+    run_ok(&camp, &out, &[]);
+    let w = waveforms(&out);
+    let total = |k: usize| -> f64 { w[k].laser_photons.iter().map(|&v| v as f64).sum() };
+    let ratios: Vec<f64> = (0..w.len() / 2)
+        .map(|s| total(2 * s + 1) / total(2 * s))
+        .collect();
+    let n = ratios.len() as f64;
+    assert_eq!(n, 20.0);
+    let mean = ratios.iter().sum::<f64>() / n;
+    let sd = (ratios.iter().map(|r| (r - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
+    let se = sd / n.sqrt();
+    assert!(
+        (mean - 0.25).abs() <= 3.0 * se + 1e-9,
+        "weak over strong {mean} (SE {se:e})"
+    );
+}
+
 // ---------------------------------------------------------------------------------------------
 // scenes
 

@@ -104,3 +104,71 @@ fn bench_names_the_repeated_orchard_by_an_absolute_path() {
         scene.display()
     );
 }
+
+/// The repeated orchard is the orchard's scene file with `repeat: true` and a header: nothing
+/// else may drift between the two.
+#[test]
+fn the_repeated_orchard_is_the_orchard_repeated() {
+    let read = |f: &str| std::fs::read_to_string(repo().join("scenes").join(f)).unwrap();
+    let body = |text: String| -> Vec<String> {
+        text.lines()
+            .filter(|l| !l.starts_with('#') && *l != "repeat: true")
+            .map(str::to_string)
+            .collect()
+    };
+    let repeated = read("rami_wco_repeated.yaml");
+    assert!(repeated.lines().any(|l| l == "repeat: true"));
+    assert_eq!(body(read("rami_wco.yaml")), body(repeated));
+}
+
+/// The bundled spaceborne campaigns write files that look like real granules to mission
+/// code: at their site (Wellington, 33.64 S, 19.00 E) and date, GEDI's gate and noise, and
+/// ATLAS's six beams, strong and weak as sc_orient 0 says, with a daytime background.
+#[test]
+fn bundled_mission_campaigns_look_like_granules() {
+    let Some(_) = rami_dir() else { return };
+    if !python_with("h5py, numpy", "h5py") {
+        return;
+    }
+    let dir = tmp("rami_granules");
+    run_cli(
+        &repo().join("pipelines/rami_wco_gedi.yaml"),
+        &dir.join("gedi"),
+        None,
+    );
+    run_cli(
+        &repo().join("pipelines/rami_wco_icesat2.yaml"),
+        &dir.join("atl"),
+        None,
+    );
+    let script = r#"
+import sys, h5py, numpy as np
+d = sys.argv[1]
+with h5py.File(d + "/gedi/waveforms_l1b.h5") as f:
+    b = f["BEAM0000"]
+    assert abs(b["geolocation/latitude_bin0"][0] + 33.64) < 0.01, b["geolocation/latitude_bin0"][0]
+    assert abs(b["geolocation/longitude_bin0"][0] - 19.00) < 0.01
+    # 2020-03-15T22:00:00Z in seconds since 2018-01-01
+    assert b["delta_time"][0] == 69544800.0, b["delta_time"][0]
+    assert b["rx_sample_count"][0] == 780
+    assert abs(b["noise_mean_corrected"][0] - 205) < 1 and abs(b["noise_stddev_corrected"][0] - 3.3) < 0.3
+with h5py.File(d + "/gedi/waveforms_l2a.h5") as f:
+    b = f["BEAM0000"]
+    assert b["quality_flag"][0] == 1
+    # the ground found within a metre of the scene's under the orchard's canopy
+    assert abs(b["elev_lowestmode"][0] - b["truth_ground_elev"][0]) < 1.0
+with h5py.File(d + "/atl/photons_atl03.h5") as f:
+    assert f["orbit_info/sc_orient"][0] == 0
+    laser = {}
+    for g in ["gt1l", "gt1r", "gt2l", "gt2r", "gt3l", "gt3r"]:
+        kind = f[g].attrs["atlas_beam_type"].decode()
+        assert kind == ("strong" if g.endswith("l") else "weak"), (g, kind)
+        laser[g] = int((f[g + "/heights/truth_source"][:] == 0).sum())
+        rate = f[g + "/bckgrd_atlas/bckgrd_rate"][:]
+        assert 1e5 < np.median(rate) < 1e7, (g, np.median(rate))
+    for p in "123":
+        assert laser["gt" + p + "l"] > 2 * laser["gt" + p + "r"], laser
+    print("laser photons per beam:", laser)
+"#;
+    run_python(script, &dir);
+}

@@ -201,7 +201,7 @@ pub fn plan(dir: &Path, campaigns: &Path, rami: &Path, full: bool) -> Result<Vec
             }
             (BenchScene::Orchard, Ok(scene)) => (scene.clone(), what.to_string()),
             (BenchScene::OrchardRepeated, Ok(scene)) => {
-                (repeated_orchard(dir, scene)?, what.to_string())
+                (repeated_orchard(scene)?, what.to_string())
             }
             (BenchScene::Forest, _) => {
                 let (scene, size) = forest_scene(dir, full)?;
@@ -223,21 +223,12 @@ pub fn plan(dir: &Path, campaigns: &Path, rami: &Path, full: bool) -> Result<Vec
     Ok(out)
 }
 
-/// The orchard's scene file with `repeat: true`, written into the bench's folder with its
-/// geometry's paths made absolute (they are relative to `scenes/`).
-fn repeated_orchard(dir: &Path, scene: &Path) -> Result<PathBuf> {
-    let text = crate::error::read_text(scene)?;
-    let base = scene.parent().unwrap_or(Path::new("."));
-    let shared = format!("{}/../../shared/", base.display());
-    let text = text.replace("../../shared/", &shared).replacen(
-        "\nmaterials:",
-        "\nrepeat: true\nmaterials:",
-        1,
-    );
-    let out = dir.join("rami_wco_repeated.yaml");
-    crate::fsutil::write_text_atomic(&out, &text)?;
-    // absolute, as the other scenes are: the campaign that names it lies in another folder
-    Ok(out.canonicalize().unwrap_or(out))
+/// The orchard's scene file with `repeat: true` (`scenes/rami_wco_repeated.yaml`, beside the
+/// orchard's), by an absolute path: the campaign that names it lies in another folder.
+fn repeated_orchard(scene: &Path) -> Result<PathBuf> {
+    let repeated = scene.with_file_name("rami_wco_repeated.yaml");
+    crate::error::read_text(&repeated)?;
+    Ok(repeated.canonicalize().unwrap_or(repeated))
 }
 
 /// The generated forest of the bench (made once, then reused): the paper's stand size in full

@@ -275,6 +275,10 @@ pub struct Segment {
 pub struct Beam {
     #[serde(default)]
     pub cross_track_m: f64,
+    /// The beam's pulse energy as a fraction of `instrument.pulse_energy_j` (default 1):
+    /// ATLAS's weak beams carry a quarter of its strong ones'.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub relative_energy: Option<f64>,
 }
 
 /// How an ALS scanner sweeps its beam across the track.
@@ -538,6 +542,17 @@ pub enum PointsFormat {
 }
 
 impl Campaign {
+    /// The pulse energy of beam `line`, J: the instrument's, times the beam's
+    /// `relative_energy`.
+    pub fn pulse_energy_j(&self, line: u32) -> f64 {
+        let beam = self
+            .platform
+            .beams
+            .as_ref()
+            .and_then(|b| b.get(line as usize));
+        self.instrument.pulse_energy_j * beam.and_then(|b| b.relative_energy).unwrap_or(1.0)
+    }
+
     /// What is valid but likely not what the user wants, one sentence each, for `check` and
     /// the run log.
     pub fn warnings(&self) -> Vec<String> {

@@ -170,6 +170,10 @@ pub fn numbers(doc: &Doc, p: &Platform) -> Result<()> {
                         &format!("platform.beams[{b}].cross_track_m"),
                         beam.cross_track_m,
                     )?;
+                    c.opt_positive(
+                        &format!("platform.beams[{b}].relative_energy"),
+                        beam.relative_energy,
+                    )?;
                 }
             }
             if let Some(a) = p.off_nadir_deg {

@@ -85,14 +85,17 @@ impl<'a> PulseSimulator<'a> {
                 s
             };
             s.for_gate(
-                inst.pulse_energy_j,
+                c.pulse_energy_j(p.line),
                 gate.dt * gate.bins as f64,
                 gate.view_area_m2(inst),
             )
         });
         PulseSetup {
             scene,
-            laser: Laser::new(inst, p.origin, p.direction),
+            laser: Laser {
+                energy: c.pulse_energy_j(p.line),
+                ..Laser::new(inst, p.origin, p.direction)
+            },
             receiver: Receiver::new(
                 inst,
                 p.origin + p.platform_to_scene(inst.receiver_offset_m.unwrap_or_default()),
@@ -120,19 +123,15 @@ impl<'a> PulseSimulator<'a> {
         let setup = self.setup(p, c.simulation.method);
         simulate_pulse_in(&setup, c.simulation.rays_per_pulse, scratch);
         let several = c.wavelength_nm.several();
+        let radiometry = Radiometry {
+            pulse_energy_j: c.pulse_energy_j(p.line),
+            ..self.radiometry
+        };
         let row = |b: usize, nm: f64| {
             let hv = crate::photon_energy_j(nm);
             let tally = scratch.band(b);
             let (gate, sub_bins) = (&setup.gate, setup.sub_bins);
-            let mut w = waveform(
-                p.id,
-                tally,
-                gate,
-                sub_bins,
-                self.sigma,
-                hv,
-                &self.radiometry,
-            );
+            let mut w = waveform(p.id, tally, gate, sub_bins, self.sigma, hv, &radiometry);
             w.wavelength_nm = several.then_some(nm);
             w
         };

@@ -30,12 +30,18 @@ pub fn l2a_waveforms(path: &Path, shots: &[ShotFigure]) -> Result<()> {
         for (area, s) in panels.iter().zip(shots) {
             let finite = |v: &&f64| v.is_finite();
             let marks = [s.ground, s.rh98, s.truth_ground, s.truth_top];
-            let heights = s
+            // the stretch with signal (the mean above 1 % of its peak) and the marks, padded
+            let peak = s.mean.iter().cloned().fold(0.0f64, f64::max);
+            let signal = s
                 .elevation
                 .iter()
-                .chain(marks.iter().flatten())
-                .filter(finite);
+                .zip(&s.mean)
+                .filter(|(_, &m)| peak > 0.0 && m >= 0.01 * peak)
+                .map(|(z, _)| z);
+            let heights = signal.chain(marks.iter().flatten()).filter(finite);
             let (lo, hi) = heights.fold((f64::MAX, f64::MIN), |(a, b), &v| (a.min(v), b.max(v)));
+            let pad = (0.15 * (hi - lo)).max(3.0);
+            let (lo, hi) = (lo - pad, hi + pad);
             let (lo, hi) = if lo < hi { (lo, hi) } else { (0.0, 1.0) };
             let xs = s.record.iter().chain(&s.mean).filter(finite);
             let (x0, x1) = xs.fold((0.0f64, f64::MIN), |(a, b), &v| (a.min(v), b.max(v)));
@@ -88,7 +94,7 @@ pub fn l2a_waveforms(path: &Path, shots: &[ShotFigure]) -> Result<()> {
                 let Some(z) = z.filter(|z| z.is_finite()) else {
                     continue;
                 };
-                let style = colour.stroke_width(if dashed { 1 } else { 3 });
+                let style = colour.stroke_width(if dashed { 2 } else { 3 });
                 let pts: Vec<(f64, f64)> = if dashed {
                     // dashes: every other tenth of the width
                     (0..10)
@@ -112,7 +118,13 @@ pub fn l2a_waveforms(path: &Path, shots: &[ShotFigure]) -> Result<()> {
                         .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], style));
                 }
             }
-            legend(&mut chart, path)?;
+            chart
+                .configure_series_labels()
+                .position(SeriesLabelPosition::UpperRight)
+                .border_style(BLACK)
+                .background_style(WHITE.mix(0.8))
+                .draw()
+                .map_err(|e| fail(path, e))?;
         }
         Ok(())
     })

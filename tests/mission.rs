@@ -155,6 +155,31 @@ fn l1b_holds_the_waveforms_where_the_plane_is() {
     let tx_count = u16s(&f, &format!("{b}/tx_sample_count"));
     let one: f32 = tx[..tx_count[0] as usize].iter().sum();
     assert!((one - 1.0).abs() < 1e-4, "{one}");
+    // the transmitted pulse's Gaussian: its centroid (samples from 1) and sd, 4 ns FWHM in
+    // 1 ns samples (the sd of bin-integrated samples is the Gaussian's plus 1/12 of a sample²)
+    let first: Vec<f64> = tx[..tx_count[0] as usize].iter().map(|&v| v as f64).collect();
+    let centroid: f64 = first.iter().enumerate().map(|(k, v)| (k + 1) as f64 * v).sum::<f64>();
+    let var: f64 = first
+        .iter()
+        .enumerate()
+        .map(|(k, v)| ((k + 1) as f64 - centroid).powi(2) * v)
+        .sum::<f64>();
+    let gloc = f32s(&f, &format!("{b}/tx_gloc"));
+    let sigma = f32s(&f, &format!("{b}/tx_egsigma"));
+    assert!((gloc[0] as f64 - centroid).abs() < 1e-3, "{} against {centroid}", gloc[0]);
+    let want = 4.0 / (8.0 * 2f64.ln()).sqrt();
+    assert!((sigma[0] as f64 - want).abs() < 1e-5);
+    assert!((var - 1.0 / 12.0 - want * want).abs() < 0.01 * want * want, "{var}");
+    // the bounce time offsets: one-way light time from the instrument (500 m above the frame's
+    // origin height) to the first and last samples
+    let alt = f64s(&f, &format!("{b}/geolocation/altitude_instrument"));
+    let t0 = f64s(&f, &format!("{b}/geolocation/bounce_time_offset_bin0"));
+    let t1 = f64s(&f, &format!("{b}/geolocation/bounce_time_offset_lastbin"));
+    for i in 0..40 {
+        assert!((alt[i] - (ORIGIN[2] + 500.0)).abs() < 1e-9);
+        assert!((C * t0[i] - (alt[i] - e0[i])).abs() < 1e-6, "{}", C * t0[i]);
+        assert!((C * t1[i] - (alt[i] - e1[i])).abs() < 1e-6);
+    }
 }
 
 /// A digitiser without noise records round(offset + gain x photoelectrons), clipped at its
@@ -813,4 +838,59 @@ print("h5coro reads all three files")
         h0 = ORIGIN[2],
     );
     run_python(&script, &dir);
+}
+
+/// GDAL and xarray, which GEDI and ICESat-2 users also open HDF5 with, read the three files:
+/// gdalinfo finds the HDF5 driver and gives the statistics numpy gives of a rank-2 dataset of
+/// each (GDAL lists those), and xarray (h5netcdf) reads a group's variables equal to h5py's.
+#[test]
+fn gdal_and_xarray_read_the_mission_files() {
+    if !python_with("h5py, numpy, xarray, h5netcdf", "h5py xarray h5netcdf") {
+        return;
+    }
+    if !std::process::Command::new("gdalinfo")
+        .arg("--version")
+        .output()
+        .is_ok_and(|o| o.status.success())
+    {
+        lidarsim::testdata::skip_tool("gdalinfo is not available (Debian's gdal-bin)");
+        return;
+    }
+    let dir = tmp("mission_gdal");
+    plane_scene(&dir, 0.4, 60.0);
+    let gedi = write(
+        &dir,
+        "gedi.yaml",
+        &track_campaign("gedi", 10.0, ", noise: { electronic_sd_photons: 2 }")
+            .replace("kind: track,", "kind: track, gps_start_s: 1.4e9,"),
+    );
+    let atl = write(&dir, "atl.yaml", &photon_track_campaign());
+    run_cli(&gedi, &dir.join("gedi"), None);
+    run_cli(&atl, &dir.join("atl"), None);
+    let script = r#"
+import sys, subprocess, h5py, numpy as np, xarray as xr
+d = sys.argv[1]
+files = [(d + "/gedi/waveforms_l1b.h5", "BEAM0000", "rxwaveform", None),
+         (d + "/gedi/waveforms_l2a.h5", "BEAM0000", "rh", "rh"),
+         (d + "/atl/photons_atl03.h5", "gt1l/heights", "h_ph", "signal_conf_ph")]
+for path, group, var, grid in files:
+    info = subprocess.run(["gdalinfo", "--config", "GDAL_PAM_ENABLED", "NO", path],
+                          capture_output=True, text=True)
+    assert info.returncode == 0 and "Driver: HDF5" in info.stdout, (path, info.stderr)
+    if grid:
+        sub = 'HDF5:"%s"://%s/%s' % (path, group, grid)
+        out = subprocess.run(["gdalinfo", "--config", "GDAL_PAM_ENABLED", "NO", "-stats", sub],
+                             capture_output=True, text=True)
+        assert out.returncode == 0, out.stderr
+        mean = float([l for l in out.stdout.splitlines() if "STATISTICS_MEAN=" in l][0].split("=")[1])
+        with h5py.File(path) as f:
+            want = f[group + "/" + grid][:].astype(float).mean()
+        assert abs(mean - want) <= 1e-9 * max(1.0, abs(want)), (path, mean, want)
+    ds = xr.open_dataset(path, group=group, engine="h5netcdf", phony_dims="sort", decode_times=False)
+    with h5py.File(path) as f:
+        assert np.array_equal(ds[var].values, f[group + "/" + var][:]), (path, var)
+    ds.close()
+print("gdal and xarray read the three files")
+"#;
+    run_python(script, &dir);
 }

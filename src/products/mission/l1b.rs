@@ -125,9 +125,20 @@ impl L1b {
             f("all_samples_sum", Kind::U32, "counts", "sum of the shot's rxwaveform samples, rounded"),
             f("rx_energy", Kind::F64, u, "sum of the shot's rxwaveform less noise_mean_corrected per sample"),
             f("stale_return_flag", Kind::U8, "1", "1: no sample of the mean waveform reaches the detection threshold"),
+            f("nsemean_even", Kind::F32, u, "noise mean of the even samples: noise_mean_corrected (the digitiser has one)"),
+            f("nsemean_odd", Kind::F32, u, "noise mean of the odd samples: noise_mean_corrected (the digitiser has one)"),
+            f("tx_gloc", Kind::F32, "counts", "centre of the transmitted pulse's Gaussian in txwaveform, in samples counted from 1"),
+            f("tx_egsigma", Kind::F32, "counts", "sigma of the transmitted pulse's Gaussian, in samples"),
+            f("tx_egamplitude", Kind::F32, "1", "summit of the transmitted pulse's Gaussian, in txwaveform's units"),
+            f("tx_egbias", Kind::F32, "1", "bias under the transmitted pulse: 0 (txwaveform is the pulse alone)"),
+            f("tx_eggamma", Kind::F32, "1", "skew of the transmitted pulse's extended Gaussian: 0 (the simulated pulse is a Gaussian)"),
+            f("tx_egflag", Kind::U8, "1", "1: the transmitted pulse's Gaussian is known (it is the simulated pulse)"),
+            f("tx_pulseflag", Kind::U8, "1", "1: a transmitted pulse"),
             f("geolocation/shot_number", Kind::U64, "counts", "as shot_number"),
             f("geolocation/delta_time", Kind::F64, "seconds since 2018-01-01", "as delta_time"),
             f("geolocation/degrade", Kind::I8, "1", "0: no degraded geolocation (a simulation knows its pointing and position)"),
+            f("geolocation/bounce_time_offset_bin0", Kind::F64, "seconds", "time light takes from the instrument to the centre of the first sample, one way"),
+            f("geolocation/bounce_time_offset_lastbin", Kind::F64, "seconds", "time light takes from the instrument to the centre of the last sample, one way"),
             f("geolocation/elevation_bin0", Kind::F64, "m", "height of the centre of the first sample, on the beam axis"),
             f("geolocation/elevation_lastbin", Kind::F64, "m", "height of the centre of the last sample, on the beam axis"),
             f("geolocation/latitude_bin0", Kind::F64, deg, "latitude of the centre of the first sample (local y without a frame: see /@coordinates)"),
@@ -193,7 +204,26 @@ impl L1b {
             &[sum - record.background * n as f64],
         )?;
         h.push_u8(&format!("{b}/stale_return_flag"), &[u8::from(stale)])?;
+        // the transmitted pulse: a Gaussian of σ_tx samples centred in its ±4σ window
+        let sigma_tx = self.pulse_sigma_s / (w.bin_ns as f64 * 1e-9);
+        let summit = tx.iter().cloned().fold(0.0f32, f32::max);
+        let noise = record.background as f32;
+        h.push_f32(&format!("{b}/nsemean_even"), &[noise])?;
+        h.push_f32(&format!("{b}/nsemean_odd"), &[noise])?;
+        h.push_f32(&format!("{b}/tx_gloc"), &[(tx.len() as f64 + 1.0) as f32 / 2.0])?;
+        h.push_f32(&format!("{b}/tx_egsigma"), &[sigma_tx as f32])?;
+        h.push_f32(&format!("{b}/tx_egamplitude"), &[summit])?;
+        h.push_f32(&format!("{b}/tx_egbias"), &[0.0])?;
+        h.push_f32(&format!("{b}/tx_eggamma"), &[0.0])?;
+        h.push_u8(&format!("{b}/tx_egflag"), &[1])?;
+        h.push_u8(&format!("{b}/tx_pulseflag"), &[1])?;
         let g = format!("{b}/geolocation");
+        let one_way = |k: usize| (w.t0_ns + (k as f64 + 0.5) * w.bin_ns as f64) * 1e-9 / 2.0;
+        h.push_f64(&format!("{g}/bounce_time_offset_bin0"), &[one_way(0)])?;
+        h.push_f64(
+            &format!("{g}/bounce_time_offset_lastbin"),
+            &[one_way(n.saturating_sub(1))],
+        )?;
         h.push_u64(&format!("{g}/shot_number"), &[shot])?;
         h.push_f64(&format!("{g}/delta_time"), &[delta_time])?;
         h.push_i8(&format!("{g}/degrade"), &[0])?;

@@ -210,7 +210,10 @@ impl L1b {
         let noise = record.background as f32;
         h.push_f32(&format!("{b}/nsemean_even"), &[noise])?;
         h.push_f32(&format!("{b}/nsemean_odd"), &[noise])?;
-        h.push_f32(&format!("{b}/tx_gloc"), &[(tx.len() as f64 + 1.0) as f32 / 2.0])?;
+        h.push_f32(
+            &format!("{b}/tx_gloc"),
+            &[(tx.len() as f64 + 1.0) as f32 / 2.0],
+        )?;
         h.push_f32(&format!("{b}/tx_egsigma"), &[sigma_tx as f32])?;
         h.push_f32(&format!("{b}/tx_egamplitude"), &[summit])?;
         h.push_f32(&format!("{b}/tx_egbias"), &[0.0])?;

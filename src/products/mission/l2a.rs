@@ -6,7 +6,7 @@
 
 use super::h5::{Field, H5Writer, Kind};
 use super::l1b::Setup;
-use super::metrics::{Metrics, MIN_SENSITIVITY, NOISELESS_FRACTION};
+use super::metrics::{quality, Metrics, MIN_SENSITIVITY, NOISELESS_FRACTION};
 use super::truth::Truth;
 use super::{
     beam_group, beam_name, dataset_identification, push_shot, root_attrs, shot_number, Geo,
@@ -135,10 +135,7 @@ impl L2a {
             Some(m) => (at(m.ground), at(m.top)),
             None => ((FILL, FILL, FILL), (FILL, FILL, FILL)),
         };
-        let quality = s
-            .found
-            .as_ref()
-            .is_some_and(|m| m.sensitivity >= MIN_SENSITIVITY && !s.stale);
+        let quality = quality(s.found.as_ref(), s.stale);
         let delta_time = pulse.gps_time_s - MISSION_EPOCH_GPS_S;
         let height = |z: Option<f64>| z.map_or(FILL, |z| self.geo.of(pulse.origin.with_z(z)).2);
         let (truth_ground, truth_top) = (height(s.truth.ground), height(s.truth.canopy_top));

@@ -32,6 +32,12 @@ pub const NOISELESS_FRACTION: f64 = 0.01;
 /// The sensitivity below which a shot's quality flag is 0 (GEDI's over land).
 pub const MIN_SENSITIVITY: f64 = 0.9;
 
+/// GEDI's `quality_flag`: a ground found, the sensitivity at least [`MIN_SENSITIVITY`], and
+/// the mean waveform reaching the detection threshold (`stale` false).
+pub fn quality(found: Option<&Metrics>, stale: bool) -> bool {
+    found.is_some_and(|m| m.sensitivity >= MIN_SENSITIVITY && !stale)
+}
+
 /// A shot's metrics, positions in fractional samples (sample k's centre at k).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Metrics {

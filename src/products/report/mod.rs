@@ -201,6 +201,17 @@ fn mission_section(out: &Path, inst: &crate::campaign::Instrument, crs: Option<&
             "\nGEDI L1B- and L2A-like files for GEDI tools: `waveforms_l1b.h5` and `waveforms_l2a.h5` ({place}); the record has {}.\n",
             record.join(", ")
         );
+        let l2a = ProductsSummary::read(&out.join("products.json")).and_then(|p| p.l2a);
+        if let Some(l) = l2a {
+            let m = |v: Option<f64>| v.map_or("–".to_string(), |v| format!("{v:+.2} m"));
+            let sd = |v: Option<f64>| v.map_or("–".to_string(), |v| format!("{v:.2} m"));
+            text += &format!(
+                "\nL2A against the truth under the footprints, over the {} of {} shots of quality 1 (`waveforms_l2a.h5`: `elev_lowestmode + rh[:, 98] − truth_canopy_top` and `elev_lowestmode − truth_ground_elev`, per shot):\n\n| | mean | sd |\n| --- | --- | --- |\n| RH98 − true canopy top | {} | {} |\n| ground − true ground | {} | {} |\n",
+                l.quality_shots, l.shots,
+                m(l.rh98_minus_top_mean_m), sd(l.rh98_minus_top_sd_m),
+                m(l.ground_minus_truth_mean_m), sd(l.ground_minus_truth_sd_m)
+            );
+        }
         if out.join("l2a_waveforms.png").is_file() {
             text += "\nA few records against elevation, with the L2A ground (lowest mode) and RH98 beside the truth under the footprint (the scene's ground and highest point; dashed):\n\n![Records with the L2A ground and RH98 against the truth](l2a_waveforms.png)\n";
         }

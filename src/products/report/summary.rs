@@ -17,6 +17,22 @@ pub struct ProductsSummary {
     /// Sums over the waveforms, for report.md (so it need not read every part again).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub waveform_totals: Option<WaveformTotals>,
+    /// waveforms_l2a.h5 against its truth (waveform instruments).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub l2a: Option<L2aSummary>,
+}
+
+/// The L2A metrics against the truth under the footprints, over the shots of quality 1 with
+/// a truth (none: null): RH98 above the lowest mode less the true canopy top above it, and
+/// the lowest mode less the true ground.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct L2aSummary {
+    pub shots: usize,
+    pub quality_shots: usize,
+    pub rh98_minus_top_mean_m: Option<f64>,
+    pub rh98_minus_top_sd_m: Option<f64>,
+    pub ground_minus_truth_mean_m: Option<f64>,
+    pub ground_minus_truth_sd_m: Option<f64>,
 }
 
 /// Sums over a run's waveforms, in part and pulse order (so a report made from them or from
@@ -141,6 +157,14 @@ mod tests {
                 surface_distance: None,
             }),
             photons: None,
+            l2a: Some(L2aSummary {
+                shots: 3,
+                quality_shots: 2,
+                rh98_minus_top_mean_m: Some(-1.5),
+                rh98_minus_top_sd_m: None,
+                ground_minus_truth_mean_m: Some(0.25),
+                ground_minus_truth_sd_m: Some(0.125),
+            }),
             waveform_totals: Some(WaveformTotals {
                 pulses: 4,
                 brf_fov_solar: None,

@@ -5,13 +5,13 @@ use super::part::{Part, Writer};
 use crate::error::Result;
 use crate::plan::Plan;
 use crate::products::figures::mission::{atl03_photons, l2a_waveforms, PhotonDot, ShotFigure};
-use crate::products::mission::metrics::metrics;
+use crate::products::mission::metrics::{metrics, quality};
 use crate::products::mission::track_name;
 use crate::products::mission::truth::under_footprint;
 use crate::products::mission::{
     stale, Atl03, Gate, L1b, L2a, Shot, ATL03_FILE, L1B_FILE, L2A_FILE,
 };
-use crate::products::report::summary::ProductsSummary;
+use crate::products::report::summary::{L2aSummary, ProductsSummary};
 use crate::scene::Scene;
 use crate::waveform::record::Recorder;
 use rayon::prelude::*;
@@ -36,6 +36,21 @@ pub(super) struct WaveformFilesWriter<'a> {
     /// The shots `l2a_waveforms.png` shows (four spread over the campaign), as they come.
     pub figure_ids: Vec<u64>,
     pub figures: Vec<ShotFigure>,
+    /// Shots, and per shot of quality 1 with a truth: RH98 less the true top, ground less the
+    /// true ground (m), in shot order.
+    pub shots: usize,
+    pub against_truth: Vec<(f64, f64)>,
+}
+
+/// Mean and sample sd of `v` (none for fewer than two).
+fn mean_sd(v: impl Iterator<Item = f64> + Clone) -> (Option<f64>, Option<f64>) {
+    let n = v.clone().count();
+    if n == 0 {
+        return (None, None);
+    }
+    let mean = v.clone().sum::<f64>() / n as f64;
+    let sd = (n > 1).then(|| (v.map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1) as f64).sqrt());
+    (Some(mean), sd)
 }
 
 /// The waveform figure's shots: four pulses spread evenly over the plan.
@@ -85,12 +100,28 @@ impl Writer for WaveformFilesWriter<'_> {
                     }
                 });
                 let sd = gain * floor.sqrt();
-                (pulse, record, sd, found, truth_found, truth, figure)
+                // RH98 and the ground against the truth, for a shot of quality 1
+                let stale = stale(w, self.threshold_photons);
+                let quality = quality(found.as_ref(), stale);
+                let compared = match (&found, truth.ground, truth.canopy_top, quality) {
+                    (Some(m), Some(g), Some(top), true) => {
+                        let at = |k: f64| {
+                            let t = (w.t0_ns + (k + 0.5) * w.bin_ns as f64) * 1e-9;
+                            (pulse.origin + pulse.direction * (crate::C * t / 2.0)).z
+                        };
+                        Some((at(m.rh[98]) - top, at(m.ground) - g))
+                    }
+                    _ => None,
+                };
+                let shot = (pulse, record, sd, found, truth_found, truth);
+                (shot, stale, figure, compared)
             })
             .collect();
         for (w, shot) in part.first.iter().zip(shots) {
-            let (pulse, record, sd, found, truth_found, truth, figure) = shot;
+            let ((pulse, record, sd, found, truth_found, truth), stale, figure, compared) = shot;
             self.figures.extend(figure);
+            self.shots += 1;
+            self.against_truth.extend(compared);
             self.l1b.add(&pulse, w, &record, sd)?;
             self.l2a.add(&Shot {
                 pulse: &pulse,
@@ -98,15 +129,25 @@ impl Writer for WaveformFilesWriter<'_> {
                 found,
                 truth_found,
                 truth,
-                stale: stale(w, self.threshold_photons),
+                stale,
             })?;
         }
         Ok(())
     }
 
-    fn finish(self: Box<Self>, _: &mut ProductsSummary) -> Result<Vec<String>> {
+    fn finish(self: Box<Self>, summary: &mut ProductsSummary) -> Result<Vec<String>> {
         self.l1b.finish()?;
         self.l2a.finish()?;
+        let top = mean_sd(self.against_truth.iter().map(|c| c.0));
+        let ground = mean_sd(self.against_truth.iter().map(|c| c.1));
+        summary.l2a = Some(L2aSummary {
+            shots: self.shots,
+            quality_shots: self.against_truth.len(),
+            rh98_minus_top_mean_m: top.0,
+            rh98_minus_top_sd_m: top.1,
+            ground_minus_truth_mean_m: ground.0,
+            ground_minus_truth_sd_m: ground.1,
+        });
         let mut files = vec![L1B_FILE.to_string(), L2A_FILE.to_string()];
         if !self.figures.is_empty() {
             l2a_waveforms(&self.out.join(L2A_FIGURE), &self.figures)?;

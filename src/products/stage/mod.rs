@@ -126,6 +126,8 @@ fn writers<'a>(
             height0: c.frame.as_ref().map_or(0.0, |f| f.origin[2]),
             figure_ids: mission::figure_ids(plan.len()),
             figures: Vec::new(),
+            shots: 0,
+            against_truth: Vec::new(),
         }));
     }
     Ok(list)

@@ -59,7 +59,7 @@ pub(crate) fn fail(path: &Path, e: impl std::fmt::Display) -> Error {
     Error::file(path, format!("cannot draw the figure: {e}"))
 }
 
-/// Errors beyond this (m) get the full colour of the error map.
+/// The error map's smallest scale, ± m (see [`error_scale`]).
 pub const MAP_SATURATION_M: f64 = 1.0;
 /// No first return where the reference has a surface: a blind spot.
 pub const GREY_MISSED: RGBColor = RGBColor(128, 128, 128);
@@ -77,16 +77,32 @@ pub fn diverging(t: f64) -> RGBColor {
     }
 }
 
-/// Colour of one DSM cell: the error on the diverging scale, or a grey for a blind spot (a
-/// reference surface with no first return) or for no reference at all.
-pub fn cell_colour(reference: f64, measured: f64) -> RGBColor {
+/// Colour of one DSM cell: the error on the diverging scale of ± `saturation` m, or a grey
+/// for a blind spot (a reference surface with no first return) or for no reference at all.
+pub fn cell_colour(reference: f64, measured: f64, saturation: f64) -> RGBColor {
     if !reference.is_finite() {
         GREY_EMPTY
     } else if !measured.is_finite() {
         GREY_MISSED
     } else {
-        diverging((measured - reference) / MAP_SATURATION_M)
+        diverging((measured - reference) / saturation)
     }
+}
+
+/// The error map's scale, ± m: twice the RMSE, at least [`MAP_SATURATION_M`], rounded up to
+/// 1, 2 or 5 times a power of ten, so the RMSE sits halfway up the colour bar.
+pub fn error_scale(rmse_m: f64) -> f64 {
+    let want = if rmse_m.is_finite() {
+        (2.0 * rmse_m).max(MAP_SATURATION_M)
+    } else {
+        MAP_SATURATION_M
+    };
+    let p = 10f64.powf(want.log10().floor());
+    [1.0, 2.0, 5.0, 10.0]
+        .iter()
+        .map(|m| m * p)
+        .find(|&v| v >= want * (1.0 - 1e-12))
+        .unwrap_or(want)
 }
 
 /// A perceptual ramp for reflectance (dark blue → green → yellow), t in [0, 1].
@@ -156,29 +172,62 @@ pub(crate) fn legend<'a, 'b: 'a>(chart: &mut Chart<'a, 'b>, path: &Path) -> Resu
         .map_err(|e| fail(path, e))
 }
 
-/// A map in scene coordinates (x, y in metres), with its axes drawn.
+/// How a map's axes are labelled: in the frame's easting and northing (the scene's x and y
+/// plus the frame's origin) when the campaign has a frame, else in scene metres.
+#[derive(Clone, Debug, Default)]
+pub struct MapAxes {
+    pub east0: f64,
+    pub north0: f64,
+    pub crs: Option<String>,
+}
+
+impl MapAxes {
+    pub fn of(frame: Option<&crate::campaign::Frame>) -> MapAxes {
+        frame.map_or_else(MapAxes::default, |f| MapAxes {
+            east0: f.origin[0],
+            north0: f.origin[1],
+            crs: Some(f.crs.clone()),
+        })
+    }
+}
+
+/// A map in scene coordinates (x, y in metres), its axes labelled as `axes` says.
 pub(crate) fn map_chart<'a, 'b>(
     area: &'a Area<'b>,
     path: &Path,
     title: &str,
     x: std::ops::Range<f64>,
     y: std::ops::Range<f64>,
+    axes: &MapAxes,
 ) -> Result<Chart<'a, 'b>> {
     let mut chart = ChartBuilder::on(area)
         .caption(title, ("sans-serif", 18))
         .margin(10)
         .x_label_area_size(40)
-        .y_label_area_size(55)
+        .y_label_area_size(75)
         .build_cartesian_2d(x, y)
         .map_err(|e| fail(path, e))?;
+    let (x_desc, y_desc) = match &axes.crs {
+        Some(c) => (format!("easting (m, {c})"), format!("northing (m, {c})")),
+        None => ("x (m)".to_string(), "y (m)".to_string()),
+    };
+    // whole metres of a projected CRS, in full: 6459925, not 6.5e6
+    let label = |v: f64| {
+        if axes.crs.is_some() {
+            format!("{v:.0}")
+        } else {
+            short(&v)
+        }
+    };
+    let (e0, n0) = (axes.east0, axes.north0);
     chart
         .configure_mesh()
         .disable_x_mesh()
         .disable_y_mesh()
-        .x_desc("x (m)")
-        .y_desc("y (m)")
-        .x_label_formatter(&short)
-        .y_label_formatter(&short)
+        .x_desc(x_desc)
+        .y_desc(y_desc)
+        .x_label_formatter(&|v: &f64| label(v + e0))
+        .y_label_formatter(&|v: &f64| label(v + n0))
         .draw()
         .map_err(|e| fail(path, e))?;
     Ok(chart)
@@ -200,7 +249,12 @@ pub const TOP_VIEW_MAX_POINTS: usize = 100_000;
 /// `points_top.png`: every first return seen from above, coloured by apparent reflectance
 /// (the colour scale runs to the 99th percentile, so a few specular outliers do not wash
 /// the rest out).
-pub fn points_top_view(path: &Path, points: &[TopPoint], title: &str) -> Result<()> {
+pub fn points_top_view(
+    path: &Path,
+    points: &[TopPoint],
+    title: &str,
+    axes: &MapAxes,
+) -> Result<()> {
     let step = points.len().div_ceil(TOP_VIEW_MAX_POINTS).max(1);
     let shown: Vec<TopPoint> = points
         .iter()
@@ -240,6 +294,7 @@ pub fn points_top_view(path: &Path, points: &[TopPoint], title: &str) -> Result<
             title,
             (lo[0] - pad)..(hi[0] + pad),
             (lo[1] - pad)..(hi[1] + pad),
+            axes,
         )?;
         chart
             .draw_series(
@@ -314,17 +369,7 @@ pub fn waveforms(path: &Path, list: &[WaveformFigure]) -> Result<()> {
             let fine: Vec<f64> = (0..=(b - a) * 8)
                 .map(|k| a as f64 + k as f64 / 8.0)
                 .collect();
-            for (k, c) in w.components.iter().enumerate() {
-                let colour = Palette99::pick(k + 1).to_rgba();
-                chart
-                    .draw_series(LineSeries::new(
-                        fine.iter().map(|&x| (range(x), gauss(c, x))),
-                        colour,
-                    ))
-                    .map_err(|e| fail(path, e))?
-                    .label(format!("return {}", k + 1))
-                    .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], colour));
-            }
+            // the sum first, so every component shows above it
             if w.components.len() > 1 {
                 chart
                     .draw_series(LineSeries::new(
@@ -335,6 +380,17 @@ pub fn waveforms(path: &Path, list: &[WaveformFigure]) -> Result<()> {
                     .map_err(|e| fail(path, e))?
                     .label("sum of fits")
                     .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], RED));
+            }
+            for (k, c) in w.components.iter().enumerate() {
+                let colour = Palette99::pick(k + 1).to_rgba();
+                chart
+                    .draw_series(LineSeries::new(
+                        fine.iter().map(|&x| (range(x), gauss(c, x))),
+                        colour.stroke_width(2),
+                    ))
+                    .map_err(|e| fail(path, e))?
+                    .label(format!("return {}", k + 1))
+                    .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], colour));
             }
             legend(&mut chart, path)?;
         }
@@ -348,11 +404,18 @@ mod tests {
 
     #[test]
     fn colours() {
-        assert_eq!(cell_colour(0.0, -2.0), RGBColor(0, 0, 255));
-        assert_eq!(cell_colour(0.0, 0.0), RGBColor(255, 255, 255));
-        assert_eq!(cell_colour(0.0, 0.5), RGBColor(255, 128, 128));
-        assert_eq!(cell_colour(f64::NAN, 1.0), GREY_EMPTY);
-        assert_eq!(cell_colour(0.0, f64::NAN), GREY_MISSED);
+        assert_eq!(cell_colour(0.0, -2.0, 1.0), RGBColor(0, 0, 255));
+        assert_eq!(cell_colour(0.0, 0.0, 1.0), RGBColor(255, 255, 255));
+        assert_eq!(cell_colour(0.0, 0.5, 1.0), RGBColor(255, 128, 128));
+        assert_eq!(cell_colour(0.0, 1.0, 2.0), RGBColor(255, 128, 128));
+        assert_eq!(cell_colour(f64::NAN, 1.0, 1.0), GREY_EMPTY);
+        assert_eq!(cell_colour(0.0, f64::NAN, 1.0), GREY_MISSED);
+        // the error map's scale: twice the RMSE, at least 1 m, to 1, 2 or 5 x 10^k
+        assert_eq!(error_scale(0.2), 1.0);
+        assert_eq!(error_scale(0.75), 2.0);
+        assert_eq!(error_scale(1.0), 2.0);
+        assert_eq!(error_scale(4.5), 10.0);
+        assert_eq!(error_scale(f64::NAN), 1.0);
         assert_eq!(ramp(0.0), RGBColor(68, 1, 84));
         assert_eq!(ramp(1.0), RGBColor(253, 231, 37));
         assert_eq!(ramp(0.5), RGBColor(33, 145, 140));
@@ -368,7 +431,7 @@ mod tests {
                 reflectance: k as f64 / 100.0,
             })
             .collect();
-        points_top_view(&d.join("top.png"), &pts, "t").unwrap();
+        points_top_view(&d.join("top.png"), &pts, "t", &MapAxes::default()).unwrap();
         let c = Component {
             centre_bin: 20.0,
             sigma_bins: 2.0,

@@ -3,29 +3,34 @@
 use super::{AngleBin, DsmReport, Grid};
 use crate::error::Result;
 use crate::products::figures::{
-    cell_colour, colour_bar, diverging, fail, legend, map_chart, png, short, MAP_SATURATION_M,
+    cell_colour, colour_bar, diverging, error_scale, fail, legend, map_chart, png, short, MapAxes,
+    GREY_EMPTY, GREY_MISSED,
 };
 use plotters::prelude::*;
 use std::path::Path;
 
-/// `error_map.png`: first-return DSM minus reference per cell, north up, with a colour bar.
+/// `error_map.png`: first-return DSM minus reference per cell, north up, with a colour bar of
+/// ± twice the headline RMSE ([`error_scale`]) and the two greys named below it.
 pub fn dsm_error_map(
     path: &Path,
     reference: &[f64],
     measured: &[f64],
     grid: &Grid,
     title: &str,
+    rmse_m: f64,
+    axes: &MapAxes,
 ) -> Result<()> {
     let aspect = (grid.ny.max(1) as f64 / grid.nx.max(1) as f64).clamp(0.25, 4.0);
-    let (w, h) = (760u32, (80.0 + 640.0 * aspect).round() as u32);
+    let (w, h) = (800u32, (80.0 + 640.0 * aspect).round().max(420.0) as u32);
+    let sat = error_scale(rmse_m);
     png(path, (w, h), |root| {
-        let (left, right) = root.split_horizontally(w - 110);
+        let (left, right) = root.split_horizontally(w - 150);
         let (x0, y0) = (grid.x0, grid.y0);
         let (x1, y1) = (
             x0 + grid.cell * grid.nx as f64,
             y0 + grid.cell * grid.ny as f64,
         );
-        let mut chart = map_chart(&left, path, title, x0..x1, y0..y1)?;
+        let mut chart = map_chart(&left, path, title, x0..x1, y0..y1, axes)?;
         chart
             .draw_series((0..grid.ny).flat_map(|j| {
                 (0..grid.nx).map(move |i| {
@@ -33,20 +38,30 @@ pub fn dsm_error_map(
                     let c = cell_colour(
                         reference.get(k).copied().unwrap_or(f64::NAN),
                         measured.get(k).copied().unwrap_or(f64::NAN),
+                        sat,
                     );
                     let (a, b) = (x0 + grid.cell * i as f64, y0 + grid.cell * j as f64);
                     Rectangle::new([(a, b), (a + grid.cell, b + grid.cell)], c.filled())
                 })
             }))
             .map_err(|e| fail(path, e))?;
-        colour_bar(
-            &right,
-            path,
-            -MAP_SATURATION_M,
-            MAP_SATURATION_M,
-            "error (m)",
-            |v| diverging(v / MAP_SATURATION_M),
-        )
+        let (bar, key) = right.split_vertically(right.dim_in_pixel().1.saturating_sub(110));
+        colour_bar(&bar, path, -sat, sat, "error (m)", |v| diverging(v / sat))?;
+        // the greys, which the bar has not
+        for (k, (colour, name)) in [
+            (GREY_MISSED, "no first return"),
+            (GREY_EMPTY, "no reference"),
+        ]
+        .into_iter()
+        .enumerate()
+        {
+            let y = 10 + 28 * k as i32;
+            key.draw(&Rectangle::new([(8, y), (26, y + 18)], colour.filled()))
+                .map_err(|e| fail(path, e))?;
+            key.draw(&Text::new(name, (32, y + 2), ("sans-serif", 13)))
+                .map_err(|e| fail(path, e))?;
+        }
+        Ok(())
     })
 }
 
@@ -154,7 +169,16 @@ mod tests {
                 }
             })
             .collect();
-        dsm_error_map(&d.join("map.png"), &reference, &measured, &grid, "t").unwrap();
+        dsm_error_map(
+            &d.join("map.png"),
+            &reference,
+            &measured,
+            &grid,
+            "t",
+            1.0,
+            &MapAxes::default(),
+        )
+        .unwrap();
         let bytes = std::fs::read(d.join("map.png")).unwrap();
         assert_eq!(&bytes[1..4], b"PNG");
         let _ = std::fs::remove_dir_all(&d);

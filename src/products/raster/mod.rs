@@ -76,10 +76,12 @@ pub fn aim_angles(pulses: &[Pulse], grid: &Grid, ground_z: f64) -> Vec<f64> {
     aims.mean()
 }
 
-/// Sums behind [`aim_angles`], gathered a chunk of pulses at a time.
+/// Sums behind [`aim_angles`], gathered a chunk of pulses at a time, and the swath: the
+/// cells whose top surface (the reference) a pulse's axis crosses.
 struct Aims {
     sum: Vec<f64>,
     count: Vec<u32>,
+    swath: Vec<bool>,
 }
 
 impl Aims {
@@ -87,6 +89,47 @@ impl Aims {
         Aims {
             sum: vec![0.0; cells],
             count: vec![0; cells],
+            swath: vec![false; cells],
+        }
+    }
+
+    /// Marks the cells whose top (the reference height) the axes of `pulses` cross from above,
+    /// between the heights `lo` and `hi` (the reference's lowest and highest): a slanted pulse
+    /// reaches a crown nearer the nadir than the ground it is aimed at, so at the swath's edge
+    /// the tops of tall surfaces lie outside it. The axis is followed in steps of a quarter
+    /// cell, from a little above `hi` to a little below `lo`.
+    fn cross_tops(&mut self, pulses: &[Pulse], grid: &Grid, reference: &[f64], lo: f64, hi: f64) {
+        for p in pulses {
+            let (o, d) = (p.origin, p.direction);
+            if d.z >= -1e-12 {
+                continue; // level or upwards: reaches no top from above
+            }
+            let margin = 0.01 * (hi - lo).max(1.0);
+            let (t_hi, t_lo) = ((hi + margin - o.z) / d.z, (lo - margin - o.z) / d.z);
+            if !(t_lo > 0.0 && t_lo.is_finite()) {
+                continue;
+            }
+            let t_hi = t_hi.max(0.0);
+            let horizontal = d.truncate().length() * (t_lo - t_hi);
+            let steps = (4.0 * horizontal / grid.cell).ceil().max(1.0) as usize;
+            let mut last: Option<(usize, f64)> = None;
+            for s in 0..=steps {
+                let t = t_hi + (t_lo - t_hi) * s as f64 / steps as f64;
+                let q = o + d * t;
+                let Some(k) = grid.index(q.x, q.y) else {
+                    last = None;
+                    continue;
+                };
+                let above = q.z - reference[k];
+                // a crossing from above, within the cell: an axis that enters a cell below its
+                // top meets the surface's side, and the top stays unseen
+                let crossed =
+                    matches!(last, Some((j, was)) if j == k && was >= 0.0 && above <= 0.0);
+                if crossed && reference[k].is_finite() {
+                    self.swath[k] = true;
+                }
+                last = Some((k, above));
+            }
         }
     }
 
@@ -135,10 +178,47 @@ pub struct AngleBin {
     pub rmse_m: f64,
 }
 
+/// The error figures of a set of cells: those with a reference surface, those of them with a
+/// first return, and over the latter bias, RMSE and MAE (NaN, null in JSON, without any).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct CellStats {
+    pub cells: usize,
+    pub cells_with_points: usize,
+    #[serde(deserialize_with = "nan_if_null")]
+    pub coverage: f64,
+    #[serde(deserialize_with = "nan_if_null")]
+    pub bias_m: f64,
+    #[serde(deserialize_with = "nan_if_null")]
+    pub rmse_m: f64,
+    #[serde(deserialize_with = "nan_if_null")]
+    pub mae_m: f64,
+}
+
+/// Which cells the headline figures are over: the inner swath, the cells whose top surface a
+/// pulse's axis crosses, as it does each of their eight neighbours'; or every cell with a
+/// reference surface where no cell is inner (a swath of a cell or two, a scan with no pulse
+/// towards the ground).
+pub const INNER_SWATH: &str = "inner swath: cells whose top surface a pulse's axis crosses from above, as it does each of their eight neighbours' (the swath's edge in `edge`; cells whose top no pulse reaches, beyond the swath or tall surfaces at its edge seen only from the side, in `outside`)";
+pub const ALL_CELLS: &str =
+    "all cells with a reference surface (no cell of the swath has all eight neighbours in it)";
+
 /// DSM error figures. Error = measured − reference over the cells where both exist; the
-/// figures are NaN (null in JSON) when there is no such cell.
+/// figures are NaN (null in JSON) when there is no such cell. The headline figures (bias, RMSE,
+/// MAE, coverage, cells) are over the cells `headline` names; `edge` holds the swath's edge
+/// (cells of the swath, not inner), `outside` the cells whose top no pulse reaches (beyond
+/// the swath, or tall surfaces at its edge seen only from the side), `all` every cell with a
+/// reference surface.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct DsmReport {
+    #[serde(default)]
+    pub headline: String,
+    #[serde(default)]
+    pub edge: CellStats,
+    /// Cells with a reference surface whose top no pulse's axis reaches from above.
+    #[serde(default)]
+    pub outside: CellStats,
+    #[serde(default)]
+    pub all: CellStats,
     #[serde(deserialize_with = "nan_if_null")]
     pub bias_m: f64,
     #[serde(deserialize_with = "nan_if_null")]
@@ -203,16 +283,32 @@ pub fn compare(
     measured: &[f64],
     aim_angle: &[f64],
     point_angle: &[f64],
+    swath: &[bool],
     grid: &Grid,
 ) -> DsmReport {
-    let mut all = Sums::default();
+    // the swath: cells whose top a pulse's axis crosses; inner: with all eight neighbours in it
+    let in_swath = |i: i64, j: i64| {
+        i >= 0
+            && j >= 0
+            && (i as usize) < grid.nx
+            && (j as usize) < grid.ny
+            && swath
+                .get(j as usize * grid.nx + i as usize)
+                .copied()
+                .unwrap_or(false)
+    };
+    let inner = |k: usize| {
+        let (i, j) = ((k % grid.nx.max(1)) as i64, (k / grid.nx.max(1)) as i64);
+        (-1..=1).all(|di| (-1..=1).all(|dj| in_swath(i + di, j + dj)))
+    };
+    let any_inner = (0..reference.len()).any(|k| reference[k].is_finite() && inner(k));
+    let (mut all, mut head) = (Group::default(), Group::default());
+    let (mut edge, mut outside) = (Group::default(), Group::default());
     let mut bins: Vec<(usize, Sums)> = Vec::new();
-    let mut cells = 0;
     for (k, &r) in reference.iter().enumerate() {
         if !r.is_finite() {
             continue;
         }
-        cells += 1;
         let m = measured.get(k).copied().unwrap_or(f64::NAN);
         let aim = aim_angle.get(k).copied().unwrap_or(f64::NAN).abs();
         let a = if aim.is_finite() {
@@ -227,26 +323,32 @@ pub fn compare(
             }
             bins[b].0 += 1;
         }
-        if !m.is_finite() {
-            continue;
-        }
-        let e = m - r;
+        let e = m.is_finite().then_some(m - r);
         all.add(e);
-        if let Some(b) = bin {
+        let is_inner = any_inner && inner(k);
+        if is_inner || !any_inner {
+            head.add(e);
+        } else if swath.get(k).copied().unwrap_or(false) {
+            edge.add(e);
+        } else {
+            outside.add(e);
+        }
+        if let (Some(b), Some(e)) = (bin, e) {
             bins[b].1.add(e);
         }
     }
+    let headline = head.stats();
     DsmReport {
-        bias_m: all.mean(all.sum),
-        rmse_m: all.mean(all.sum_sq).sqrt(),
-        mae_m: all.mean(all.sum_abs),
-        coverage: if cells == 0 {
-            f64::NAN
-        } else {
-            all.n as f64 / cells as f64
-        },
-        cells,
-        cells_with_points: all.n,
+        headline: if any_inner { INNER_SWATH } else { ALL_CELLS }.to_string(),
+        edge: edge.stats(),
+        outside: outside.stats(),
+        all: all.stats(),
+        bias_m: headline.bias_m,
+        rmse_m: headline.rmse_m,
+        mae_m: headline.mae_m,
+        coverage: headline.coverage,
+        cells: headline.cells,
+        cells_with_points: headline.cells_with_points,
         by_scan_angle: bins
             .iter()
             .enumerate()
@@ -268,6 +370,38 @@ pub fn compare(
     }
 }
 
+/// Cells with a reference surface and the errors of those with a first return.
+#[derive(Default)]
+struct Group {
+    cells: usize,
+    errors: Sums,
+}
+
+impl Group {
+    fn add(&mut self, error: Option<f64>) {
+        self.cells += 1;
+        if let Some(e) = error {
+            self.errors.add(e);
+        }
+    }
+
+    fn stats(&self) -> CellStats {
+        let s = &self.errors;
+        CellStats {
+            cells: self.cells,
+            cells_with_points: s.n,
+            coverage: if self.cells == 0 {
+                f64::NAN
+            } else {
+                s.n as f64 / self.cells as f64
+            },
+            bias_m: s.mean(s.sum),
+            rmse_m: s.mean(s.sum_sq).sqrt(),
+            mae_m: s.mean(s.sum_abs),
+        }
+    }
+}
+
 /// Writes `dir/report.json`, `dir/error_vs_scan_angle.png` (bias, RMSE and coverage per angle
 /// bin) and `dir/error_map.png`.
 pub fn write_report(
@@ -276,6 +410,7 @@ pub fn write_report(
     reference: &[f64],
     measured: &[f64],
     grid: &Grid,
+    axes: &crate::products::figures::MapAxes,
 ) -> Result<()> {
     let json = serde_json::to_string_pretty(report)
         .map_err(|e| Error::msg(format!("cannot encode the DSM report: {e}")))?;
@@ -287,9 +422,14 @@ pub fn write_report(
         measured,
         grid,
         &format!(
-            "first-return DSM − reference, {} m cells: bias {:+.3} m, RMSE {:.3} m",
-            report.resolution_m, report.bias_m, report.rmse_m
+            "first-return DSM − reference, {} m cells: bias {:+.3} m, RMSE {:.3} m ({})",
+            report.resolution_m,
+            report.bias_m,
+            report.rmse_m,
+            report.headline.split(':').next().unwrap_or_default()
         ),
+        report.rmse_m,
+        axes,
     )
 }
 
@@ -307,6 +447,8 @@ pub struct Dsm {
     measured: Vec<f64>,
     angles: Vec<f64>,
     aims: Aims,
+    /// The reference's lowest and highest heights.
+    heights: (f64, f64),
 }
 
 impl Dsm {
@@ -338,6 +480,10 @@ impl Dsm {
             .collect();
         heights.sort_by(f64::total_cmp);
         let ground = heights.get(heights.len() / 20).copied().unwrap_or(slo.z);
+        let span = (
+            heights.first().copied().unwrap_or(slo.z),
+            heights.last().copied().unwrap_or(shi.z),
+        );
         let n = grid.len();
         Some(Dsm {
             grid,
@@ -347,6 +493,7 @@ impl Dsm {
             measured: vec![f64::NAN; n],
             angles: vec![f64::NAN; n],
             aims: Aims::new(n),
+            heights: span,
         })
     }
 
@@ -357,6 +504,9 @@ impl Dsm {
 
     pub fn aim(&mut self, pulses: &[Pulse]) {
         self.aims.add(pulses, &self.grid, self.ground);
+        let (lo, hi) = self.heights;
+        self.aims
+            .cross_tops(pulses, &self.grid, &self.reference, lo, hi);
     }
 
     /// Writes `dsm/` under `out`: the report, its figures and the three rasters, in the
@@ -368,10 +518,19 @@ impl Dsm {
             &self.measured,
             &aim,
             &self.angles,
+            &self.aims.swath,
             &self.grid,
         );
         let dir = out.join("dsm");
-        write_report(&dir, &report, &self.reference, &self.measured, &self.grid)?;
+        let axes = crate::products::figures::MapAxes::of(frame);
+        write_report(
+            &dir,
+            &report,
+            &self.reference,
+            &self.measured,
+            &self.grid,
+            &axes,
+        )?;
         let difference: Vec<f64> = self
             .measured
             .iter()
@@ -400,12 +559,18 @@ impl Dsm {
             false,
         )?;
         crate::progress::log(&format!(
-            "dsm: bias {:+.3} m, RMSE {:.3} m, coverage {:.1}% over {} cells of {} m",
+            "dsm: bias {:+.3} m, RMSE {:.3} m, coverage {:.1}% over {} cells of {} m ({}); the swath's edge: RMSE {:.3} m, coverage {:.1}% over {} cells; outside it: RMSE {:.3} m over {} cells",
             report.bias_m,
             report.rmse_m,
             100.0 * report.coverage,
             report.cells,
-            self.res
+            self.res,
+            report.headline.split(':').next().unwrap_or_default(),
+            report.edge.rmse_m,
+            100.0 * report.edge.coverage,
+            report.edge.cells,
+            report.outside.rmse_m,
+            report.outside.cells,
         ));
         Ok(vec![
             "dsm/report.json".into(),
@@ -485,7 +650,7 @@ mod tests {
         }
         let (measured, angle) = first_return_dsm_with_angle(&points, &grid);
         assert_eq!(measured, first_return_dsm(&points, &grid));
-        let r = compare(&reference, &measured, &[], &angle, &grid);
+        let r = compare(&reference, &measured, &[], &angle, &[], &grid);
         assert!(r.bias_m.abs() < 0.01 && r.rmse_m < 0.01, "{r:?}");
         assert_eq!((r.cells, r.cells_with_points, r.coverage), (100, 100, 1.0));
         assert_eq!(r.resolution_m, 2.0);
@@ -501,7 +666,15 @@ mod tests {
         assert_eq!(r.by_scan_angle[4].bin_deg_lo, 8.0);
 
         let out = d.join("dsm");
-        write_report(&out, &r, &reference, &measured, &grid).unwrap();
+        write_report(
+            &out,
+            &r,
+            &reference,
+            &measured,
+            &grid,
+            &crate::products::figures::MapAxes::default(),
+        )
+        .unwrap();
         let json: serde_json::Value =
             serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap())
                 .unwrap();
@@ -555,7 +728,7 @@ mod tests {
         assert_eq!(angle[0], 1.0);
         assert_eq!(measured[2 * 4 + 2], 1.0);
         assert!(measured[2 * 4].is_nan());
-        let r = compare(&reference, &measured, &[], &angle, &grid);
+        let r = compare(&reference, &measured, &[], &angle, &[], &grid);
         assert_eq!((r.cells, r.cells_with_points), (9, 6));
         assert!((r.coverage - 6.0 / 9.0).abs() < 1e-12);
         let errors = [0.2, 0.2, -0.2, -0.2, 0.0, 0.0];
@@ -575,10 +748,62 @@ mod tests {
         assert!((r.by_scan_angle[0].rmse_m - 0.2).abs() < 1e-12);
 
         // no points at all: nothing covered, figures undefined, written as null
-        let r = compare(&reference, &[f64::NAN; 12], &[], &[f64::NAN; 12], &grid);
+        let r = compare(
+            &reference,
+            &[f64::NAN; 12],
+            &[],
+            &[f64::NAN; 12],
+            &[],
+            &grid,
+        );
         assert_eq!((r.cells_with_points, r.coverage), (0, 0.0));
         assert!(r.bias_m.is_nan() && r.by_scan_angle.is_empty());
         let json = serde_json::to_string(&r).unwrap();
         assert!(json.contains("\"bias_m\":null"), "{json}");
+    }
+
+    /// The headline is over the inner swath: on a 6 x 4 grid whose swath is columns 0-4, the
+    /// cells with all eight neighbours in it are (1..=3, 1..=2); the swath's
+    /// edge, badly covered and off by 3 m, stays in `edge`, and `all` keeps every cell.
+    #[test]
+    fn the_headline_is_the_inner_swath() {
+        let grid = Grid {
+            x0: 0.0,
+            y0: 0.0,
+            cell: 1.0,
+            nx: 6,
+            ny: 4,
+        };
+        let reference = vec![0.0; 24];
+        let mut measured = vec![f64::NAN; 24];
+        let mut swath = vec![false; 24];
+        for j in 0..4 {
+            for i in 0..5 {
+                swath[j * 6 + i] = true;
+                let inner = (1..=3).contains(&i) && (1..=2).contains(&j);
+                // inner cells 0.1 m off; the edge off by 3 m where it has a return at all
+                measured[j * 6 + i] = if inner {
+                    0.1
+                } else if (i + j) % 2 == 0 {
+                    3.0
+                } else {
+                    f64::NAN
+                };
+            }
+        }
+        let r = compare(&reference, &measured, &[], &[f64::NAN; 24], &swath, &grid);
+        assert_eq!(r.headline, INNER_SWATH);
+        assert_eq!((r.cells, r.cells_with_points), (6, 6));
+        assert!((r.rmse_m - 0.1).abs() < 1e-12 && (r.bias_m - 0.1).abs() < 1e-12);
+        // the edge: 20 swath cells less the 6 inner, 7 of them with a return
+        assert_eq!((r.edge.cells, r.edge.cells_with_points), (14, 7));
+        assert!((r.edge.rmse_m - 3.0).abs() < 1e-12);
+        assert_eq!((r.outside.cells, r.outside.cells_with_points), (4, 0));
+        assert_eq!((r.all.cells, r.all.cells_with_points), (24, 13));
+        // no swath: the headline is every cell
+        let r = compare(&reference, &measured, &[], &[f64::NAN; 24], &[], &grid);
+        assert_eq!(r.headline, ALL_CELLS);
+        assert_eq!((r.cells, r.cells_with_points), (24, 13));
+        assert_eq!(r.edge.cells, 0);
     }
 }

@@ -4,7 +4,7 @@ pub mod summary;
 
 use crate::campaign::Loaded;
 use crate::error::Result;
-use crate::products::raster::DsmReport;
+use crate::products::raster::{CellStats, DsmReport};
 use crate::scene::Scene;
 use crate::scene::SurfaceClass;
 use crate::waveform::file::{part_name, read_waveforms, Parts};
@@ -267,10 +267,32 @@ fn products_section(out: &Path, points_file: &str, crs: Option<&str>) -> String 
         }
     }
     if let Some(d) = DsmReport::read(&out.join("dsm/report.json")) {
+        let row = |name: &str, c: &CellStats| {
+            format!(
+                "| {name} | {} m | {} m | {} m | {} | {} |\n",
+                num(Some(c.bias_m)),
+                num(Some(c.rmse_m)),
+                num(Some(c.mae_m)),
+                num(Some(c.coverage)),
+                c.cells
+            )
+        };
+        let headline = CellStats {
+            cells: d.cells,
+            cells_with_points: d.cells_with_points,
+            coverage: d.coverage,
+            bias_m: d.bias_m,
+            rmse_m: d.rmse_m,
+            mae_m: d.mae_m,
+        };
         text += &format!(
-            "\n## DSM error ({} m cells)\n\n| bias | RMSE | MAE | coverage | cells |\n| --- | --- | --- | --- | --- |\n| {} m | {} m | {} m | {} | {} |\n\n| \\|scan angle\\| (°) | cells | coverage | bias (m) | RMSE (m) |\n| --- | --- | --- | --- | --- |\n",
-            raw(d.resolution_m), num(Some(d.bias_m)), num(Some(d.rmse_m)), num(Some(d.mae_m)),
-            num(Some(d.coverage)), d.cells
+            "\n## DSM error ({} m cells)\n\nThe headline is over the {}.\n\n| cells | bias | RMSE | MAE | coverage | cells |\n| --- | --- | --- | --- | --- | --- |\n{}{}{}{}\n| \\|scan angle\\| (°) | cells | coverage | bias (m) | RMSE (m) |\n| --- | --- | --- | --- | --- |\n",
+            raw(d.resolution_m),
+            d.headline,
+            row("**headline**", &headline),
+            row("the swath's edge", &d.edge),
+            row("outside the swath (tops no pulse reaches)", &d.outside),
+            row("all", &d.all),
         );
         for b in &d.by_scan_angle {
             text += &format!(

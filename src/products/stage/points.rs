@@ -230,6 +230,7 @@ fn point_figures(
             "{}: {} points from above, by apparent reflectance",
             loaded.campaign.name, points
         ),
+        &figures::MapAxes::of(loaded.campaign.frame.as_ref()),
     )?;
     let examples = examples.figures(loaded);
     let mut written = vec!["points_top.png".to_string()];

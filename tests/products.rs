@@ -486,10 +486,13 @@ with rasterio.open(sys.argv[1] + "/dsm/dsm.tif") as r:
     a = r.read(1)
     h = a[a != r.nodata]
     assert abs(float(np.median(h)) - {z0}) < 0.05, np.median(h)
-# the difference raster is what dsm/report.json reports: its cells with a value, their mean,
-# root mean square and mean absolute value
+# the difference raster is what dsm/report.json reports over all cells: its cells with a
+# value, their mean, root mean square and mean absolute value (the headline is over the inner
+# swath, a part of them)
 import json
 rep = json.load(open(sys.argv[1] + "/dsm/report.json"))
+assert rep["cells"] <= rep["all"]["cells"], rep
+rep = rep["all"]
 with rasterio.open(sys.argv[1] + "/dsm/difference.tif") as r:
     assert r.crs.to_epsg() == 32631 and r.nodata == -9999.0
     a = r.read(1)

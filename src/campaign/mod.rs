@@ -226,6 +226,9 @@ pub struct Platform {
     pub along_track_step_m: Option<f64>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub position: Option<[f64; 3]>,
+    /// Several TLS stations, scanned in turn (`line` and the points' source id = the index).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub positions: Option<Vec<[f64; 3]>>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub azimuth_deg: Option<[f64; 2]>,
     #[serde(default, skip_serializing_if = "Option::is_none")]

@@ -131,8 +131,37 @@ pub fn check(path: &Path) -> Result<CheckReport> {
         rays_per_second: rate,
         threads: rayon::current_num_threads(),
         estimated_time_s: total_rays / rate,
-        warnings: c.warnings(),
+        warnings: c
+            .warnings()
+            .into_iter()
+            .chain(overlap_warning(c, &scene, &plan))
+            .collect(),
     })
+}
+
+/// Pulses traced for the ranges at which the scene lies before the sensor.
+const OVERLAP_PULSES: u64 = 4096;
+
+/// The near-field overlap warning ([`crate::sensor::overlap`]) from the ranges at which up to
+/// 4,096 of the plan's pulses, evenly spread, first meet the scene.
+pub fn overlap_warning(
+    c: &crate::campaign::Campaign,
+    scene: &Scene,
+    plan: &Plan,
+) -> Option<String> {
+    let n = plan.len() as u64;
+    let step = n.div_ceil(OVERLAP_PULSES).max(1) as usize;
+    let ranges: Vec<f64> = (0..n)
+        .step_by(step)
+        .filter_map(|id| {
+            let p = plan.pulse(id);
+            let none = crate::scene::FacetId::NONE;
+            scene
+                .intersect(p.origin, p.direction, f64::INFINITY, none)
+                .map(|h| h.t)
+        })
+        .collect();
+    crate::sensor::overlap::warning(&c.instrument, &ranges)
 }
 
 impl CheckReport {

@@ -428,6 +428,9 @@ fn run_single(
 
     let scene = cache.get(&loaded.scene_path, loaded.campaign.wavelength_nm.all())?;
     memory::fits(loaded, scene, &plan)?;
+    if let Some(w) = check::overlap_warning(&loaded.campaign, scene, &plan) {
+        log(&format!("warning: {w}"));
+    }
     let sim = &loaded.campaign.simulation;
     let bdpt = matches!(sim.method, Method::Bdpt | Method::Auto);
     if scene.water.is_some() && bdpt && sim.receiver_depth == ReceiverDepth::First {

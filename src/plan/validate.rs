@@ -55,7 +55,7 @@ pub fn platform(doc: &Doc, p: &Platform) -> Result<()> {
 }
 
 /// Every platform key and whether this platform gives it.
-fn given(p: &Platform) -> [(&'static str, bool); 17] {
+fn given(p: &Platform) -> [(&'static str, bool); 18] {
     [
         ("pulses", p.pulses.is_some()),
         ("altitude_m", p.altitude_m.is_some()),
@@ -69,6 +69,7 @@ fn given(p: &Platform) -> [(&'static str, bool); 17] {
         ("off_nadir_deg", p.off_nadir_deg.is_some()),
         ("along_track_step_m", p.along_track_step_m.is_some()),
         ("position", p.position.is_some()),
+        ("positions", p.positions.is_some()),
         ("azimuth_deg", p.azimuth_deg.is_some()),
         ("azimuth_step_deg", p.azimuth_step_deg.is_some()),
         ("zenith_deg", p.zenith_deg.is_some()),
@@ -96,13 +97,12 @@ fn keys_of(kind: PlatformKind) -> (&'static [&'static str], &'static [&'static s
         ),
         PlatformKind::Tls => (
             &[
-                "position",
                 "azimuth_deg",
                 "azimuth_step_deg",
                 "zenith_deg",
                 "zenith_step_deg",
             ],
-            &["prf_hz", "gps_start_s"],
+            &["position", "positions", "prf_hz", "gps_start_s"],
         ),
     }
 }
@@ -198,8 +198,31 @@ pub fn numbers(doc: &Doc, p: &Platform) -> Result<()> {
             Ok(())
         }
         PlatformKind::Tls => {
-            if let Some(pos) = p.position {
-                c.vec_finite("platform.position", &pos)?;
+            match (&p.position, &p.positions) {
+                (Some(pos), None) => c.vec_finite("platform.position", pos)?,
+                (None, Some(list)) if !list.is_empty() => {
+                    for (k, pos) in list.iter().enumerate() {
+                        c.vec_finite(&format!("platform.positions[{k}]"), pos)?;
+                    }
+                }
+                (None, Some(_)) => {
+                    return Err(doc.error(
+                        "platform.positions",
+                        "the list of scan positions is empty (give at least one [x, y, z])",
+                    ))
+                }
+                (Some(_), Some(_)) => {
+                    return Err(doc.error(
+                        "platform.positions",
+                        "give either `position` (one station) or `positions` (several), not both",
+                    ))
+                }
+                (None, None) => {
+                    return Err(doc.error(
+                        "platform",
+                        "a tls platform needs position (one station) or positions (several)",
+                    ))
+                }
             }
             if let Some([a0, a1]) = p.azimuth_deg {
                 let key = "platform.azimuth_deg";

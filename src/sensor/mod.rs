@@ -2,6 +2,8 @@
 //!
 //! Both are mono-static and co-aligned: they share the pulse's position and axis.
 
+pub mod overlap;
+
 use crate::campaign::Instrument;
 use glam::DVec3;
 use std::f64::consts::PI;

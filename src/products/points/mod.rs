@@ -51,6 +51,9 @@ pub struct PointConfig {
     /// the platform's nominal range (altitude for nadir sensors) keeps intensities of one
     /// campaign in the u16 range whatever its energy, aperture and altitude.
     pub reference_range_m: f64,
+    /// The LAS point source id of `line` 0: 1 for flight lines and beams (ASPRS's custom),
+    /// 0 for TLS stations (the station's index, as the campaign's `positions` count them).
+    pub first_source_id: u32,
 }
 
 impl PointConfig {
@@ -134,7 +137,10 @@ pub fn points_on_axis(
                 return_number: k as u8 + 1,
                 number_of_returns: n,
                 scan_angle_deg: pulse.scan_angle_deg,
-                point_source_id: pulse.line.saturating_add(1).min(u16::MAX as u32) as u16,
+                point_source_id: pulse
+                    .line
+                    .saturating_add(config.first_source_id)
+                    .min(u16::MAX as u32) as u16,
                 classification: classes.get(i).copied().unwrap_or(1),
                 apparent_reflectance: rho as f32,
                 pulse_id: pulse.id,
@@ -208,6 +214,7 @@ mod tests {
             emitted_energy_j: 1e-6,
             photon_energy_j: crate::photon_energy_j(1064.0),
             telescope_area_m2: 0.1,
+            first_source_id: 1,
             reference_range_m: h,
         };
         let pulse = Pulse {
@@ -256,6 +263,7 @@ mod tests {
             emitted_energy_j: 1e-6,
             photon_energy_j: 1e-19,
             telescope_area_m2: 0.1,
+            first_source_id: 1,
             reference_range_m: 250.0,
         };
         let pulse = Pulse {

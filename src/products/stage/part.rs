@@ -206,13 +206,15 @@ fn discrete_returns(loaded: &Loaded, plan: &Plan, waveforms: &[Waveform]) -> Vec
     let by_pulse: Vec<Vec<Point>> = waveforms
         .par_iter()
         .map(|w| {
+            let pulse = &plan.pulse(w.pulse_id);
             let config = PointConfig {
-                emitted_energy_j: inst.pulse_energy_j,
+                // the pulse's own beam's energy (a weak beam's is a fraction of it)
+                emitted_energy_j: c.pulse_energy_j(pulse.line),
                 photon_energy_j: crate::photon_energy_j(band_of(loaded, w)),
                 telescope_area_m2: inst.receiver_area_m2,
                 reference_range_m: reference_range,
+                first_source_id: u32::from(c.platform.kind != crate::campaign::PlatformKind::Tls),
             };
-            let pulse = &plan.pulse(w.pulse_id);
             // the points where a detector puts the returns: wide ones at their summits
             let (mut comps, photons, sigma_bins) = decomposed(loaded, w);
             place_on_summits(&mut comps, &photons, sigma_bins);

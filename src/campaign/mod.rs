@@ -286,7 +286,7 @@ pub struct Beam {
 
 /// How an ALS scanner sweeps its beam across the track.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize, Serialize)]
-#[serde(rename_all = "lowercase")]
+#[serde(rename_all = "snake_case")]
 pub enum ScanPattern {
     /// Back and forth between the scan angles (a galvanometer mirror).
     Oscillating,
@@ -294,6 +294,13 @@ pub enum ScanPattern {
     Line,
     /// Around a cone at the largest scan angle (a Palmer scanner).
     Conic,
+    /// A spinning mirror polygon: parallel lines, each from min to max, firing in the first
+    /// `duty` of each line.
+    RotatingPolygon,
+    /// Two rotating prisms (Livox-like rosettes), paraxial: the deflections add as vectors.
+    Risley,
+    /// A spinning multi-channel head (Velodyne-like).
+    Multibeam,
 }
 
 impl ScanPattern {
@@ -301,7 +308,11 @@ impl ScanPattern {
     pub fn lines_per_period(self) -> f64 {
         match self {
             ScanPattern::Oscillating => 2.0,
-            ScanPattern::Line | ScanPattern::Conic => 1.0,
+            ScanPattern::Line
+            | ScanPattern::Conic
+            | ScanPattern::RotatingPolygon
+            | ScanPattern::Risley
+            | ScanPattern::Multibeam => 1.0,
         }
     }
 }
@@ -310,7 +321,30 @@ impl ScanPattern {
 #[serde(deny_unknown_fields)]
 pub struct Scanner {
     pub pattern: ScanPattern,
-    pub scan_angle_deg: [f64; 2],
+    /// [min, max] of the look angle: every pattern but `risley` and `multibeam`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub scan_angle_deg: Option<[f64; 2]>,
+    /// `rotating_polygon`: mirror facets (a line per facet; the rotation is
+    /// scan_frequency_hz / facets) and the fraction of each line that fires (default 1).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub facets: Option<u32>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub duty: Option<f64>,
+    /// `risley`: the two prisms' rates (turns per second, signed), deflections and phases.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub prism_rates_hz: Option<[f64; 2]>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub deviation_deg: Option<[f64; 2]>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub phase_deg: Option<[f64; 2]>,
+    /// `multibeam`: the channels' elevations above the head's plane, its turns per second and
+    /// its tilt (a roll about the body's x axis, right side down).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub channels_deg: Option<Vec<f64>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rotation_hz: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub head_tilt_deg: Option<f64>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub scan_frequency_hz: Option<f64>,
     #[serde(default, skip_serializing_if = "Option::is_none")]

@@ -540,3 +540,137 @@ fn platform_frame_points_along_track_and_left() {
         "{along}"
     );
 }
+
+/// The angle between two unit vectors, radians (acos loses digits near 0: atan2 of the cross
+/// and dot products keeps them).
+fn angle_between(a: DVec3, b: DVec3) -> f64 {
+    a.cross(b).length().atan2(a.dot(b))
+}
+
+/// A rotating polygon: a sawtooth of the look angle against time, min + (max − min) frac(f t),
+/// firing only in the first `duty` of each line (here 0.75 of P = 40 pulses: 30 a line).
+#[test]
+fn rotating_polygon_is_a_sawtooth_with_its_duty() {
+    let p = pulses(
+        "platform: { kind: als, altitude_m: 100, speed_m_s: 10, prf_hz: 4000, lines: [ { start: [0, 0], end: [10, 0] } ],
+            scanner: { pattern: rotating_polygon, facets: 4, scan_angle_deg: [-30, 30], scan_frequency_hz: 100, duty: 0.75 } }",
+    );
+    assert_ids_and_times(&p);
+    // 10 m at 10 m/s: 100 lines of 30 pulses
+    assert_eq!(p.len(), 100 * 30);
+    for q in &p {
+        let u = (q.gps_time_s * 100.0).fract();
+        let u = if u > 1.0 - 1e-9 { 0.0 } else { u };
+        assert!(u < 0.75 + 1e-9, "pulse {} at phase {u}", q.id);
+        let want = -30.0 + 60.0 * u;
+        assert!(
+            (q.scan_angle_deg as f64 - want).abs() < 1e-4,
+            "pulse {}",
+            q.id
+        );
+        // the beam across track at that angle, flying +x: right is −y
+        let t = want.to_radians();
+        let d = DVec3::new(0.0, -t.sin(), -t.cos());
+        assert!(angle_between(q.direction, d) < 1e-9, "pulse {}", q.id);
+    }
+}
+
+/// Risley prisms, paraxial: the off-nadir angle |d1 + d2| towards the body azimuth of
+/// d1 + d2, d_i = dev_i (cos p_i, sin p_i), p_i = 360 rate_i t + phase_i, to 1e-9 rad.
+#[test]
+fn risley_prisms_add_their_deflections() {
+    let p = pulses(
+        "platform: { kind: als, altitude_m: 60, speed_m_s: 5, prf_hz: 2000, lines: [ { start: [0, 0], end: [0, 2] } ],
+            scanner: { pattern: risley, prism_rates_hz: [120.0, -87.0], deviation_deg: [19.0, 19.0], phase_deg: [0, 30] } }",
+    );
+    assert_ids_and_times(&p);
+    assert_eq!(p.len(), 800);
+    // flying +y: body x = +y, body left = −x
+    let (along, left) = (DVec3::Y, DVec3::NEG_X);
+    for q in &p {
+        let t = q.gps_time_s;
+        assert!((t - q.id as f64 / 2000.0).abs() < 1e-12);
+        let d = |rate: f64, phase: f64| {
+            let a = (360.0 * rate * t + phase).to_radians();
+            (19.0 * a.cos(), 19.0 * a.sin())
+        };
+        let (a, b) = (d(120.0, 0.0), d(-87.0, 30.0));
+        let (x, y) = (a.0 + b.0, a.1 + b.1);
+        let off = x.hypot(y).to_radians();
+        let az = y.atan2(x);
+        let want = (along * az.cos() + left * az.sin()) * off.sin() - DVec3::Z * off.cos();
+        assert!(angle_between(q.direction, want) < 1e-9, "pulse {}", q.id);
+        assert!((q.scan_angle_deg as f64 - x.hypot(y)).abs() < 1e-4);
+    }
+    // the rosette reaches both its centre and its rim
+    let offs: Vec<f32> = p.iter().map(|q| q.scan_angle_deg).collect();
+    assert!(offs.iter().cloned().fold(f32::MAX, f32::min) < 5.0);
+    assert!(offs.iter().cloned().fold(0.0, f32::max) > 37.0);
+}
+
+/// A multi-beam head: every firing gives one pulse per channel at once, each at its
+/// elevation above the head's plane, the azimuth stepping 360 rotation / prf per firing
+/// (counter-clockwise from body x); a head tilt rolls it about body x, right side down.
+#[test]
+fn multibeam_head_fires_its_channels_around() {
+    for tilt in [0.0f64, 20.0] {
+        let p = pulses(&format!(
+            "platform: {{ kind: als, altitude_m: 2, speed_m_s: 10, prf_hz: 1800, lines: [ {{ start: [0, 0], end: [1, 0] }} ],
+                scanner: {{ pattern: multibeam, channels_deg: [-15, -5, 5, 15], rotation_hz: 10, head_tilt_deg: {tilt} }} }}"
+        ));
+        assert_ids_and_times(&p);
+        // 1 m at 10 m/s: 180 firings of 4 channels
+        assert_eq!(p.len(), 180 * 4);
+        let (sr, cr) = tilt.to_radians().sin_cos();
+        // the head's axis and its zero azimuth, in the world (flying +x: left = +y)
+        let axis = DVec3::new(0.0, -sr, cr);
+        for q in &p {
+            let (k, c) = (q.id / 4, (q.id % 4) as usize);
+            assert_eq!(
+                q.gps_time_s,
+                p[4 * k as usize].gps_time_s,
+                "channels fire at once"
+            );
+            let e = [-15.0f64, -5.0, 5.0, 15.0][c];
+            assert_eq!(q.scan_angle_deg as f64, e);
+            // elevation above the head's plane
+            let elev = std::f64::consts::FRAC_PI_2 - angle_between(q.direction, axis);
+            assert!((elev - e.to_radians()).abs() < 1e-9, "pulse {}", q.id);
+            let phi = (360.0 * 10.0 * k as f64 / 1800.0).to_radians();
+            let h = DVec3::new(
+                e.to_radians().cos() * phi.cos(),
+                e.to_radians().cos() * phi.sin(),
+                e.to_radians().sin(),
+            );
+            let want = DVec3::new(h.x, h.y * cr - h.z * sr, h.y * sr + h.z * cr);
+            assert!(angle_between(q.direction, want) < 1e-9, "pulse {}", q.id);
+        }
+        // the azimuth step: 2 degrees between firings, about the head's axis
+        let flat = |d: DVec3| d - axis * d.dot(axis);
+        let step = angle_between(flat(p[0].direction), flat(p[4].direction));
+        assert!((step - 2f64.to_radians()).abs() < 1e-9, "{step}");
+    }
+}
+
+/// Keys of another pattern are refused by name, and a pattern's own missing keys too.
+#[test]
+fn scanner_keys_belong_to_their_pattern() {
+    let e = error(
+        "platform: { kind: als, altitude_m: 60, speed_m_s: 5, prf_hz: 2000, lines: [ { start: [0, 0], end: [0, 2] } ],
+            scanner: { pattern: risley, prism_rates_hz: [1, 2], deviation_deg: [1, 1], scan_angle_deg: [-1, 1] } }",
+    );
+    assert!(
+        e.contains("scan_angle_deg") && e.contains("not used by the risley pattern"),
+        "{e}"
+    );
+    let e = error(
+        "platform: { kind: als, altitude_m: 60, speed_m_s: 5, prf_hz: 2000, lines: [ { start: [0, 0], end: [0, 2] } ],
+            scanner: { pattern: multibeam, channels_deg: [0] } }",
+    );
+    assert!(e.contains("needs rotation_hz"), "{e}");
+    let e = error(
+        "platform: { kind: als, altitude_m: 60, speed_m_s: 5, prf_hz: 2000, lines: [ { start: [0, 0], end: [0, 2] } ],
+            scanner: { pattern: rotating_polygon, scan_angle_deg: [-30, 30], scan_frequency_hz: 100, duty: 1.5 } }",
+    );
+    assert!(e.contains("duty"), "{e}");
+}

@@ -142,6 +142,65 @@ pub fn keys(doc: &Doc, p: &Platform) -> Result<()> {
     Ok(())
 }
 
+/// The scanner keys each pattern takes: a key of another pattern is an error naming it, and a
+/// key a pattern needs, missing, is one too.
+fn pattern_keys(c: &Check, s: &crate::campaign::Scanner) -> Result<()> {
+    use ScanPattern::*;
+    let given = [
+        ("scan_angle_deg", s.scan_angle_deg.is_some()),
+        ("scan_frequency_hz", s.scan_frequency_hz.is_some()),
+        ("look_angle_step_deg", s.look_angle_step_deg.is_some()),
+        ("along_track_step_m", s.along_track_step_m.is_some()),
+        ("facets", s.facets.is_some()),
+        ("duty", s.duty.is_some()),
+        ("prism_rates_hz", s.prism_rates_hz.is_some()),
+        ("deviation_deg", s.deviation_deg.is_some()),
+        ("phase_deg", s.phase_deg.is_some()),
+        ("channels_deg", s.channels_deg.is_some()),
+        ("rotation_hz", s.rotation_hz.is_some()),
+        ("head_tilt_deg", s.head_tilt_deg.is_some()),
+    ];
+    let grid: &[&str] = &[
+        "scan_angle_deg",
+        "scan_frequency_hz",
+        "look_angle_step_deg",
+        "along_track_step_m",
+    ];
+    let (needs, takes): (&[&str], Vec<&str>) = match s.pattern {
+        Line | Oscillating | Conic => (&["scan_angle_deg"], grid.to_vec()),
+        RotatingPolygon => (&["scan_angle_deg"], [grid, &["facets", "duty"]].concat()),
+        Risley => (
+            &["prism_rates_hz", "deviation_deg"],
+            vec!["prism_rates_hz", "deviation_deg", "phase_deg"],
+        ),
+        Multibeam => (
+            &["channels_deg", "rotation_hz"],
+            vec!["channels_deg", "rotation_hz", "head_tilt_deg"],
+        ),
+    };
+    let name = serde_yaml::to_value(s.pattern)
+        .ok()
+        .and_then(|v| v.as_str().map(str::to_string))
+        .unwrap_or_default();
+    for (key, here) in given {
+        if here && !takes.contains(&key) {
+            return Err(c.doc.error(
+                &format!("platform.scanner.{key}"),
+                format!("not used by the {name} pattern"),
+            ));
+        }
+    }
+    for key in needs {
+        if !given.iter().any(|(k, here)| k == key && *here) {
+            return Err(c.doc.error(
+                "platform.scanner",
+                format!("the {name} pattern needs {key}"),
+            ));
+        }
+    }
+    Ok(())
+}
+
 /// Number checks of the non-static kinds (static is checked by the caller).
 ///
 /// A flat list of located checks, one per key of each platform kind.
@@ -267,34 +326,83 @@ fn als(c: &Check, p: &Platform) -> Result<()> {
     c.opt_positive("platform.speed_m_s", p.speed_m_s)?;
     let Some(s) = &p.scanner else { return Ok(()) };
     let pattern = s.pattern;
-    let key = "platform.scanner.scan_angle_deg";
-    let [lo, hi] = s.scan_angle_deg;
-    for a in [lo, hi] {
-        c.open_deg(key, a, -90.0, 90.0)?;
-    }
-    if lo >= hi {
-        return Err(doc.error(
-            key,
-            format!("must be [min, max] with min < max, found [{lo}, {hi}]"),
-        ));
-    }
-    c.opt_positive("platform.scanner.scan_frequency_hz", s.scan_frequency_hz)?;
-    c.opt_positive(
-        "platform.scanner.look_angle_step_deg",
-        s.look_angle_step_deg,
-    )?;
-    c.opt_positive("platform.scanner.along_track_step_m", s.along_track_step_m)?;
-    if s.along_track_step_m.is_none() && s.scan_frequency_hz.is_none() {
-        return Err(doc.error(
-            "platform.scanner",
-            "an als scanner needs scan_frequency_hz unless along_track_step_m is given",
-        ));
-    }
-    if s.look_angle_step_deg.is_none() && p.prf_hz.is_none() {
-        return Err(doc.error(
-            "platform",
-            "an als platform needs prf_hz unless scanner.look_angle_step_deg is given",
-        ));
+    pattern_keys(c, s)?;
+    let (mut lo, mut hi) = (0.0, 0.0);
+    match pattern {
+        ScanPattern::Risley => {
+            let key = "platform.scanner.prism_rates_hz";
+            for r in s.prism_rates_hz.unwrap_or_default() {
+                c.finite(key, r)?;
+            }
+            for d in s.deviation_deg.unwrap_or_default() {
+                c.open_deg("platform.scanner.deviation_deg", d, 0.0, 45.0)?;
+            }
+            for ph in s.phase_deg.unwrap_or_default() {
+                c.finite("platform.scanner.phase_deg", ph)?;
+            }
+            if p.prf_hz.is_none() {
+                return Err(doc.error("platform", "a risley scanner needs platform.prf_hz"));
+            }
+        }
+        ScanPattern::Multibeam => {
+            let key = "platform.scanner.channels_deg";
+            let channels = s.channels_deg.as_deref().unwrap_or(&[]);
+            if channels.is_empty() {
+                return Err(doc.error(key, "the list of channels is empty"));
+            }
+            for &e in channels {
+                c.open_deg(key, e, -90.0, 90.0)?;
+            }
+            c.opt_positive("platform.scanner.rotation_hz", s.rotation_hz)?;
+            if let Some(t) = s.head_tilt_deg {
+                c.open_deg("platform.scanner.head_tilt_deg", t, -90.0, 90.0)?;
+            }
+            if p.prf_hz.is_none() {
+                return Err(doc.error("platform", "a multibeam scanner needs platform.prf_hz"));
+            }
+        }
+        _ => {
+            let key = "platform.scanner.scan_angle_deg";
+            [lo, hi] = s.scan_angle_deg.unwrap_or_default();
+            for a in [lo, hi] {
+                c.open_deg(key, a, -90.0, 90.0)?;
+            }
+            if lo >= hi {
+                return Err(doc.error(
+                    key,
+                    format!("must be [min, max] with min < max, found [{lo}, {hi}]"),
+                ));
+            }
+            c.opt_positive("platform.scanner.scan_frequency_hz", s.scan_frequency_hz)?;
+            c.opt_positive(
+                "platform.scanner.look_angle_step_deg",
+                s.look_angle_step_deg,
+            )?;
+            c.opt_positive("platform.scanner.along_track_step_m", s.along_track_step_m)?;
+            if let Some(d) = s.duty {
+                if !(d > 0.0 && d <= 1.0) {
+                    return Err(doc.error(
+                        "platform.scanner.duty",
+                        format!("must be in (0, 1], found {d}"),
+                    ));
+                }
+            }
+            if let Some(0) = s.facets {
+                return Err(doc.error("platform.scanner.facets", "must be at least 1"));
+            }
+            if s.along_track_step_m.is_none() && s.scan_frequency_hz.is_none() {
+                return Err(doc.error(
+                    "platform.scanner",
+                    "an als scanner needs scan_frequency_hz unless along_track_step_m is given",
+                ));
+            }
+            if s.look_angle_step_deg.is_none() && p.prf_hz.is_none() {
+                return Err(doc.error(
+                    "platform",
+                    "an als platform needs prf_hz unless scanner.look_angle_step_deg is given",
+                ));
+            }
+        }
     }
     let lines = p.lines.as_deref().unwrap_or(&[]);
     if lines.is_empty() {

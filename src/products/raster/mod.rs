@@ -559,7 +559,7 @@ impl Dsm {
             false,
         )?;
         crate::progress::log(&format!(
-            "dsm: bias {:+.3} m, RMSE {:.3} m, coverage {:.1}% over {} cells of {} m ({}); the swath's edge: RMSE {:.3} m, coverage {:.1}% over {} cells; outside it: RMSE {:.3} m over {} cells",
+            "dsm: bias {:+.3} m, RMSE {:.3} m, coverage {:.1}% over {} cells of {} m ({}); the swath's edge: RMSE {:.3} m, coverage {:.1}% over {} cells{}",
             report.bias_m,
             report.rmse_m,
             100.0 * report.coverage,
@@ -569,8 +569,13 @@ impl Dsm {
             report.edge.rmse_m,
             100.0 * report.edge.coverage,
             report.edge.cells,
-            report.outside.rmse_m,
-            report.outside.cells,
+            match report.outside.cells {
+                0 => String::new(),
+                n => format!(
+                    "; tops no pulse reaches: RMSE {:.3} m over {n} cells",
+                    report.outside.rmse_m
+                ),
+            },
         ));
         Ok(vec![
             "dsm/report.json".into(),

@@ -1279,3 +1279,24 @@ fn check_bounds_the_peak_memory_of_a_run() {
         "bound {bound} MB for a peak of {peak} MB\n{check}"
     );
 }
+
+/// Every bundled campaign in pipelines/ (the bench's aside) reads and plans as `lidarsim run`
+/// reads and plans it: keys, values and the platform's pulses.
+#[test]
+fn every_bundled_campaign_plans() {
+    let dir = lidarsim::testdata::repo().join("pipelines");
+    let mut names: Vec<_> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|x| x == "yaml"))
+        .collect();
+    names.sort();
+    assert!(names.len() >= 10, "{names:?}");
+    for path in names {
+        let loaded = lidarsim::plan::read_campaign(&path)
+            .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+        let plan = lidarsim::plan::Plan::new(&loaded.campaign)
+            .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+        assert!(plan.len() > 0, "{}: no pulses", path.display());
+    }
+}

@@ -1297,6 +1297,6 @@ fn every_bundled_campaign_plans() {
             .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
         let plan = lidarsim::plan::Plan::new(&loaded.campaign)
             .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-        assert!(plan.len() > 0, "{}: no pulses", path.display());
+        assert!(!plan.is_empty(), "{}: no pulses", path.display());
     }
 }

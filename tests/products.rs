@@ -476,8 +476,14 @@ g = laspy.read(sys.argv[1] + "/../geo_las/points.las")
 assert not g.header.are_points_compressed and f.header.are_points_compressed
 assert [v for v in g.header.vlrs if v.record_id == 2112][0].string == wkt
 for d in ["X", "Y", "Z", "gps_time", "return_number", "number_of_returns", "classification",
-          "intensity", "pulse_id"]:
+          "intensity", "pulse_id", "scan_direction_flag", "edge_of_flight_line"]:
     assert np.array_equal(np.asarray(f[d]), np.asarray(g[d])), d
+# the scan flags as LAS defines them: a line scanner sweeps left to right (1) in lines of
+# 12 / 0.3 = 40 pulses, the last of each at the edge of the flight line
+pid = np.asarray(g["pulse_id"]).astype(np.int64)
+assert np.all(np.asarray(g["scan_direction_flag"]) == 1)
+assert np.array_equal(np.asarray(g["edge_of_flight_line"]) == 1, pid % 40 == 39)
+assert (pid % 40 == 39).sum() > 0
 with rasterio.open(sys.argv[1] + "/dsm/dsm.tif") as r:
     assert r.crs.to_epsg() == 32631, r.crs
     assert r.nodata == -9999.0, r.nodata

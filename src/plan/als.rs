@@ -279,6 +279,20 @@ impl Als {
         }
     }
 
+    /// (left to right, edge of the scan line) of pulse `id`: see [`super::Plan::scan_flags`].
+    pub(crate) fn scan_flags(&self, id: u64) -> (bool, bool) {
+        let index = self.flights.partition_point(|f| f.first_id <= id) - 1;
+        let f = &self.flights[index];
+        let n = self.per_line;
+        let (j, i) = ((id - f.first_id) / n, (id - f.first_id) % n);
+        let edge = i + 1 == n;
+        match self.pattern {
+            ScanPattern::Line | ScanPattern::RotatingPolygon => (true, edge),
+            ScanPattern::Oscillating => (j % 2 == 0, edge),
+            _ => (false, false),
+        }
+    }
+
     /// Pulse `id` (< [`Als::count`]).
     pub(crate) fn pulse(&self, id: u64) -> Pulse {
         let index = self.flights.partition_point(|f| f.first_id <= id) - 1;

@@ -285,6 +285,17 @@ impl Plan {
         }
     }
 
+    /// LAS's scan direction and edge-of-flight-line flags of pulse `id`: the look angle
+    /// growing (left to right: a positive angle is right of the track), and the last pulse of a
+    /// scan line. Only the across-track sweeps (`line`, `oscillating`, `rotating_polygon`) have
+    /// them; every other pulse has neither.
+    pub fn scan_flags(&self, id: u64) -> (bool, bool) {
+        match &self.platform {
+            Source::Als(a) => a.scan_flags(id),
+            _ => (false, false),
+        }
+    }
+
     /// `n` pulses spread over the plan for a sample of it (a pilot, a probe): one from each of
     /// `n` equal strata, at an offset hashed from `seed` and the stratum. Not the first of
     /// each stratum: a fixed stride aliases with a scan whose period divides it (the town

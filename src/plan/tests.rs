@@ -674,3 +674,43 @@ fn scanner_keys_belong_to_their_pattern() {
     );
     assert!(e.contains("duty"), "{e}");
 }
+
+/// LAS's scan flags: an oscillating scan's lines alternate their direction (left to right on
+/// even lines, growing angles), a line scan's all grow, and the last pulse of every line is
+/// its edge; a conic scan has neither flag.
+#[test]
+fn scan_flags_follow_the_sweep() {
+    let platform = |pattern: &str| {
+        format!(
+            "platform: {{ kind: als, altitude_m: 100, speed_m_s: 10, prf_hz: 2000, lines: [ {{ start: [0, 0], end: [2, 0] }} ],
+                scanner: {{ pattern: {pattern}, scan_angle_deg: [-10, 10], scan_frequency_hz: 50 }} }}"
+        )
+    };
+    for pattern in ["oscillating", "line", "conic"] {
+        let c = campaign(&platform(pattern));
+        let plan = Plan::new(&c).unwrap();
+        let Source::Als(a) = &plan.platform else {
+            panic!("an als plan")
+        };
+        let n = a.per_line;
+        assert!(n > 2);
+        let pulses = plan.pulses(0..plan.len());
+        for q in &pulses {
+            let (dir, edge) = plan.scan_flags(q.id);
+            let (j, i) = (q.id / n, q.id % n);
+            match pattern {
+                "conic" => assert_eq!((dir, edge), (false, false)),
+                _ => {
+                    assert_eq!(edge, i + 1 == n, "pulse {}", q.id);
+                    let growing = pattern == "line" || j % 2 == 0;
+                    assert_eq!(dir, growing, "pulse {}", q.id);
+                    // the flag says which way the angle goes to the line's next pulse
+                    if i + 1 < n {
+                        let next = pulses[q.id as usize + 1].scan_angle_deg;
+                        assert_eq!(next > q.scan_angle_deg, dir, "pulse {}", q.id);
+                    }
+                }
+            }
+        }
+    }
+}

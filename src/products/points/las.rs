@@ -278,6 +278,12 @@ fn to_las(p: &Point, layout: &Layout) -> las::Point {
         number_of_returns: p.number_of_returns.min(15),
         classification,
         scan_angle: scan_angle_for_las(p.scan_angle_deg),
+        scan_direction: if p.left_to_right {
+            las::point::ScanDirection::LeftToRight
+        } else {
+            las::point::ScanDirection::RightToLeft
+        },
+        is_edge_of_flight_line: p.edge_of_line,
         point_source_id: p.point_source_id,
         gps_time: Some(p.gps_time),
         extra_bytes: extra,
@@ -370,6 +376,8 @@ pub fn read_las(path: &Path) -> Result<Vec<Point>> {
             apparent_reflectance: rho,
             pulse_id: id,
             wavelength_nm,
+            left_to_right: p.scan_direction == las::point::ScanDirection::LeftToRight,
+            edge_of_line: p.is_edge_of_flight_line,
         });
     }
     Ok(out)
@@ -400,6 +408,8 @@ mod tests {
                     apparent_reflectance: r.uniform() as f32,
                     pulse_id: (1u64 << 40) + i as u64,
                     wavelength_nm: None,
+                    left_to_right: i % 2 == 0,
+                    edge_of_line: i % 7 == 0,
                 }
             })
             .collect()

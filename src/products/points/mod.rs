@@ -36,6 +36,10 @@ pub struct Point {
     pub pulse_id: u64,
     /// The band of the waveform it came from, in a run of several bands.
     pub wavelength_nm: Option<f32>,
+    /// LAS's scan direction flag (the look angle growing: left to right) and edge of flight
+    /// line (the last pulse of a scan line), from [`crate::plan::Plan::scan_flags`].
+    pub left_to_right: bool,
+    pub edge_of_line: bool,
 }
 
 /// Sensor constants the points need.
@@ -145,6 +149,8 @@ pub fn points_on_axis(
                 apparent_reflectance: rho as f32,
                 pulse_id: pulse.id,
                 wavelength_nm: None,
+                left_to_right: false,
+                edge_of_line: false,
             }
         })
         .collect()

@@ -13,7 +13,7 @@ use std::path::Path;
 /// Bytes of one record: x, y, z, gps_time f64; intensity u16; return number, number of
 /// returns u8; scan angle f32; point source u16; class u8; apparent reflectance f32; pulse u64;
 /// band f32 (NaN: none).
-const RECORD: usize = 4 * 8 + 2 + 1 + 1 + 4 + 2 + 1 + 4 + 8 + 4;
+const RECORD: usize = 4 * 8 + 2 + 1 + 1 + 4 + 2 + 1 + 4 + 8 + 4 + 1;
 
 /// Points read back at a time.
 pub const CHUNK: usize = 1 << 16;
@@ -92,6 +92,7 @@ fn encode(p: &Point, out: &mut Vec<u8>) {
     out.extend_from_slice(&p.apparent_reflectance.to_le_bytes());
     out.extend_from_slice(&p.pulse_id.to_le_bytes());
     out.extend_from_slice(&p.wavelength_nm.unwrap_or(f32::NAN).to_le_bytes());
+    out.push(u8::from(p.left_to_right) | u8::from(p.edge_of_line) << 1);
 }
 
 fn decode(b: &[u8]) -> Point {
@@ -116,6 +117,7 @@ fn decode(b: &[u8]) -> Point {
     let apparent_reflectance = f32::from_le_bytes(take(4).try_into().unwrap_or_default());
     let pulse_id = u64::from_le_bytes(take(8).try_into().unwrap_or_default());
     let nm = f32::from_le_bytes(take(4).try_into().unwrap_or_default());
+    let flags = take(1)[0];
     Point {
         x,
         y,
@@ -130,6 +132,8 @@ fn decode(b: &[u8]) -> Point {
         apparent_reflectance,
         pulse_id,
         wavelength_nm: (!nm.is_nan()).then_some(nm),
+        left_to_right: flags & 1 != 0,
+        edge_of_line: flags & 2 != 0,
     }
 }
 
@@ -156,6 +160,8 @@ mod tests {
                 apparent_reflectance: 0.3 + i as f32 * 1e-6,
                 pulse_id: u64::MAX - i,
                 wavelength_nm: (i % 2 == 0).then_some(532.0 + i as f32),
+                left_to_right: i % 3 == 0,
+                edge_of_line: i % 5 == 0,
             })
             .collect();
         let path = dir.join("points.las");

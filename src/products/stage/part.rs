@@ -224,8 +224,11 @@ fn discrete_returns(loaded: &Loaded, plan: &Plan, waveforms: &[Waveform]) -> Vec
                 .collect();
             let mut points =
                 points_on_axis(pulse, w.t0_ns, w.bin_ns as f64, &comps, &classes, &config);
+            let (left_to_right, edge_of_line) = plan.scan_flags(pulse.id);
             for p in &mut points {
                 p.wavelength_nm = w.wavelength_nm.map(|nm| nm as f32);
+                p.left_to_right = left_to_right;
+                p.edge_of_line = edge_of_line;
             }
             points
         })

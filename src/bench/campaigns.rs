@@ -71,7 +71,7 @@ pub enum BenchScene {
 
 /// The bench's campaigns, in the order of its table: file stem under the campaigns folder
 /// (`pipelines/bench/`), what it measures, and the scene it flies over.
-pub const CAMPAIGNS: [(&str, &str, BenchScene); 8] = [
+pub const CAMPAIGNS: [(&str, &str, BenchScene); 11] = [
     (
         "orchard_gedi_sun",
         "orchard, GEDI-like waveform, sun 50°/180° (section 3.3)",
@@ -111,6 +111,21 @@ pub const CAMPAIGNS: [(&str, &str, BenchScene); 8] = [
         "als_town",
         "town, airborne discrete return at 19 rays per pulse, method auto",
         BenchScene::Town,
+    ),
+    (
+        "als_forest_polygon",
+        "forest, rotating polygon scanner (±30°, 80 % duty) from 100 m",
+        BenchScene::Forest,
+    ),
+    (
+        "als_forest_risley",
+        "forest, Risley-prism rosette from a UAV at 60 m",
+        BenchScene::Forest,
+    ),
+    (
+        "als_forest_multibeam",
+        "forest, 16-channel spinning head tilted 90° from a UAV at 30 m",
+        BenchScene::Forest,
     ),
 ];
 

@@ -355,7 +355,15 @@ fn als(c: &Check, p: &Platform) -> Result<()> {
             }
             c.opt_positive("platform.scanner.rotation_hz", s.rotation_hz)?;
             if let Some(t) = s.head_tilt_deg {
-                c.open_deg("platform.scanner.head_tilt_deg", t, -90.0, 90.0)?;
+                // ±90: the head's axis level, its channels sweeping a vertical plane
+                let key = "platform.scanner.head_tilt_deg";
+                c.finite(key, t)?;
+                if t.abs() > 90.0 {
+                    return Err(doc.error(
+                        key,
+                        format!("must lie between -90 and 90 degrees, found {t}"),
+                    ));
+                }
             }
             if p.prf_hz.is_none() {
                 return Err(doc.error("platform", "a multibeam scanner needs platform.prf_hz"));

@@ -210,6 +210,18 @@ pub fn ln_factorial(k: u64) -> f64 {
         + inv * (1.0 / 12.0 - inv2 * (1.0 / 360.0 - inv2 / 1260.0))
 }
 
+/// A standard normal deviate that depends on (seed, stream, index) alone, so that any one of
+/// a sequence is drawn without the others (the navigation errors of a pulse found by its id):
+/// Box-Muller on two uniforms hashed from the three.
+pub fn normal_at(seed: u64, stream: u64, index: u64) -> f64 {
+    let h = splitmix64(seed ^ splitmix64(stream ^ splitmix64(index)));
+    let unit = (1u64 << 53) as f64;
+    // in (0, 1], so that the logarithm is finite
+    let u1 = ((h >> 11) as f64 + 1.0) / unit;
+    let u2 = (splitmix64(h) >> 11) as f64 / unit;
+    (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
+}
+
 /// Scene generation's generator: xorshift64*.
 pub struct Rand(u64);
 

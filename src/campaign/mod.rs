@@ -239,6 +239,77 @@ pub struct Platform {
     pub zenith_step_deg: Option<f64>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub gps_start_s: Option<f64>,
+    /// A recorded trajectory flown instead of `altitude_m`, `speed_m_s` and `lines` (als).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub trajectory: Option<Trajectory>,
+    /// Where the scanner sits on the body and how it is turned (als), known to the
+    /// georeferencing.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mount: Option<Mount>,
+    /// Navigation and mounting errors (als): flown, and not corrected by the georeferencing.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub errors: Option<NavErrors>,
+}
+
+/// `platform.trajectory`: a CSV of epochs (columns by name) and the times that fire.
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Trajectory {
+    /// Relative to the campaign file.
+    pub file: String,
+    /// GPS time intervals [t0, t1] that fire pulses; default the whole trajectory.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub scan: Option<Vec<[f64; 2]>>,
+    /// `file` resolved against the campaign file's folder when the campaign is loaded.
+    #[serde(skip)]
+    pub resolved: Option<PathBuf>,
+    /// The frame's origin (easting, northing, height), subtracted from the file's positions;
+    /// zero without a frame. Set with `resolved`.
+    #[serde(skip)]
+    pub origin: [f64; 3],
+}
+
+/// `platform.mount`: the scanner's origin in the body frame and its turn against the body.
+#[derive(Clone, Debug, Default, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Mount {
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub offset_m: Option<[f64; 3]>,
+    /// Roll, pitch, heading of the scanner against the body, degrees.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub boresight_deg: Option<[f64; 3]>,
+}
+
+/// `platform.errors`: first-order Gauss-Markov position and attitude errors of the recorded
+/// pose, and an unknown boresight the pulses fly with.
+#[derive(Clone, Debug, Default, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct NavErrors {
+    /// East, north, up, metres.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub position_sd_m: Option<[f64; 3]>,
+    /// 0 (the default): white.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub position_correlation_s: Option<f64>,
+    /// Roll, pitch, heading, degrees.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub attitude_sd_deg: Option<[f64; 3]>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub attitude_correlation_s: Option<f64>,
+    /// Roll, pitch, heading of an unknown misalignment, degrees.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub boresight_deg: Option<[f64; 3]>,
+}
+
+impl Campaign {
+    /// Resolves the files the campaign names besides its scene against `doc`'s folder.
+    pub fn resolve_files(&mut self, doc: &Doc) {
+        let origin = self.frame.as_ref().map_or([0.0; 3], |f| f.origin);
+        if let Some(t) = &mut self.platform.trajectory {
+            t.resolved = Some(doc.resolve(&t.file));
+            t.origin = origin;
+        }
+    }
 }
 
 #[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq, Default)]
@@ -689,6 +760,11 @@ impl Loaded {
     pub fn resolved_yaml(&self) -> String {
         let mut c = self.campaign.clone();
         c.scene = self.scene_path.display().to_string();
+        if let Some(t) = &mut c.platform.trajectory {
+            if let Some(r) = &t.resolved {
+                t.file = r.display().to_string();
+            }
+        }
         let yaml = serde_yaml::to_string(&c).expect("a campaign always serialises");
         match &self.method_note {
             Some(note) => format!("# {note}\n{yaml}"),

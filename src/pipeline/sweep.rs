@@ -140,12 +140,13 @@ fn sub_campaign(
     if let serde_yaml::Value::Mapping(m) = &mut tree {
         m.remove("sweep");
     }
-    let campaign: Campaign = serde_yaml::from_value(tree).map_err(|e| {
+    let mut campaign: Campaign = serde_yaml::from_value(tree).map_err(|e| {
         loaded.doc.error(
             "sweep",
             format!("a combination does not make a valid campaign: {e}"),
         )
     })?;
+    campaign.resolve_files(&loaded.doc);
     plan::check_campaign(&loaded.doc, &campaign).map_err(|e| {
         let swept = e.key.as_deref().and_then(|ek| {
             keys.iter()

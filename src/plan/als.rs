@@ -44,18 +44,78 @@
 //!   platform flies straight from one end to the next start at the same speed, so GPS times
 //!   keep increasing with emission order. `line` = index of the flight line.
 
+use super::nav::Errors;
+use super::trajectory::Trajectory;
 use super::{need, whole_steps, GroundPath, Pulse};
 use crate::campaign::{Platform, PlatformKind, ScanPattern};
 use crate::error::{Error, Result};
-use glam::DVec3;
+use glam::{DMat3, DVec3};
 
-/// A flight line with what its pulses need: where its pulses start in the plan and when the
-/// platform reaches its start.
+/// A flight line, or a scan interval of a trajectory, with what its pulses need: where its
+/// pulses start in the plan and when its first scan line starts.
 struct Flight {
-    path: GroundPath,
+    /// The straight line flown (`lines`); `None` on a trajectory.
+    path: Option<GroundPath>,
     first_id: u64,
     scan_lines: u64,
-    t_start: f64,
+    /// `lines`: seconds from the campaign's first pulse; a trajectory: GPS seconds.
+    start_s: f64,
+}
+
+/// What the platform flies.
+enum Route {
+    /// Straight level lines at a constant height and speed.
+    Lines {
+        altitude: f64,
+    },
+    Trajectory(Trajectory),
+}
+
+/// The scanner's axes in the scene: forward, right and down.
+struct Axes {
+    along: DVec3,
+    right: DVec3,
+    down: DVec3,
+}
+
+impl Axes {
+    /// A level scanner flying along `g`, as the straight lines have always been computed.
+    fn level(g: &GroundPath) -> Axes {
+        Axes {
+            along: g.along,
+            right: g.right,
+            down: DVec3::NEG_Z,
+        }
+    }
+
+    /// A scanner whose x, y, z (forward, left, up) are the columns of `m`.
+    fn of(m: &DMat3) -> Axes {
+        Axes {
+            along: m.x_axis,
+            right: -m.y_axis,
+            down: -m.z_axis,
+        }
+    }
+}
+
+/// The rotation of a body (or a scanner against it) turned by roll, pitch and heading
+/// (degrees), with the spec's R = Rz(90° − h)·Ry(−p)·Rx(r) less the 90° that puts heading 0
+/// on grid north: B = Rz(−h)·Ry(−p)·Rx(r), a heading clockwise seen from above.
+fn turned(rph: [f64; 3]) -> DMat3 {
+    DMat3::from_rotation_z(-rph[2].to_radians())
+        * DMat3::from_rotation_y(-rph[1].to_radians())
+        * DMat3::from_rotation_x(rph[0].to_radians())
+}
+
+/// `m` = Rz(ψ)·Ry(θ)·Rx(φ) (ψ = 90° − h, θ = −p, φ = r) with roll, pitch and heading errors
+/// (degrees) added to r, p and h.
+fn with_attitude_error(m: &DMat3, e: [f64; 3]) -> DMat3 {
+    let theta = (-m.x_axis.z).clamp(-1.0, 1.0).asin();
+    let phi = m.y_axis.z.atan2(m.z_axis.z);
+    let psi = m.x_axis.y.atan2(m.x_axis.x);
+    DMat3::from_rotation_z(psi - e[2].to_radians())
+        * DMat3::from_rotation_y(theta - e[1].to_radians())
+        * DMat3::from_rotation_x(phi + e[0].to_radians())
 }
 
 /// What turns a pulse's place in its scan line, and its time, into a beam.
@@ -83,16 +143,26 @@ enum Sweep {
 
 pub(crate) struct Als {
     flights: Vec<Flight>,
-    altitude: f64,
-    speed: f64,
+    route: Route,
     pattern: ScanPattern,
     sweep: Sweep,
-    /// d: along-track distance between scan lines, m.
+    lines_per_s: f64,
+    /// d: along-track distance between scan lines, m (`lines`; 0 on a trajectory).
     pub(crate) line_step_m: f64,
     /// δ: angle between pulses in a scan line, degrees (azimuth for conic).
     pub(crate) look_step_deg: f64,
     pub(crate) per_line: u64,
     gps_start: f64,
+    /// The mount's offset (body frame), its boresight, and the unknown boresight flown.
+    offset: DVec3,
+    mount: DMat3,
+    unknown: DMat3,
+    /// Straight lines with neither mount nor unknown boresight: the level frame, computed as
+    /// it always was, so such campaigns keep their bytes.
+    plain: bool,
+    /// Whether the pulses carry a recorded pose (`errors` given), and its navigation errors.
+    recorded: bool,
+    errors: Option<Errors>,
 }
 
 impl Als {
@@ -103,9 +173,22 @@ impl Als {
             .as_ref()
             .ok_or_else(|| Error::msg("an als platform needs scanner"))?;
         let pattern = s.pattern;
-        let speed = need(p.speed_m_s, kind, "speed_m_s")?;
+        let trajectory = p.trajectory.as_ref().map(Trajectory::open).transpose()?;
+        // a trajectory has no speed: its scan lines are timed by the scanner alone
+        let speed = match &trajectory {
+            Some(_) => {
+                if s.along_track_step_m.is_some() {
+                    return Err(Error::msg(
+                        "scanner.along_track_step_m is not used with a trajectory \
+                         (it has no constant speed): give scan_frequency_hz",
+                    ));
+                }
+                None
+            }
+            None => Some(need(p.speed_m_s, kind, "speed_m_s")?),
+        };
         let grid_angles = || need(s.scan_angle_deg, kind, "scanner.scan_angle_deg");
-        let (sweep, line_step_m, look_step_deg, per_line) = match pattern {
+        let (sweep, lines_per_s, look_step_deg, per_line) = match pattern {
             ScanPattern::Risley | ScanPattern::Multibeam => {
                 let prf = need(p.prf_hz, kind, "prf_hz")?;
                 let sweep = if pattern == ScanPattern::Risley {
@@ -126,18 +209,17 @@ impl Als {
                     Sweep::Multibeam { channels_deg, .. } => channels_deg.len() as u64,
                     _ => 1,
                 };
-                (sweep, speed / prf, 0.0, per_line)
+                (sweep, prf, 0.0, per_line)
             }
             _ => {
                 let [min_deg, max_deg] = grid_angles()?;
-                let lines_per_s = match s.along_track_step_m {
-                    Some(d) => speed / d,
-                    None => {
+                let lines_per_s = match (s.along_track_step_m, speed) {
+                    (Some(d), Some(speed)) => speed / d,
+                    _ => {
                         need(s.scan_frequency_hz, kind, "scanner.scan_frequency_hz")?
                             * pattern.lines_per_period()
                     }
                 };
-                let line_step_m = s.along_track_step_m.unwrap_or(speed / lines_per_s);
                 let sweep_deg = match pattern {
                     ScanPattern::Conic => 360.0,
                     _ => max_deg - min_deg,
@@ -166,43 +248,104 @@ impl Als {
                     cone_deg: min_deg.abs().max(max_deg.abs()),
                     per_period,
                 };
-                (sweep, line_step_m, look_step_deg, per_line)
+                (sweep, lines_per_s, look_step_deg, per_line)
             }
         };
-        // Flights in order; between two, the platform flies straight from one end to the next
-        // start. Summed in flight order, so every pulse's time is the same however it is found.
-        let (mut flights, mut first_id, mut t_line) = (Vec::new(), 0u64, 0.0);
-        let mut previous_end: Option<DVec3> = None;
-        for seg in p.lines.as_deref().unwrap_or(&[]) {
-            let path = GroundPath::new(seg);
-            if let Some(e) = previous_end {
-                t_line += (path.start - e).length() / speed;
+        let (mut flights, mut first_id) = (Vec::new(), 0u64);
+        let (route, line_step_m, lines_per_s, gps_start) = match (trajectory, speed) {
+            (Some(t), _) => {
+                let span = t.span();
+                let intervals = p
+                    .trajectory
+                    .as_ref()
+                    .and_then(|t| t.scan.clone())
+                    .unwrap_or_else(|| vec![span]);
+                for [t0, t1] in &intervals {
+                    let scan_lines = whole_steps(t1 - t0, 1.0 / lines_per_s);
+                    flights.push(Flight {
+                        path: None,
+                        first_id,
+                        scan_lines,
+                        start_s: *t0,
+                    });
+                    first_id = first_id.saturating_add(scan_lines.saturating_mul(per_line));
+                }
+                let gps_start = intervals.first().map_or(span[0], |i| i[0]);
+                (Route::Trajectory(t), 0.0, lines_per_s, gps_start)
             }
-            let scan_lines = whole_steps(path.length, line_step_m);
-            flights.push(Flight {
-                path,
-                first_id,
-                scan_lines,
-                t_start: t_line,
-            });
-            first_id = first_id.saturating_add(scan_lines.saturating_mul(per_line));
-            t_line += path.length / speed;
-            previous_end = Some(path.end);
-        }
+            (None, speed) => {
+                let speed = speed.unwrap_or(1.0);
+                let line_step_m = match pattern {
+                    ScanPattern::Risley | ScanPattern::Multibeam => speed / lines_per_s,
+                    _ => s.along_track_step_m.unwrap_or(speed / lines_per_s),
+                };
+                // Flights in order; between two, the platform flies straight from one end to
+                // the next start. Summed in flight order, so every pulse's time is the same
+                // however it is found.
+                let (mut t_line, mut previous_end) = (0.0, None::<DVec3>);
+                for seg in p.lines.as_deref().unwrap_or(&[]) {
+                    let path = GroundPath::new(seg);
+                    if let Some(e) = previous_end {
+                        t_line += (path.start - e).length() / speed;
+                    }
+                    let scan_lines = whole_steps(path.length, line_step_m);
+                    flights.push(Flight {
+                        path: Some(path),
+                        first_id,
+                        scan_lines,
+                        start_s: t_line,
+                    });
+                    first_id = first_id.saturating_add(scan_lines.saturating_mul(per_line));
+                    t_line += path.length / speed;
+                    previous_end = Some(path.end);
+                }
+                let altitude = need(p.altitude_m, kind, "altitude_m")?;
+                (
+                    Route::Lines { altitude },
+                    line_step_m,
+                    speed / line_step_m,
+                    p.gps_start_s.unwrap_or(0.0),
+                )
+            }
+        };
+        let mount = p.mount.clone().unwrap_or_default();
+        let unknown = p.errors.as_ref().and_then(|e| e.boresight_deg);
+        let plain = matches!(route, Route::Lines { .. })
+            && p.mount.is_none()
+            && unknown.is_none_or(|b| b == [0.0; 3]);
         Ok(Als {
             flights,
-            altitude: need(p.altitude_m, kind, "altitude_m")?,
-            speed,
+            route,
             pattern,
             sweep,
+            lines_per_s,
             line_step_m,
             look_step_deg,
             per_line,
-            gps_start: p.gps_start_s.unwrap_or(0.0),
+            gps_start,
+            offset: DVec3::from_array(mount.offset_m.unwrap_or([0.0; 3])),
+            mount: turned(mount.boresight_deg.unwrap_or([0.0; 3])),
+            unknown: turned(unknown.unwrap_or([0.0; 3])),
+            plain,
+            recorded: p.errors.is_some(),
+            errors: None,
         })
     }
 
-    /// Scan lines of each flight line, in order.
+    /// The navigation errors of `p.errors`, drawn from `seed`.
+    pub(crate) fn with_errors(mut self, p: &Platform, seed: u64) -> Als {
+        if let Some(e) = &p.errors {
+            let n = self.count();
+            self.errors = Errors::new(e, seed, n, &|id| self.time(id).1);
+        }
+        self
+    }
+
+    pub(crate) fn records_pose(&self) -> bool {
+        self.recorded
+    }
+
+    /// Scan lines of each flight line (or scan interval), in order.
     pub(crate) fn scan_lines(&self) -> impl Iterator<Item = u64> + '_ {
         self.flights.iter().map(|f| f.scan_lines)
     }
@@ -214,11 +357,48 @@ impl Als {
         })
     }
 
+    /// Flight, scan line j in it and pulse i in that, of pulse `id`.
+    fn locate(&self, id: u64) -> (usize, u64, u64) {
+        let index = self.flights.partition_point(|f| f.first_id <= id) - 1;
+        let f = &self.flights[index];
+        let n = self.per_line;
+        (index, (id - f.first_id) / n, (id - f.first_id) % n)
+    }
+
+    /// Scan lines flown since the start of the flight, fractional: a grid spreads a line's
+    /// pulses over its period, a multibeam head fires its channels at once.
+    fn lines_flown(&self, j: u64, i: u64) -> f64 {
+        let frac = match &self.sweep {
+            Sweep::Grid { per_period, .. } => i as f64 / per_period,
+            Sweep::Risley { .. } | Sweep::Multibeam { .. } => 0.0,
+        };
+        j as f64 + frac
+    }
+
+    /// (GPS time, seconds since the campaign's first scan line began) of a pulse `dt` seconds
+    /// into flight `f`.
+    fn times(&self, f: &Flight, dt: f64) -> (f64, f64) {
+        match self.route {
+            Route::Lines { .. } => {
+                let t = f.start_s + dt;
+                (self.gps_start + t, t)
+            }
+            Route::Trajectory(_) => (f.start_s + dt, (f.start_s - self.gps_start) + dt),
+        }
+    }
+
+    /// (GPS time, seconds since the first scan line began) of pulse `id`.
+    fn time(&self, id: u64) -> (f64, f64) {
+        let (index, j, i) = self.locate(id);
+        let f = &self.flights[index];
+        self.times(f, self.lines_flown(j, i) / self.lines_per_s)
+    }
+
     /// Beam direction and scan-angle column of pulse `i` of scan line `j`, fired `t` seconds
-    /// after the campaign's first pulse.
-    fn beam(&self, g: &GroundPath, j: u64, i: u64, t: f64) -> (DVec3, f64) {
-        let down = DVec3::NEG_Z;
-        let left = -g.right;
+    /// after the campaign's first pulse, from a scanner whose axes are `a`.
+    fn beam(&self, a: &Axes, j: u64, i: u64, t: f64) -> (DVec3, f64) {
+        let down = a.down;
+        let left = -a.right;
         match &self.sweep {
             Sweep::Grid {
                 min_deg,
@@ -231,7 +411,7 @@ impl Als {
                     ScanPattern::Conic => {
                         let (s, c) = cone_deg.to_radians().sin_cos();
                         let (sa, ca) = step.to_radians().sin_cos();
-                        ((g.along * ca + g.right * sa) * s + down * c, *cone_deg)
+                        ((a.along * ca + a.right * sa) * s + down * c, *cone_deg)
                     }
                     _ => {
                         // Clamped because whole_steps tolerates a last step overshooting by 1e-9.
@@ -241,7 +421,7 @@ impl Als {
                             (min_deg + step).min(*max_deg)
                         };
                         let (s, c) = theta.to_radians().sin_cos();
-                        (g.right * s + down * c, theta)
+                        (a.right * s + down * c, theta)
                     }
                 }
             }
@@ -258,7 +438,7 @@ impl Als {
                 let off = d.length();
                 let az = d.y.atan2(d.x);
                 let (s, c) = off.to_radians().sin_cos();
-                ((g.along * az.cos() + left * az.sin()) * s + down * c, off)
+                ((a.along * az.cos() + left * az.sin()) * s + down * c, off)
             }
             Sweep::Multibeam {
                 channels_deg,
@@ -272,20 +452,38 @@ impl Als {
                 let (sr, cr) = tilt_deg.to_radians().sin_cos();
                 let b = DVec3::new(h.x, h.y * cr - h.z * sr, h.y * sr + h.z * cr);
                 (
-                    g.along * b.x + left * b.y + DVec3::Z * b.z,
+                    a.along * b.x + left * b.y - down * b.z,
                     channels_deg[i as usize],
                 )
             }
         }
     }
 
+    /// The scan angle LAS records for a sweep across track: the beam's angle from the scene's
+    /// nadir in the plane across the direction of travel, positive to the right (counter-
+    /// clockwise seen from behind), so a roll is in it. Other patterns keep their column.
+    fn scene_angle(&self, column: f64, d: DVec3, body: &DMat3) -> f64 {
+        match self.pattern {
+            ScanPattern::Line | ScanPattern::Oscillating | ScanPattern::RotatingPolygon => {
+                let x = body.x_axis;
+                let right = DVec3::new(x.y, -x.x, 0.0)
+                    .try_normalize()
+                    .unwrap_or_else(|| {
+                        (-body.y_axis)
+                            .with_z(0.0)
+                            .try_normalize()
+                            .unwrap_or(DVec3::X)
+                    });
+                d.dot(right).atan2(-d.z).to_degrees()
+            }
+            _ => column,
+        }
+    }
+
     /// (left to right, edge of the scan line) of pulse `id`: see [`super::Plan::scan_flags`].
     pub(crate) fn scan_flags(&self, id: u64) -> (bool, bool) {
-        let index = self.flights.partition_point(|f| f.first_id <= id) - 1;
-        let f = &self.flights[index];
-        let n = self.per_line;
-        let (j, i) = ((id - f.first_id) / n, (id - f.first_id) % n);
-        let edge = i + 1 == n;
+        let (_, j, i) = self.locate(id);
+        let edge = i + 1 == self.per_line;
         match self.pattern {
             ScanPattern::Line | ScanPattern::RotatingPolygon => (true, edge),
             ScanPattern::Oscillating => (j % 2 == 0, edge),
@@ -295,28 +493,61 @@ impl Als {
 
     /// Pulse `id` (< [`Als::count`]).
     pub(crate) fn pulse(&self, id: u64) -> Pulse {
-        let index = self.flights.partition_point(|f| f.first_id <= id) - 1;
+        let (index, j, i) = self.locate(id);
         let f = &self.flights[index];
-        let n = self.per_line;
-        let (j, i) = ((id - f.first_id) / n, (id - f.first_id) % n);
-        let lines_per_s = self.speed / self.line_step_m;
-        // Scan lines flown since the start of this flight line, fractional: a grid spreads a
-        // line's pulses over its period, a multibeam head fires its channels at once
-        let frac = match &self.sweep {
-            Sweep::Grid { per_period, .. } => i as f64 / per_period,
-            Sweep::Risley { .. } | Sweep::Multibeam { .. } => 0.0,
+        let s = self.lines_flown(j, i);
+        let dt = s / self.lines_per_s;
+        let (gps_time_s, t) = self.times(f, dt);
+        // the body's position and axes (columns: forward, left, up)
+        let (position, body) = match (&self.route, &f.path) {
+            (Route::Trajectory(tr), _) => {
+                let (p, q) = tr.pose(f.start_s, dt);
+                (p, DMat3::from_quat(q))
+            }
+            (Route::Lines { altitude }, Some(g)) => (
+                g.start + g.along * (s * self.line_step_m) + DVec3::Z * *altitude,
+                DMat3::from_cols(g.along, -g.right, DVec3::Z),
+            ),
+            (Route::Lines { .. }, None) => unreachable!("a flight line has its path"),
         };
-        let s = j as f64 + frac;
-        let t = f.t_start + s / lines_per_s;
-        let (direction, angle) = self.beam(&f.path, j, i, t);
+        let (origin, direction, angle) = match (&f.path, self.plain) {
+            (Some(g), true) => {
+                let (d, a) = self.beam(&Axes::level(g), j, i, t);
+                (position, d, a)
+            }
+            _ => {
+                let flown = body * self.mount * self.unknown;
+                let (d, a) = self.beam(&Axes::of(&flown), j, i, t);
+                (
+                    position + body * self.offset,
+                    d,
+                    self.scene_angle(a, d, &body),
+                )
+            }
+        };
+        let recorded = self.recorded.then(|| match &self.errors {
+            None if self.unknown == DMat3::IDENTITY => (origin, direction),
+            None => {
+                let (d, _) = self.beam(&Axes::of(&(body * self.mount)), j, i, t);
+                (origin, d)
+            }
+            Some(e) => {
+                let (dp, da) = e.at(id, &|k| self.time(k).1);
+                let rec = with_attitude_error(&body, da);
+                let (d, _) = self.beam(&Axes::of(&(rec * self.mount)), j, i, t);
+                (position + DVec3::from_array(dp) + rec * self.offset, d)
+            }
+        });
         Pulse {
             id,
-            gps_time_s: self.gps_start + t,
-            origin: f.path.start + f.path.along * (s * self.line_step_m) + DVec3::Z * self.altitude,
+            gps_time_s,
+            origin,
             direction,
             scan_angle_deg: angle as f32,
             line: index as u32,
-            along: f.path.along,
+            along: body.x_axis,
+            up: body.z_axis,
+            recorded,
         }
     }
 }

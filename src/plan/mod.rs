@@ -18,10 +18,12 @@
 //! millionth of a step), so that 100/0.1 counts as 1000 steps despite rounding.
 
 mod als;
+mod nav;
 mod pulses_file;
 mod spaceborne;
 mod tls;
 mod track;
+mod trajectory;
 pub mod validate;
 
 #[cfg(test)]
@@ -54,16 +56,31 @@ pub struct Pulse {
     /// Angle between the beam and nadir, degrees (signed for scanners).
     pub scan_angle_deg: f32,
     pub line: u32,
-    /// The platform frame's x axis: the unit horizontal direction of travel; +x for static
-    /// and terrestrial platforms, whose frame is the scene's.
+    /// The platform (body) frame's x axis: the direction of travel, horizontal but for a
+    /// trajectory's pitch; +x for static and terrestrial platforms, whose frame is the scene's.
     pub along: DVec3,
+    /// The body frame's z axis: +z but for a trajectory's roll and pitch.
+    pub up: DVec3,
+    /// The pose the points are georeferenced from (origin, unit direction) when it differs
+    /// from the flown one: a campaign with `errors`. `None`: the flown pose.
+    pub recorded: Option<(DVec3, DVec3)>,
 }
 
 impl Pulse {
     /// A point given in the platform frame (x along track, y left, z up), in the scene.
     pub fn platform_to_scene(&self, v: [f64; 3]) -> DVec3 {
-        let left = DVec3::Z.cross(self.along);
-        self.along * v[0] + left * v[1] + DVec3::Z * v[2]
+        let left = self.up.cross(self.along);
+        self.along * v[0] + left * v[1] + self.up * v[2]
+    }
+
+    /// The origin the points are georeferenced from: the recorded one.
+    pub fn rec_origin(&self) -> DVec3 {
+        self.recorded.map_or(self.origin, |r| r.0)
+    }
+
+    /// The beam direction the points are georeferenced along: the recorded one.
+    pub fn rec_direction(&self) -> DVec3 {
+        self.recorded.map_or(self.direction, |r| r.1)
     }
 }
 
@@ -119,7 +136,8 @@ pub fn read_campaign(path: &std::path::Path) -> Result<Loaded> {
 /// overridden key names the override.
 pub fn load_campaign(doc: Doc, overrides: &[(String, serde_yaml::Value)]) -> Result<Loaded> {
     if overrides.is_empty() {
-        let campaign: Campaign = doc.parse()?;
+        let mut campaign: Campaign = doc.parse()?;
+        campaign.resolve_files(&doc);
         check_campaign(&doc, &campaign)?;
         return Loaded::new(doc, campaign);
     }
@@ -136,7 +154,7 @@ pub fn load_campaign(doc: Doc, overrides: &[(String, serde_yaml::Value)]) -> Res
     for (k, v) in overrides {
         crate::campaign::yaml::set_path(&mut tree, k, v.clone()).map_err(|m| named(k, v, &m))?;
     }
-    let campaign: Campaign = serde_yaml::from_value(tree).map_err(|e| {
+    let mut campaign: Campaign = serde_yaml::from_value(tree).map_err(|e| {
         let e = e.to_string();
         match overrides
             .iter()
@@ -146,6 +164,7 @@ pub fn load_campaign(doc: Doc, overrides: &[(String, serde_yaml::Value)]) -> Res
             None => doc.error("", format!("with the overrides: {e}")),
         }
     })?;
+    campaign.resolve_files(&doc);
     check_campaign(&doc, &campaign).map_err(|e| {
         let ek = e.key.clone().unwrap_or_default();
         match overrides
@@ -234,7 +253,7 @@ pub struct Plan {
 enum Source {
     /// `static`: the campaign file lists its pulses.
     Listed(Vec<Pulse>),
-    Als(als::Als),
+    Als(Box<als::Als>),
     Spaceborne(spaceborne::Spaceborne),
     Track(track::Track),
     Tls(tls::Tls),
@@ -246,7 +265,9 @@ impl Plan {
         let p = &campaign.platform;
         let platform = match p.kind {
             PlatformKind::Static => Source::Listed(static_pulses(p)),
-            PlatformKind::Als => Source::Als(als::Als::new(p)?),
+            PlatformKind::Als => {
+                Source::Als(Box::new(als::Als::new(p)?.with_errors(p, campaign.seed)))
+            }
             PlatformKind::Spaceborne => Source::Spaceborne(spaceborne::Spaceborne::new(p)?),
             PlatformKind::Track => Source::Track(track::Track::new(p)?),
             PlatformKind::Tls => Source::Tls(tls::Tls::new(p)?),
@@ -283,6 +304,12 @@ impl Plan {
             Source::Track(t) => t.pulse(id),
             Source::Tls(t) => t.pulse(id),
         }
+    }
+
+    /// Whether the pulses carry a recorded pose apart from the flown one (`errors` given):
+    /// pulses.parquet then has its columns.
+    pub fn records_pose(&self) -> bool {
+        matches!(&self.platform, Source::Als(a) if a.records_pose())
     }
 
     /// LAS's scan direction and edge-of-flight-line flags of pulse `id`: the look angle
@@ -367,6 +394,8 @@ fn static_pulses(p: &Platform) -> Vec<Pulse> {
                 scan_angle_deg: off_nadir_deg(direction) as f32,
                 line: 0,
                 along: DVec3::X,
+                up: DVec3::Z,
+                recorded: None,
             }
         })
         .collect()

@@ -15,7 +15,7 @@ const CHUNK: usize = crate::parquet_io::ROW_GROUP_ROWS;
 pub fn write_pulses(path: &Path, plan: &Plan) -> Result<()> {
     let mut sink = None;
     for start in (0..plan.len().max(1)).step_by(CHUNK) {
-        let b = table(&plan.pulses(start..start + CHUNK));
+        let b = table(&plan.pulses(start..start + CHUNK), plan.records_pose());
         let s = match &mut sink {
             Some(s) => s,
             None => sink.insert(Sink::create(path, b.schema())?),
@@ -28,11 +28,12 @@ pub fn write_pulses(path: &Path, plan: &Plan) -> Result<()> {
     }
 }
 
-fn table(pulses: &[Pulse]) -> RecordBatch {
+/// The columns of outputs.md; with `recorded`, the recorded pose after them.
+fn table(pulses: &[Pulse], recorded: bool) -> RecordBatch {
     let f64col = |f: fn(&Pulse) -> f64| -> ArrayRef {
         Arc::new(Float64Array::from_iter_values(pulses.iter().map(f)))
     };
-    batch(vec![
+    let mut columns: Vec<(&str, ArrayRef)> = vec![
         (
             "pulse_id",
             Arc::new(UInt64Array::from_iter_values(pulses.iter().map(|p| p.id))),
@@ -54,5 +55,16 @@ fn table(pulses: &[Pulse]) -> RecordBatch {
             "line",
             Arc::new(UInt32Array::from_iter_values(pulses.iter().map(|p| p.line))),
         ),
-    ])
+    ];
+    if recorded {
+        columns.extend([
+            ("rec_origin_x", f64col(|p| p.rec_origin().x)),
+            ("rec_origin_y", f64col(|p| p.rec_origin().y)),
+            ("rec_origin_z", f64col(|p| p.rec_origin().z)),
+            ("rec_dir_x", f64col(|p| p.rec_direction().x)),
+            ("rec_dir_y", f64col(|p| p.rec_direction().y)),
+            ("rec_dir_z", f64col(|p| p.rec_direction().z)),
+        ]);
+    }
+    batch(columns)
 }

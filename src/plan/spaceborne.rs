@@ -82,6 +82,8 @@ impl Spaceborne {
             scan_angle_deg: self.off_nadir_deg as f32,
             line: b as u32,
             along: g.along,
+            up: DVec3::Z,
+            recorded: None,
         }
     }
 }

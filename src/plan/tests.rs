@@ -521,6 +521,8 @@ fn platform_frame_points_along_track_and_left() {
         scan_angle_deg: 0.0,
         line: 0,
         along: DVec3::X,
+        up: DVec3::Z,
+        recorded: None,
     };
     assert_eq!(
         p.platform_to_scene([1.0, 2.0, 3.0]),
@@ -712,5 +714,433 @@ fn scan_flags_follow_the_sweep() {
                 }
             }
         }
+    }
+}
+
+/// A folder of its own in the system's temp folder, removed when dropped.
+struct TempDir(PathBuf);
+
+impl TempDir {
+    fn new(name: &str) -> TempDir {
+        let d = std::env::temp_dir().join(format!("lidarsim-plan-{name}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&d);
+        std::fs::create_dir_all(&d).unwrap();
+        TempDir(d)
+    }
+}
+
+impl Drop for TempDir {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+/// A trajectory CSV flying from `from` to `to` (x, y) at height `z` with a constant attitude,
+/// one epoch every `dt` seconds from GPS time `t0` to `t1`.
+#[allow(clippy::too_many_arguments)]
+fn trajectory_csv(
+    dir: &TempDir,
+    name: &str,
+    (t0, t1, dt): (f64, f64, f64),
+    from: [f64; 2],
+    to: [f64; 2],
+    z: f64,
+    rph: [f64; 3],
+) -> PathBuf {
+    let mut s = String::from("time_s,x,y,z,roll_deg,pitch_deg,heading_deg,extra\n");
+    let n = ((t1 - t0) / dt).round() as usize;
+    for k in 0..=n {
+        let u = k as f64 / n as f64;
+        let x = from[0] + (to[0] - from[0]) * u;
+        let y = from[1] + (to[1] - from[1]) * u;
+        s += &format!(
+            "{},{x},{y},{z},{},{},{},7\n",
+            t0 + k as f64 * dt,
+            rph[0],
+            rph[1],
+            rph[2]
+        );
+    }
+    let p = dir.0.join(name);
+    std::fs::write(&p, s).unwrap();
+    p
+}
+
+/// A campaign in `dir`, loaded as a run loads it (its files resolved there), and its plan.
+fn plan_in(dir: &TempDir, platform: &str) -> Result<Plan> {
+    let doc = Doc {
+        path: dir.0.join("campaign.yaml"),
+        text: text(platform),
+    };
+    let mut campaign: Campaign = doc.parse()?;
+    campaign.resolve_files(&doc);
+    super::check_campaign(&doc, &campaign)?;
+    Plan::new(&campaign)
+}
+
+const OSC: &str =
+    "scanner: { pattern: oscillating, scan_angle_deg: [-20, 20], scan_frequency_hz: 25 }";
+
+/// Straight level flight from a trajectory (at GPS times near 1.3e9 s, one epoch every 1/8 s,
+/// times a GPS double holds exactly)
+/// plans the `lines:` campaign's pulses: origins within 1e-6 m, directions within 1e-9 rad,
+/// the same times and angles, for every scanner; along +x and along a diagonal.
+#[test]
+fn a_straight_level_trajectory_flies_the_lines_campaign() {
+    let dir = TempDir::new("straight");
+    let scanners = [
+        OSC.to_string(),
+        "scanner: { pattern: line, scan_angle_deg: [-15, 15], scan_frequency_hz: 40 }".into(),
+        "scanner: { pattern: rotating_polygon, scan_angle_deg: [-30, 30], scan_frequency_hz: 60, duty: 0.8 }".into(),
+        "scanner: { pattern: conic, scan_angle_deg: [-10, 10], scan_frequency_hz: 20 }".into(),
+        "scanner: { pattern: risley, prism_rates_hz: [120, -87], deviation_deg: [10, 10] }".into(),
+        "scanner: { pattern: multibeam, channels_deg: [-15, 0, 15], rotation_hz: 10 }".into(),
+    ];
+    let t0 = 1.3e9;
+    for (from, to) in [([0.0, 0.0], [200.0, 0.0]), ([10.0, -5.0], [130.0, 155.0])] {
+        let length = DVec2::from_array(to).distance(DVec2::from_array(from));
+        let (speed, z) = (50.0, 120.0);
+        let heading = 90.0 - (to[1] - from[1]).atan2(to[0] - from[0]).to_degrees();
+        let csv = trajectory_csv(
+            &dir,
+            "t.csv",
+            (t0, t0 + length / speed, 0.125),
+            from,
+            to,
+            z,
+            [0.0, 0.0, heading],
+        );
+        for sc in &scanners {
+            let lines = pulses(&format!(
+                "platform: {{ kind: als, altitude_m: {z}, speed_m_s: {speed}, prf_hz: 9000, gps_start_s: {t0},
+                    lines: [ {{ start: {from:?}, end: {to:?} }} ], {sc} }}"
+            ));
+            let plan = plan_in(
+                &dir,
+                &format!(
+                    "platform: {{ kind: als, prf_hz: 9000, trajectory: {{ file: {} }}, {sc} }}",
+                    csv.file_name().unwrap().to_str().unwrap()
+                ),
+            )
+            .unwrap();
+            let level = Plan::new(&campaign(&format!(
+                "platform: {{ kind: als, altitude_m: {z}, speed_m_s: {speed}, prf_hz: 9000,
+                    lines: [ {{ start: {from:?}, end: {to:?} }} ], {sc} }}"
+            )))
+            .unwrap();
+            assert_eq!(plan.len(), lines.len(), "{sc}");
+            assert!(lines.len() > 1000, "{sc}: {}", lines.len());
+            for a in &lines {
+                let b = plan.pulse(a.id);
+                assert!((a.origin - b.origin).length() < 1e-6, "{sc} pulse {}", a.id);
+                assert!(
+                    angle_between(a.direction, b.direction) < 1e-9,
+                    "{sc} pulse {}",
+                    a.id
+                );
+                assert!((a.gps_time_s - b.gps_time_s).abs() < 1e-6, "{sc}");
+                assert!((a.scan_angle_deg - b.scan_angle_deg).abs() < 1e-4, "{sc}");
+                assert_eq!(a.line, b.line);
+                assert_eq!(plan.scan_flags(a.id), level.scan_flags(a.id));
+            }
+        }
+    }
+}
+
+/// Where a pulse's beam meets z = 0.
+fn ground(p: &Pulse) -> DVec3 {
+    p.origin + p.direction * (-p.origin.z / p.direction.z)
+}
+
+/// A constant roll of 5° (right wing down) moves the nadir beam's spot H tan 5° to the left,
+/// and LAS's scan angle counts it; a heading of 30° flies the swath turned by 30°.
+#[test]
+fn roll_shifts_and_heading_turns_the_swath() {
+    let dir = TempDir::new("roll");
+    let h = 300.0;
+    let nadir = |p: &Plan| -> Vec<Pulse> {
+        (0..p.len() as u64)
+            .map(|i| p.pulse(i))
+            .filter(|q| {
+                let level = q.direction - q.up * q.direction.dot(q.up);
+                level.dot(q.up.cross(q.along)).abs() < 1e-12 && level.dot(q.along).abs() < 1e-12
+            })
+            .collect()
+    };
+    let plat = |file: &str| {
+        format!("platform: {{ kind: als, prf_hz: 10000, trajectory: {{ file: {file} }}, {OSC} }}")
+    };
+    trajectory_csv(
+        &dir,
+        "roll.csv",
+        (0.0, 2.0, 0.5),
+        [0.0, 0.0],
+        [100.0, 0.0],
+        h,
+        [5.0, 0.0, 90.0],
+    );
+    let rolled = nadir(&plan_in(&dir, &plat("roll.csv")).unwrap());
+    assert!(rolled.len() > 10);
+    for q in &rolled {
+        // flying +x, left is +y
+        let spot = ground(q);
+        assert!(
+            (spot.y - h * 5f64.to_radians().tan()).abs() < 1e-6,
+            "{spot}"
+        );
+        assert!(
+            (q.scan_angle_deg + 5.0).abs() < 1e-4,
+            "{}",
+            q.scan_angle_deg
+        );
+    }
+    // heading 30°: flying towards azimuth 30° from north, the swath across it
+    let (s, c) = 30f64.to_radians().sin_cos();
+    trajectory_csv(
+        &dir,
+        "turn.csv",
+        (0.0, 2.0, 0.5),
+        [0.0, 0.0],
+        [100.0 * s, 100.0 * c],
+        h,
+        [0.0, 0.0, 30.0],
+    );
+    let plan = plan_in(&dir, &plat("turn.csv")).unwrap();
+    let across = DVec3::new(c, -s, 0.0); // the right of the track
+    for id in 0..plan.len() as u64 {
+        let q = plan.pulse(id);
+        let off = ground(&q) - q.origin.with_z(0.0);
+        // every spot lies across the track, at its scan angle
+        assert!(off.dot(DVec3::new(s, c, 0.0)).abs() < 1e-6, "pulse {id}");
+        let theta = (q.scan_angle_deg as f64).to_radians();
+        assert!(
+            (off.dot(across) - h * theta.tan()).abs() < 1e-3,
+            "pulse {id}"
+        );
+    }
+}
+
+/// A trajectory longer than a block, read on demand in any order, gives the same pulses as in
+/// order; and its errors name the CSV file, line and column.
+#[test]
+fn trajectory_files_stream_and_their_errors_are_located() {
+    let dir = TempDir::new("stream");
+    // 2,001 epochs of a turning, climbing flight
+    let mut s = String::from("heading_deg,time_s,x,y,z,roll_deg,pitch_deg\n");
+    for k in 0..=2000 {
+        let t = k as f64 * 0.01;
+        let a = t * 0.5;
+        s += &format!(
+            "{},{t},{},{},{},{},{}\n",
+            90.0 - a.to_degrees(),
+            100.0 * a.sin(),
+            100.0 * (1.0 - a.cos()),
+            200.0 + t,
+            10.0 * a.sin(),
+            2.0
+        );
+    }
+    std::fs::write(dir.0.join("turn.csv"), &s).unwrap();
+    let plat = format!("platform: {{ kind: als, prf_hz: 2000, trajectory: {{ file: turn.csv, scan: [[1, 9], [11, 19.5]] }}, {OSC} }}");
+    let plan = plan_in(&dir, &plat).unwrap();
+    let all = plan.pulses(0..plan.len());
+    assert_eq!(
+        all.len(),
+        (8.0 * 50.0) as usize * 40 + (8.5 * 50.0) as usize * 40
+    );
+    assert!(all
+        .iter()
+        .all(|p| (1.0..=19.5).contains(&(p.gps_time_s)) && !(9.0..11.0).contains(&p.gps_time_s)));
+    assert_eq!(all.last().unwrap().line, 1);
+    let fresh = plan_in(&dir, &plat).unwrap();
+    for id in (0..all.len() as u64).rev().step_by(97) {
+        assert_eq!(fresh.pulse(id), all[id as usize]);
+    }
+    // an epoch between two holds the interpolated attitude: roll 10 sin(t/2)
+    let q = &all[1234];
+    let t = q.gps_time_s;
+    let up = q.up;
+    let left = up.cross(q.along);
+    let roll = left.z.atan2(up.z).to_degrees();
+    assert!((roll - 10.0 * (t * 0.5).sin()).abs() < 1e-3, "{roll}");
+
+    let bad = |name: &str, csv: &str| -> String {
+        std::fs::write(dir.0.join(name), csv).unwrap();
+        plan_in(
+            &dir,
+            &format!(
+                "platform: {{ kind: als, prf_hz: 2000, trajectory: {{ file: {name} }}, {OSC} }}"
+            ),
+        )
+        .err()
+        .expect("refused")
+        .to_string()
+    };
+    let e = bad("a.csv", "time_s,x,y,z,roll_deg,pitch_deg\n0,0,0,0,0,0\n");
+    assert!(e.contains("a.csv") && e.contains("heading_deg"), "{e}");
+    let e = bad(
+        "b.csv",
+        "time_s,x,y,z,roll_deg,pitch_deg,heading_deg\n0,0,0,100,0,0,90\n1,5,0,1e,0,0,90\n",
+    );
+    assert!(e.contains("b.csv:3:7: z:"), "{e}");
+    let e = bad(
+        "c.csv",
+        "time_s,x,y,z,roll_deg,pitch_deg,heading_deg\n0,0,0,100,0,0,90\n0,5,0,100,0,0,90\n",
+    );
+    assert!(
+        e.contains("c.csv:3") && e.contains("time_s") && e.contains("increase"),
+        "{e}"
+    );
+    let e = bad(
+        "d.csv",
+        "time_s,x,y,z,roll_deg,pitch_deg,heading_deg\n0,0,0,100,0,0,90\n",
+    );
+    assert!(e.contains("d.csv") && e.contains("two epochs"), "{e}");
+    let e = bad(
+        "e.csv",
+        "time_s,x,y,z,roll_deg,pitch_deg,heading_deg\n0,0,0,100,0,0,90\n1,5,0,100,0\n",
+    );
+    assert!(e.contains("e.csv:3") && e.contains("fields"), "{e}");
+    let e = plan_in(
+        &dir,
+        &format!(
+            "platform: {{ kind: als, prf_hz: 2000, trajectory: {{ file: none.csv }}, {OSC} }}"
+        ),
+    )
+    .err()
+    .unwrap()
+    .to_string();
+    assert!(
+        e.contains("platform.trajectory.file") && e.contains("does not exist"),
+        "{e}"
+    );
+    let e = plan_in(&dir, &format!("platform: {{ kind: als, prf_hz: 2000, altitude_m: 100, trajectory: {{ file: turn.csv }}, {OSC} }}")).err().unwrap().to_string();
+    assert!(
+        e.contains("platform.altitude_m") && e.contains("trajectory"),
+        "{e}"
+    );
+    let e = plan_in(&dir, &format!("platform: {{ kind: als, prf_hz: 2000, trajectory: {{ file: turn.csv, scan: [[5, 30]] }}, {OSC} }}")).err().unwrap().to_string();
+    assert!(
+        e.contains("platform.trajectory.scan[0]") && e.contains("within"),
+        "{e}"
+    );
+}
+
+/// A known mount (offset and boresight) is flown and recorded alike; an unknown boresight of
+/// 0.05° turns the flown beam from the recorded one by 0.05°, so a point at range r moves by
+/// r × 0.05° (in radians); errors off (absent, or all zero) leave every pulse as it was.
+#[test]
+fn mount_and_boresight() {
+    let base = format!(
+        "platform: {{ kind: als, altitude_m: 500, speed_m_s: 60, prf_hz: 20000, lines: [ {{ start: [0, 0], end: [60, 0] }} ], {OSC}"
+    );
+    let plain = pulses(&format!("{base} }}"));
+    let mounted = pulses(&format!(
+        "{base}, mount: {{ offset_m: [1.0, 0.5, -0.3], boresight_deg: [0.4, -0.2, 1.0] }}, errors: {{}} }}"
+    ));
+    for (a, b) in plain.iter().zip(&mounted) {
+        assert!((b.origin - a.origin - DVec3::new(1.0, 0.5, -0.3)).length() < 1e-9);
+        assert_eq!(b.rec_origin(), b.origin);
+        assert_eq!(b.rec_direction(), b.direction);
+        // the boresight turns the beam by at most the sum of its angles
+        let turn = angle_between(a.direction, b.direction).to_degrees();
+        assert!(turn > 0.1 && turn < 1.6, "{turn}");
+    }
+    let unknown = pulses(&format!(
+        "{base}, errors: {{ boresight_deg: [0.05, 0, 0] }} }}"
+    ));
+    for (a, b) in plain.iter().zip(&unknown) {
+        assert_eq!(a.direction, b.rec_direction());
+        assert_eq!(a.origin, b.rec_origin());
+        let turn = angle_between(b.direction, b.rec_direction()).to_degrees();
+        assert!((turn - 0.05).abs() < 1e-9, "{turn}");
+    }
+    let zero = pulses(&format!(
+        "{base}, errors: {{ position_sd_m: [0, 0, 0], attitude_sd_deg: [0, 0, 0], boresight_deg: [0, 0, 0] }} }}"
+    ));
+    for (a, b) in plain.iter().zip(&zero) {
+        assert_eq!((a.origin, a.direction), (b.origin, b.direction));
+        assert_eq!((a.origin, a.direction), (b.rec_origin(), b.rec_direction()));
+        assert_eq!(a.recorded, None);
+    }
+}
+
+/// White navigation errors (correlation 0) over 10^5 pulses: the recorded positions scatter
+/// about the flown ones with the configured standard deviations (within 5 %: the estimate's
+/// relative SE is 1/sqrt(2N) = 0.22 %), attitude errors turn the recorded beam by as much.
+#[test]
+fn white_errors_have_their_standard_deviations() {
+    let p = pulses(&format!(
+        "platform: {{ kind: als, altitude_m: 500, speed_m_s: 60, prf_hz: 40000, lines: [ {{ start: [0, 0], end: [150, 0] }} ], {OSC},
+            errors: {{ position_sd_m: [0.03, 0.05, 0.08], attitude_sd_deg: [0.003, 0.004, 0.0] }} }}"
+    ));
+    assert!(p.len() >= 100_000, "{}", p.len());
+    let n = p.len() as f64;
+    let mut sq = [0.0f64; 3];
+    let mut mean = [0.0f64; 3];
+    let (mut across, mut along) = (0.0f64, 0.0f64);
+    for q in &p {
+        let d = q.rec_origin() - q.origin;
+        for k in 0..3 {
+            sq[k] += d[k] * d[k];
+            mean[k] += d[k] / n;
+        }
+        // roll turns the beam about the track (x), pitch about the wing (y)
+        let (a, b) = (q.direction, q.rec_direction());
+        let flat = |v: DVec3, axis: DVec3| (v - axis * v.dot(axis)).normalize();
+        across += angle_between(flat(a, DVec3::X), flat(b, DVec3::X)).powi(2);
+        along += angle_between(flat(a, DVec3::Y), flat(b, DVec3::Y)).powi(2);
+    }
+    for (k, want) in [0.03, 0.05, 0.08].iter().enumerate() {
+        let sd = (sq[k] / n).sqrt();
+        assert!(
+            (sd / want - 1.0).abs() < 0.05,
+            "axis {k}: {sd} against {want}"
+        );
+        assert!(
+            mean[k].abs() < 4.0 * want / n.sqrt(),
+            "axis {k}: mean {}",
+            mean[k]
+        );
+    }
+    let across = (across / n).sqrt().to_degrees();
+    let along = (along / n).sqrt().to_degrees();
+    assert!((across / 0.003 - 1.0).abs() < 0.05, "{across}");
+    assert!((along / 0.004 - 1.0).abs() < 0.05, "{along}");
+}
+
+/// Correlated position errors (τ = 0.2 s) are a first-order Gauss-Markov process: over 24
+/// seeds, the mean of (x_t x_{t+lag}) / σ² at lags of 0.5, 1 and 2 τ is exp(−lag/τ) within 3
+/// SE (the SE from the 24 seeds' spread), and the variance is σ² within 3 SE.
+#[test]
+fn correlated_errors_decay_as_exp_minus_lag_over_tau() {
+    let (tau, sd, prf): (f64, f64, f64) = (0.2, 0.05, 2000.0);
+    let lags = [0.0, 0.5, 1.0, 2.0];
+    let mut runs: Vec<[f64; 4]> = Vec::new();
+    for seed in 0..24u64 {
+        let c = campaign(&format!(
+            "seed: {seed}\nplatform: {{ kind: als, altitude_m: 500, speed_m_s: 50, prf_hz: {prf}, lines: [ {{ start: [0, 0], end: [200, 0] }} ],
+                scanner: {{ pattern: risley, prism_rates_hz: [10, -7], deviation_deg: [5, 5] }},
+                errors: {{ position_sd_m: [{sd}, 0, 0], position_correlation_s: {tau} }} }}"
+        ));
+        let p = plan(&c).unwrap();
+        let x: Vec<f64> = p.iter().map(|q| q.rec_origin().x - q.origin.x).collect();
+        runs.push(lags.map(|l| {
+            let k = (l * tau * prf).round() as usize;
+            let m = x.len() - k;
+            (0..m).map(|i| x[i] * x[i + k]).sum::<f64>() / m as f64 / (sd * sd)
+        }));
+    }
+    let n = runs.len() as f64;
+    for (j, l) in lags.iter().enumerate() {
+        let mean = runs.iter().map(|r| r[j]).sum::<f64>() / n;
+        let var = runs.iter().map(|r| (r[j] - mean).powi(2)).sum::<f64>() / (n - 1.0);
+        let se = (var / n).sqrt();
+        let want = (-l).exp();
+        assert!(
+            (mean - want).abs() < 3.0 * se,
+            "lag {l} tau: {mean} against {want}, SE {se}"
+        );
+        assert!(se < 0.1, "lag {l}: SE {se}");
     }
 }

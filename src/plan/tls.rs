@@ -86,6 +86,8 @@ impl Tls {
             scan_angle_deg: ze as f32,
             line: station as u32,
             along: DVec3::X,
+            up: DVec3::Z,
+            recorded: None,
         }
     }
 }

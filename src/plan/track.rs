@@ -54,6 +54,8 @@ impl Track {
             scan_angle_deg: 0.0,
             line: 0,
             along: g.along,
+            up: DVec3::Z,
+            recorded: None,
         }
     }
 }

@@ -55,7 +55,7 @@ pub fn platform(doc: &Doc, p: &Platform) -> Result<()> {
 }
 
 /// Every platform key and whether this platform gives it.
-fn given(p: &Platform) -> [(&'static str, bool); 18] {
+fn given(p: &Platform) -> [(&'static str, bool); 21] {
     [
         ("pulses", p.pulses.is_some()),
         ("altitude_m", p.altitude_m.is_some()),
@@ -75,17 +75,23 @@ fn given(p: &Platform) -> [(&'static str, bool); 18] {
         ("zenith_deg", p.zenith_deg.is_some()),
         ("zenith_step_deg", p.zenith_step_deg.is_some()),
         ("gps_start_s", p.gps_start_s.is_some()),
+        ("trajectory", p.trajectory.is_some()),
+        ("mount", p.mount.is_some()),
+        ("errors", p.errors.is_some()),
     ]
 }
 
 /// (keys the kind needs, keys it may also take). `prf_hz` is conditionally needed by als
 /// (checked in `als`); static's `pulses` is checked with its own message by the caller.
-fn keys_of(kind: PlatformKind) -> (&'static [&'static str], &'static [&'static str]) {
-    match kind {
+fn keys_of(p: &Platform) -> (&'static [&'static str], &'static [&'static str]) {
+    match p.kind {
         PlatformKind::Static => (&[], &["pulses", "gps_start_s"]),
+        PlatformKind::Als if p.trajectory.is_some() => {
+            (&["trajectory", "scanner"], &["prf_hz", "mount", "errors"])
+        }
         PlatformKind::Als => (
             &["altitude_m", "speed_m_s", "lines", "scanner"],
-            &["prf_hz", "gps_start_s"],
+            &["prf_hz", "gps_start_s", "mount", "errors"],
         ),
         PlatformKind::Spaceborne => (
             &["altitude_m", "ground_speed_m_s", "prf_hz", "track"],
@@ -108,9 +114,15 @@ fn keys_of(kind: PlatformKind) -> (&'static [&'static str], &'static [&'static s
 }
 
 /// A pointer to the key the user probably meant.
-fn hint(kind: PlatformKind, key: &str) -> &'static str {
+fn hint(p: &Platform, key: &str) -> &'static str {
     use PlatformKind::*;
-    match (kind, key) {
+    if p.kind == Als
+        && p.trajectory.is_some()
+        && ["altitude_m", "speed_m_s", "lines", "gps_start_s"].contains(&key)
+    {
+        return " (with a trajectory, its file gives the times, positions and attitudes)";
+    }
+    match (p.kind, key) {
         (Als, "along_track_step_m") => " (an als along-track step goes under `scanner:`)",
         (Als, "ground_speed_m_s") => " (an als platform takes speed_m_s)",
         (Spaceborne, "speed_m_s") => " (a spaceborne platform takes ground_speed_m_s)",
@@ -123,14 +135,14 @@ fn hint(kind: PlatformKind, key: &str) -> &'static str {
 
 /// Keys that do not belong to the kind, and keys it needs but lacks.
 pub fn keys(doc: &Doc, p: &Platform) -> Result<()> {
-    let (required, optional) = keys_of(p.kind);
+    let (required, optional) = keys_of(p);
     let phrase = kind_phrase(p.kind);
     let given = given(p);
     for (key, here) in given {
         if here && !required.contains(&key) && !optional.contains(&key) {
             return Err(doc.error(
                 &format!("platform.{key}"),
-                format!("not used by {phrase} platform{}", hint(p.kind, key)),
+                format!("not used by {phrase} platform{}", hint(p, key)),
             ));
         }
     }
@@ -412,6 +424,10 @@ fn als(c: &Check, p: &Platform) -> Result<()> {
             }
         }
     }
+    mount_and_errors(c, p)?;
+    if let Some(t) = &p.trajectory {
+        return trajectory(c, p, t);
+    }
     let lines = p.lines.as_deref().unwrap_or(&[]);
     if lines.is_empty() {
         return Err(doc.error("platform.lines", "the list of flight lines is empty"));
@@ -455,6 +471,122 @@ fn als(c: &Check, p: &Platform) -> Result<()> {
                     a.line_step_m
                 ),
             ));
+        }
+    }
+    Ok(())
+}
+
+/// `mount` and `errors`: finite numbers, angles below 90°, standard deviations and
+/// correlation times not negative.
+fn mount_and_errors(c: &Check, p: &Platform) -> Result<()> {
+    let angles = |key: &str, v: [f64; 3]| -> Result<()> {
+        for a in v {
+            c.open_deg(key, a, -90.0, 90.0)?;
+        }
+        Ok(())
+    };
+    if let Some(m) = &p.mount {
+        if let Some(o) = &m.offset_m {
+            c.vec_finite("platform.mount.offset_m", o)?;
+        }
+        if let Some(b) = m.boresight_deg {
+            angles("platform.mount.boresight_deg", b)?;
+        }
+    }
+    if let Some(e) = &p.errors {
+        for (key, sd) in [
+            ("platform.errors.position_sd_m", e.position_sd_m),
+            ("platform.errors.attitude_sd_deg", e.attitude_sd_deg),
+        ] {
+            for v in sd.unwrap_or_default() {
+                c.non_negative(key, v)?;
+            }
+        }
+        for (key, tau) in [
+            (
+                "platform.errors.position_correlation_s",
+                e.position_correlation_s,
+            ),
+            (
+                "platform.errors.attitude_correlation_s",
+                e.attitude_correlation_s,
+            ),
+        ] {
+            if let Some(t) = tau {
+                c.non_negative(key, t)?;
+            }
+        }
+        if let Some(b) = e.boresight_deg {
+            angles("platform.errors.boresight_deg", b)?;
+        }
+    }
+    Ok(())
+}
+
+/// A trajectory platform: its file (errors name the file's line and column), its scan
+/// intervals within the file's times, and a scan line in each.
+fn trajectory(c: &Check, p: &Platform, t: &crate::campaign::Trajectory) -> Result<()> {
+    let doc = c.doc;
+    let path = t.resolved.clone().unwrap_or_else(|| t.file.clone().into());
+    if !path.is_file() {
+        return Err(doc.error(
+            "platform.trajectory.file",
+            format!("trajectory file {} does not exist", path.display()),
+        ));
+    }
+    let span = super::trajectory::Trajectory::open(t)?.span();
+    let key = "platform.trajectory.scan";
+    if let Some(intervals) = &t.scan {
+        if intervals.is_empty() {
+            return Err(doc.error(key, "the list of scan intervals is empty (leave `scan` out to scan the whole trajectory)"));
+        }
+        let mut previous = f64::NEG_INFINITY;
+        for (k, &[t0, t1]) in intervals.iter().enumerate() {
+            let key = format!("{key}[{k}]");
+            c.finite(&key, t0)?;
+            c.finite(&key, t1)?;
+            if t1 <= t0 {
+                return Err(doc.error(
+                    &key,
+                    format!("must be [from, to] with from < to, found [{t0}, {t1}]"),
+                ));
+            }
+            if t0 < span[0] || t1 > span[1] {
+                return Err(doc.error(
+                    &key,
+                    format!(
+                        "[{t0}, {t1}] is not within the trajectory's times [{}, {}]",
+                        span[0], span[1]
+                    ),
+                ));
+            }
+            if t0 < previous {
+                return Err(doc.error(
+                    &key,
+                    format!("starts at {t0} s, before the interval before it ends ({previous} s): give the intervals in time order, apart"),
+                ));
+            }
+            previous = t1;
+        }
+    }
+    let a = Als::new(p).map_err(|e| doc.error("platform", e))?;
+    if a.per_line == 0 {
+        return Err(doc.error(
+            "platform.prf_hz",
+            format!(
+                "prf_hz is too low: the derived look angle step is {}°, wider than the scan: no pulse fits in a scan line",
+                a.look_step_deg
+            ),
+        ));
+    }
+    for (k, n) in a.scan_lines().enumerate() {
+        if n == 0 {
+            let which = if t.scan.is_some() {
+                format!("{key}[{k}]")
+            } else {
+                "platform.trajectory".to_string()
+            };
+            return Err(doc.error(&which, "is shorter than one scan line: no pulse fits"));
         }
     }
     Ok(())

@@ -110,7 +110,7 @@ pub fn photon_rows(
         .iter()
         .map(|e| {
             let time_ns = t0_ns + e.time_s * 1e9;
-            let p = pulse.origin + pulse.direction * (C * time_ns * 1e-9 / 2.0);
+            let p = pulse.rec_origin() + pulse.rec_direction() * (C * time_ns * 1e-9 / 2.0);
             PhotonRow {
                 pulse_id: pulse.id,
                 time_ns,
@@ -257,6 +257,8 @@ mod tests {
             scan_angle_deg: 0.0,
             line: 0,
             along: DVec3::X,
+            up: DVec3::Z,
+            recorded: None,
         };
         let ev = [
             PhotonEvent {

@@ -9,7 +9,11 @@ use las::{Builder, Reader, Transform, Vector, Version, Vlr, Writer};
 use std::io::{BufWriter, Seek, SeekFrom, Write};
 use std::path::Path;
 
+/// The coarsest coordinate step, used when the points span more than i32 steps of [`FINE`]
+/// (214 km); the finest otherwise, so that a coordinate's rounding stays far below the
+/// millimetre a user compares points at.
 pub const SCALE: f64 = 0.001;
+pub const FINE: f64 = 0.0001;
 
 /// Extra bytes per point: `apparent_reflectance` f32 then `pulse_id` u64, little-endian.
 const EXTRA: [(&str, u8, usize, &str); 2] = [
@@ -61,12 +65,13 @@ fn extra_len(bands: bool) -> u16 {
 }
 
 /// Writes the points (in the given order) to a LAS 1.4 point format 6 file. The offset is
-/// the floor of each coordinate's minimum, so every coordinate is a whole number of
-/// millimetres from it and fits i32 for extents up to 2000 km.
+/// the floor of each coordinate's minimum, so every coordinate is a whole number of steps
+/// (0.1 mm, or 1 mm past 214 km) from it and fits i32 for extents up to 2000 km.
 pub fn write_las(path: &Path, points: &[Point]) -> Result<()> {
     let mut extent = Extent::default();
     extent.add(path, points)?;
-    let layout = Layout::local(extent.offset(path, [0.0; 3])?);
+    let offset = extent.offset(path, [0.0; 3])?;
+    let layout = Layout::local(offset, extent.scale(offset, [0.0; 3]));
     let mut chunks = Some(points);
     write_las_chunks(path, &layout, |each| match chunks.take() {
         Some(c) => each(c),
@@ -79,6 +84,8 @@ pub fn write_las(path: &Path, points: &[Point]) -> Result<()> {
 #[derive(Clone, Debug, PartialEq)]
 pub struct Layout {
     pub offset: [f64; 3],
+    /// The coordinates' step: [`FINE`] or [`SCALE`] ([`Extent::scale`]).
+    pub scale: f64,
     pub shift: [f64; 3],
     pub wkt: Option<&'static str>,
     pub laz: bool,
@@ -88,9 +95,10 @@ pub struct Layout {
 
 impl Layout {
     /// Local metres, no CRS, LAS.
-    pub fn local(offset: [f64; 3]) -> Layout {
+    pub fn local(offset: [f64; 3], scale: f64) -> Layout {
         Layout {
             offset,
+            scale,
             shift: [0.0; 3],
             wkt: None,
             laz: false,
@@ -157,6 +165,21 @@ impl Extent {
         }
         Ok(offset)
     }
+
+    /// [`FINE`] when every shifted coordinate is within i32 steps of it from `offset`, else
+    /// [`SCALE`].
+    pub fn scale(&self, offset: [f64; 3], shift: [f64; 3]) -> f64 {
+        let fits = self.max.iter().enumerate().all(|(axis, p)| {
+            p.as_ref().is_none_or(|p| {
+                ([p.x, p.y, p.z][axis] + shift[axis] - offset[axis]) / FINE < i32::MAX as f64
+            })
+        });
+        if fits {
+            FINE
+        } else {
+            SCALE
+        }
+    }
 }
 
 /// Writes points.las (or .laz) as `layout` says from the points `chunks` hands to its
@@ -181,7 +204,7 @@ pub fn write_las_chunks(
     b.point_format.extra_bytes = extra_len(layout.bands);
     b.point_format.is_compressed = layout.laz;
     let transform = |offset| Transform {
-        scale: SCALE,
+        scale: layout.scale,
         offset,
     };
     b.transforms = Vector {

@@ -128,7 +128,8 @@ pub fn points_on_axis(
         .enumerate()
         .map(|(k, &(i, r))| {
             let c = &components[i];
-            let p = pulse.origin + pulse.direction * r;
+            // georeferenced from the recorded pose, as a survey is
+            let p = pulse.rec_origin() + pulse.rec_direction() * r;
             let energy_ratio = c.area_photons * config.photon_energy_j / config.emitted_energy_j;
             // ρ_i = (π / ΔΩ_i)(Q_i / Q_e), ΔΩ_i = A_tel / R².
             let rho = std::f64::consts::PI * r * r / config.telescope_area_m2 * energy_ratio;
@@ -231,6 +232,8 @@ mod tests {
             scan_angle_deg: -3.5,
             line: 2,
             along: DVec3::X,
+            up: DVec3::Z,
+            recorded: None,
         };
         // A target at range h: t = 2h/c; ρ = 0.4 Lambertian returns Q_e ρ A / (π h²).
         let centre = (2.0 * h / C * 1e9 - T0_NS) / BIN_NS;
@@ -280,6 +283,8 @@ mod tests {
             scan_angle_deg: 0.0,
             line: 0,
             along: DVec3::X,
+            up: DVec3::Z,
+            recorded: None,
         };
         let c = Component {
             centre_bin: f64::NAN,

@@ -107,8 +107,10 @@ impl Writer for PointsWriter<'_> {
             Some(f) => (f.origin, Some(f.resolve().map_err(Error::msg)?.1)),
             None => ([0.0; 3], None),
         };
+        let offset = extent.offset(&las, shift)?;
         let layout = Layout {
-            offset: extent.offset(&las, shift)?,
+            offset,
+            scale: extent.scale(offset, shift),
             shift,
             wkt,
             laz: format == PointsFormat::Laz,

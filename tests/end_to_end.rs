@@ -1296,8 +1296,9 @@ fn every_bundled_campaign_plans() {
     for path in names {
         let name = path.display();
         let doc = lidarsim::campaign::Doc::read(&path).unwrap_or_else(|e| panic!("{name}: {e}"));
-        let campaign: lidarsim::campaign::Campaign =
+        let mut campaign: lidarsim::campaign::Campaign =
             doc.parse().unwrap_or_else(|e| panic!("{name}: {e}"));
+        campaign.resolve_files(&doc);
         lidarsim::plan::check_campaign(&doc, &campaign).unwrap_or_else(|e| panic!("{name}: {e}"));
         let plan = lidarsim::plan::Plan::new(&campaign).unwrap_or_else(|e| panic!("{name}: {e}"));
         assert!(!plan.is_empty(), "{}: no pulses", path.display());

@@ -31,6 +31,10 @@ pub struct RunRow {
     pub dsm_bias_m: Option<f64>,
     pub dsm_rmse_m: Option<f64>,
     pub dsm_coverage: Option<f64>,
+    /// Overlapping strips' height differences over smooth cells (`products.json`, `strips`).
+    pub strip_cells: Option<u64>,
+    pub strip_rms_dz_m: Option<f64>,
+    pub strip_max_mean_dz_m: Option<f64>,
     pub run_time_s: f64,
 }
 
@@ -91,6 +95,16 @@ pub fn read_row(dir: &Path) -> Result<RunRow> {
     };
     if let Some(p) = products {
         row.pulses = p.pulses as u64;
+        if let Some(s) = &p.strips {
+            row.strip_cells = Some(s.cells as u64);
+            row.strip_rms_dz_m = s.rms_dz_m.and_then(finite);
+            // the pair furthest apart on average: a strip's offset
+            row.strip_max_mean_dz_m = s
+                .pairs
+                .iter()
+                .map(|q| q.mean_dz_m)
+                .max_by(|a, b| a.abs().total_cmp(&b.abs()));
+        }
         if let Some(pts) = p.points {
             row.points = Some(pts.points as u64);
             row.points_per_pulse = finite(pts.points_per_pulse);
@@ -118,13 +132,13 @@ fn cell(v: Option<f64>, digits: usize) -> String {
 
 pub fn markdown(rows: &[RunRow]) -> String {
     let mut s = String::from(
-        "| run | altitude m | PRF Hz | rays | sampler | pulses | points/pulse | within 5 cm | within 25 cm | median distance mm | pulses/m² | DSM bias m | DSM RMSE m | coverage | run s |\n| --- | ---: | ---: | ---: | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n",
+        "| run | altitude m | PRF Hz | rays | sampler | pulses | points/pulse | within 5 cm | within 25 cm | median distance mm | pulses/m² | DSM bias m | DSM RMSE m | coverage | strip cells | strip RMS dz m | run s |\n| --- | ---: | ---: | ---: | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n",
     );
     let percent =
         |v: Option<f64>| cell(v.map(|x| 100.0 * x), 2) + if v.is_some() { " %" } else { "" };
     for r in rows {
         s += &format!(
-            "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {:.1} |\n",
+            "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {:.1} |\n",
             r.run,
             cell(r.altitude_m, 0),
             cell(r.prf_hz, 0),
@@ -139,6 +153,8 @@ pub fn markdown(rows: &[RunRow]) -> String {
             cell(r.dsm_bias_m, 3),
             cell(r.dsm_rmse_m, 3),
             cell(r.dsm_coverage, 3),
+            cell(r.strip_cells.map(|n| n as f64), 0),
+            cell(r.strip_rms_dz_m, 3),
             r.run_time_s
         );
     }
@@ -146,7 +162,7 @@ pub fn markdown(rows: &[RunRow]) -> String {
 }
 
 /// The columns of the CSV table, in order.
-pub const CSV_COLUMNS: [&str; 16] = [
+pub const CSV_COLUMNS: [&str; 19] = [
     "run",
     "altitude_m",
     "prf_hz",
@@ -163,6 +179,9 @@ pub const CSV_COLUMNS: [&str; 16] = [
     "within_5cm",
     "within_25cm",
     "median_distance_m",
+    "strip_cells",
+    "strip_rms_dz_m",
+    "strip_max_mean_dz_m",
 ];
 
 /// The CSV table's columns as an Arrow table: text, unsigned counts and floats, null where
@@ -179,7 +198,7 @@ pub fn table(rows: &[RunRow]) -> arrow_array::RecordBatch {
     let t = |g: fn(&RunRow) -> Option<String>| -> ArrayRef {
         Arc::new(StringArray::from_iter(rows.iter().map(g)))
     };
-    let columns: [ArrayRef; 16] = [
+    let columns: [ArrayRef; 19] = [
         t(|r| Some(r.run.clone())),
         f(|r| r.altitude_m),
         f(|r| r.prf_hz),
@@ -196,6 +215,9 @@ pub fn table(rows: &[RunRow]) -> arrow_array::RecordBatch {
         f(|r| r.within_5cm),
         f(|r| r.within_25cm),
         f(|r| r.median_distance_m),
+        u(|r| r.strip_cells),
+        f(|r| r.strip_rms_dz_m),
+        f(|r| r.strip_max_mean_dz_m),
     ];
     crate::parquet_io::batch(CSV_COLUMNS.iter().copied().zip(columns).collect())
 }
@@ -222,6 +244,9 @@ pub fn write_csv(path: &Path, rows: &[RunRow]) -> Result<()> {
             o(r.within_5cm),
             o(r.within_25cm),
             o(r.median_distance_m),
+            r.strip_cells.map(|x| x.to_string()).unwrap_or_default(),
+            o(r.strip_rms_dz_m),
+            o(r.strip_max_mean_dz_m),
         ]
     });
     crate::fsutil::write_csv_atomic(path, &header, table)

@@ -1,5 +1,6 @@
 use super::*;
 use crate::campaign::Doc;
+use crate::testdata::TempDir;
 use std::path::PathBuf;
 
 const HEAD: &str = "name: t
@@ -717,24 +718,6 @@ fn scan_flags_follow_the_sweep() {
     }
 }
 
-/// A folder of its own in the system's temp folder, removed when dropped.
-struct TempDir(PathBuf);
-
-impl TempDir {
-    fn new(name: &str) -> TempDir {
-        let d = std::env::temp_dir().join(format!("lidarsim-plan-{name}-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&d);
-        std::fs::create_dir_all(&d).unwrap();
-        TempDir(d)
-    }
-}
-
-impl Drop for TempDir {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
-    }
-}
-
 /// A trajectory CSV flying from `from` to `to` (x, y) at height `z` with a constant attitude,
 /// one epoch every `dt` seconds from GPS time `t0` to `t1`.
 #[allow(clippy::too_many_arguments)]
@@ -761,7 +744,7 @@ fn trajectory_csv(
             rph[2]
         );
     }
-    let p = dir.0.join(name);
+    let p = dir.join(name);
     std::fs::write(&p, s).unwrap();
     p
 }
@@ -769,7 +752,7 @@ fn trajectory_csv(
 /// A campaign in `dir`, loaded as a run loads it (its files resolved there), and its plan.
 fn plan_in(dir: &TempDir, platform: &str) -> Result<Plan> {
     let doc = Doc {
-        path: dir.0.join("campaign.yaml"),
+        path: dir.join("campaign.yaml"),
         text: text(platform),
     };
     let mut campaign: Campaign = doc.parse()?;
@@ -787,7 +770,7 @@ const OSC: &str =
 /// the same times and angles, for every scanner; along +x and along a diagonal.
 #[test]
 fn a_straight_level_trajectory_flies_the_lines_campaign() {
-    let dir = TempDir::new("straight");
+    let dir = TempDir::new("plan-straight");
     let scanners = [
         OSC.to_string(),
         "scanner: { pattern: line, scan_angle_deg: [-15, 15], scan_frequency_hz: 40 }".into(),
@@ -856,7 +839,7 @@ fn ground(p: &Pulse) -> DVec3 {
 /// and LAS's scan angle counts it; a heading of 30° flies the swath turned by 30°.
 #[test]
 fn roll_shifts_and_heading_turns_the_swath() {
-    let dir = TempDir::new("roll");
+    let dir = TempDir::new("plan-roll");
     let h = 300.0;
     let nadir = |p: &Plan| -> Vec<Pulse> {
         (0..p.len() as u64)
@@ -924,7 +907,7 @@ fn roll_shifts_and_heading_turns_the_swath() {
 /// order; and its errors name the CSV file, line and column.
 #[test]
 fn trajectory_files_stream_and_their_errors_are_located() {
-    let dir = TempDir::new("stream");
+    let dir = TempDir::new("plan-stream");
     // 2,001 epochs of a turning, climbing flight
     let mut s = String::from("heading_deg,time_s,x,y,z,roll_deg,pitch_deg\n");
     for k in 0..=2000 {
@@ -940,7 +923,7 @@ fn trajectory_files_stream_and_their_errors_are_located() {
             2.0
         );
     }
-    std::fs::write(dir.0.join("turn.csv"), &s).unwrap();
+    std::fs::write(dir.join("turn.csv"), &s).unwrap();
     let plat = format!("platform: {{ kind: als, prf_hz: 2000, trajectory: {{ file: turn.csv, scan: [[1, 9], [11, 19.5]] }}, {OSC} }}");
     let plan = plan_in(&dir, &plat).unwrap();
     let all = plan.pulses(0..plan.len());
@@ -965,7 +948,7 @@ fn trajectory_files_stream_and_their_errors_are_located() {
     assert!((roll - 10.0 * (t * 0.5).sin()).abs() < 1e-3, "{roll}");
 
     let bad = |name: &str, csv: &str| -> String {
-        std::fs::write(dir.0.join(name), csv).unwrap();
+        std::fs::write(dir.join(name), csv).unwrap();
         plan_in(
             &dir,
             &format!(

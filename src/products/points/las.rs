@@ -445,6 +445,20 @@ mod tests {
         (d, p)
     }
 
+    /// Points 300 km apart do not fit i32 steps of 0.1 mm: the file falls back to 1 mm.
+    #[test]
+    fn a_wide_extent_takes_millimetre_steps() {
+        let mut pts = sample(4);
+        pts[3].x += 300_000.0;
+        let (_dir, path) = tmp("wide.las");
+        write_las(&path, &pts).unwrap();
+        let h = Reader::from_path(&path).unwrap().header().clone();
+        assert_eq!(h.transforms().x.scale, SCALE);
+        for (a, b) in pts.iter().zip(read_las(&path).unwrap()) {
+            assert!((a.x - b.x).abs() <= 0.0005 + 1e-9, "{} {}", a.x, b.x);
+        }
+    }
+
     #[test]
     fn write_then_read_back() {
         let pts = sample(1000);
@@ -453,9 +467,9 @@ mod tests {
         let back = read_las(&path).unwrap();
         assert_eq!(back.len(), pts.len());
         for (a, b) in pts.iter().zip(&back) {
-            assert!((a.x - b.x).abs() <= 0.0005 + 1e-9, "{} {}", a.x, b.x);
-            assert!((a.y - b.y).abs() <= 0.0005 + 1e-9);
-            assert!((a.z - b.z).abs() <= 0.0005 + 1e-9);
+            assert!((a.x - b.x).abs() <= 0.00005 + 1e-9, "{} {}", a.x, b.x);
+            assert!((a.y - b.y).abs() <= 0.00005 + 1e-9);
+            assert!((a.z - b.z).abs() <= 0.00005 + 1e-9);
             assert_eq!(a.gps_time, b.gps_time);
             assert_eq!(
                 (
@@ -479,7 +493,7 @@ mod tests {
         let h = Reader::from_path(&path).unwrap().header().clone();
         assert_eq!(h.version(), Version::new(1, 4));
         assert_eq!(h.point_format().to_u8().unwrap(), 6);
-        assert_eq!(h.transforms().x.scale, 0.001);
+        assert_eq!(h.transforms().x.scale, FINE);
         assert_eq!(h.transforms().z.offset, -3.0);
         // Nothing left under a temporary name.
         let names: Vec<_> = std::fs::read_dir(path.parent().unwrap())
@@ -525,7 +539,7 @@ f = laspy.read(sys.argv[1])
 assert f.header.version.major == 1 and f.header.version.minor == 4, f.header.version
 assert f.header.point_format.id == 6, f.header.point_format.id
 assert len(f.points) == {n}, len(f.points)
-assert list(f.header.scales) == [0.001, 0.001, 0.001], f.header.scales
+assert list(f.header.scales) == [0.0001, 0.0001, 0.0001], f.header.scales
 names = list(f.point_format.extra_dimension_names)
 assert names == ["apparent_reflectance", "pulse_id"], names
 assert f["pulse_id"].dtype == np.uint64 and f["apparent_reflectance"].dtype == np.float32

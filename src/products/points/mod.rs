@@ -3,6 +3,7 @@
 pub mod accuracy;
 pub mod las;
 pub mod spill;
+pub mod strips;
 
 use crate::plan::Pulse;
 use crate::products::returns::Component;

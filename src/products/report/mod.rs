@@ -266,6 +266,28 @@ fn products_section(out: &Path, points_file: &str, crs: Option<&str>) -> String 
             }
         }
     }
+    if let Some(s) = &p.strips {
+        text += &format!(
+            "\n## Strip-to-strip height differences\n\nWhere strips (point source ids) overlap on smooth cells ({} m cells in which each strip has at least {} last returns within {} m of height), the difference of their mean heights, b less a:\n\n| a | b | cells | mean | RMS | largest |\n| --- | --- | --- | --- | --- | --- |\n",
+            raw(s.cell_m),
+            s.min_points,
+            raw(s.flat_m)
+        );
+        for q in &s.pairs {
+            text += &format!(
+                "| {} | {} | {} | {} m | {} m | {} m |\n",
+                q.a,
+                q.b,
+                q.cells,
+                num(Some(q.mean_dz_m)),
+                num(Some(q.rms_dz_m)),
+                num(Some(q.max_abs_dz_m))
+            );
+        }
+        if s.pairs.is_empty() {
+            text += "| – | – | 0 | – | – | – |\n\nNo two strips overlap on a smooth cell.\n";
+        }
+    }
     if let Some(d) = DsmReport::read(&out.join("dsm/report.json")) {
         let row = |name: &str, c: &CellStats| {
             format!(

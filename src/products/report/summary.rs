@@ -20,6 +20,9 @@ pub struct ProductsSummary {
     /// waveforms_l2a.h5 against its truth (waveform instruments).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub l2a: Option<L2aSummary>,
+    /// Height differences between overlapping strips (several flight lines or stations).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub strips: Option<crate::products::points::strips::StripSummary>,
 }
 
 /// The L2A metrics against the truth under the footprints, over the shots of quality 1 with
@@ -157,6 +160,7 @@ mod tests {
                 surface_distance: None,
             }),
             photons: None,
+            strips: None,
             l2a: Some(L2aSummary {
                 shots: 3,
                 quality_shots: 2,

@@ -10,6 +10,7 @@ use crate::products::figures::{self, TopPoint, WaveformFigure};
 use crate::products::points::accuracy::DistanceHistogram;
 use crate::products::points::las::{write_las_chunks, Extent, Layout};
 use crate::products::points::spill::Spill;
+use crate::products::points::strips::Strips;
 use crate::products::points::Point;
 use crate::products::raster::Dsm;
 use crate::products::report::summary::{PointsSummary, ProductsSummary};
@@ -103,6 +104,7 @@ impl Writer for PointsWriter<'_> {
         let format = c.points_format();
         let mut dsm = dsm.and_then(|res| Dsm::new(scene, first, res));
         let mut top = TopView::new(spill.len());
+        let mut strips = Strips::default();
         let (shift, wkt) = match &c.frame {
             Some(f) => (f.origin, Some(f.resolve().map_err(Error::msg)?.1)),
             None => ([0.0; 3], None),
@@ -129,6 +131,7 @@ impl Writer for PointsWriter<'_> {
                     chunk
                 };
                 top.offer(chunk);
+                strips.add(chunk);
                 if let Some(d) = &mut dsm {
                     d.add_points(chunk);
                 }
@@ -154,6 +157,7 @@ impl Writer for PointsWriter<'_> {
         outputs.extend(figures?);
         outputs.extend(dsm?);
         summary.points = Some(tally.summary(plan.len()));
+        summary.strips = strips.summary();
         Ok(outputs)
     }
 }

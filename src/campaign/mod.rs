@@ -595,8 +595,10 @@ pub struct Simulation {
     pub method: Method,
     #[serde(default = "default_rays")]
     pub rays_per_pulse: u64,
+    /// The highest order of scattering traced, or `auto`: read it through
+    /// [`MaxOrder::cap`].
     #[serde(default = "default_max_order")]
-    pub max_order: u32,
+    pub max_order: MaxOrder,
     #[serde(default)]
     pub mis: MisHeuristic,
     #[serde(default)]
@@ -621,8 +623,66 @@ impl Default for Simulation {
 fn default_rays() -> u64 {
     10_000
 }
-fn default_max_order() -> u32 {
-    100
+fn default_max_order() -> MaxOrder {
+    MaxOrder::Order(MaxOrder::AUTO_CAP)
+}
+
+/// `simulation.max_order` as written: a number, or `auto`, which the pilot resolves into the
+/// order past which the received energy's tail is below a fraction of a pulse's standard
+/// error (`pipeline::simulate::choose_max_order`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum MaxOrder {
+    Order(u32),
+    Auto,
+}
+
+impl MaxOrder {
+    /// The order `auto`'s pilot traces to, and the default.
+    pub const AUTO_CAP: u32 = 100;
+
+    /// The highest order traced: `auto` before its pilot is [`MaxOrder::AUTO_CAP`].
+    pub fn cap(self) -> u32 {
+        match self {
+            MaxOrder::Order(n) => n,
+            MaxOrder::Auto => MaxOrder::AUTO_CAP,
+        }
+    }
+}
+
+impl std::fmt::Display for MaxOrder {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            MaxOrder::Order(n) => write!(f, "{n}"),
+            MaxOrder::Auto => f.write_str("auto"),
+        }
+    }
+}
+
+impl Serialize for MaxOrder {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> std::result::Result<S::Ok, S::Error> {
+        match self {
+            MaxOrder::Order(n) => s.serialize_u32(*n),
+            MaxOrder::Auto => s.serialize_str("auto"),
+        }
+    }
+}
+
+impl<'de> Deserialize<'de> for MaxOrder {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> std::result::Result<Self, D::Error> {
+        #[derive(Deserialize)]
+        #[serde(untagged)]
+        enum Raw {
+            Number(u64),
+            Word(String),
+        }
+        match Raw::deserialize(d) {
+            Ok(Raw::Number(n)) => Ok(MaxOrder::Order(u32::try_from(n).unwrap_or(u32::MAX))),
+            Ok(Raw::Word(w)) if w == "auto" => Ok(MaxOrder::Auto),
+            _ => Err(serde::de::Error::custom(
+                "expected a whole number of scattering orders (1 to 100000) or auto",
+            )),
+        }
+    }
 }
 
 #[derive(Clone, Debug, Deserialize, Serialize)]
@@ -1031,7 +1091,7 @@ impl Campaign {
         if s.rays_per_pulse == 0 {
             return Err(doc.error("simulation.rays_per_pulse", "must be at least 1"));
         }
-        if s.max_order == 0 || s.max_order > 100_000 {
+        if s.max_order.cap() == 0 || s.max_order.cap() > 100_000 {
             return Err(doc.error("simulation.max_order", "must be between 1 and 100000"));
         }
         if let Some(p) = &self.products {

@@ -103,7 +103,7 @@ pub fn gate_bins(
 /// over a gate of `bins`.
 pub fn pulse_bytes(loaded: &crate::campaign::Loaded, bins: usize) -> f64 {
     let c = &loaded.campaign;
-    waveform_bytes(bins, c.simulation.max_order) * c.wavelength_nm.all().len() as f64
+    waveform_bytes(bins, c.simulation.max_order.cap()) * c.wavelength_nm.all().len() as f64
 }
 
 /// Bytes of one waveform row in memory, about: photons, impulse energy and its error, four

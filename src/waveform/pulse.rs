@@ -110,7 +110,7 @@ impl<'a> PulseSimulator<'a> {
             sun,
             atmosphere: self.atmosphere.as_ref(),
             bands: self.bands.as_ref(),
-            max_order: c.simulation.max_order,
+            max_order: c.simulation.max_order.cap(),
             seed: c.seed,
             pulse_id: p.id,
         }

@@ -151,6 +151,9 @@ fn navigation_errors_move_the_points_as_configured() {
     let n = clean.len() as f64;
     let (rh, rv) = ((h2 / n).sqrt(), (v2 / n).sqrt());
     let (wh, wv) = ((want_h2 / n).sqrt(), (want_v2 / n).sqrt());
+    eprintln!(
+        "white errors over {n} points: horizontal RMSE {rh:.4} m against {wh:.4} m, vertical {rv:.4} m against {wv:.4} m"
+    );
     assert!(
         (rh / wh - 1.0).abs() < 0.05,
         "horizontal RMSE {rh} m against {wh} m"
@@ -183,5 +186,110 @@ fn navigation_errors_move_the_points_as_configured() {
             q.pulse_id
         );
     }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Two strips flown in opposite directions 40 m apart over a plane 300 m below: without errors
+/// their heights agree where they overlap (the range's own noise aside); with an unknown roll
+/// boresight of 0.05° each strip's recorded plane tilts the other way, and report.md,
+/// products.json and `compare` give the strips' height differences, whose RMS is the tilt's
+/// (computed here from the geometry of every overlapping cell) with the noise added, within
+/// 10 %.
+#[test]
+fn compare_reports_the_strips_height_differences() {
+    let dir = tmp("survey_strips");
+    let plane = plane_scene(&dir, 0.3, 400.0);
+    let h = 300.0;
+    let lines = format!(
+        "altitude_m: {h}, speed_m_s: 60, lines: [{{ start: [-40, 0], end: [40, 0] }}, {{ start: [40, 40], end: [-40, 40] }}]"
+    );
+    for (name, errors) in [
+        ("clean", ""),
+        ("tilted", ", errors: { boresight_deg: [0.05, 0, 0] }"),
+    ] {
+        let c = write(
+            &dir,
+            &format!("{name}.yaml"),
+            &survey(&plane, &format!("{lines}{errors}"), 1),
+        );
+        run_cli(&c, &dir.join(name), None);
+    }
+    let strips = |name: &str| {
+        let text = std::fs::read_to_string(dir.join(name).join("products.json")).unwrap();
+        let v: serde_json::Value = serde_json::from_str(&text).unwrap();
+        v["strips"].clone()
+    };
+    let (clean, tilted) = (strips("clean"), strips("tilted"));
+    let pair = |s: &serde_json::Value| s["pairs"][0].clone();
+    assert_eq!(
+        (pair(&clean)["a"].as_u64(), pair(&clean)["b"].as_u64()),
+        (Some(1), Some(2))
+    );
+    let cells = pair(&tilted)["cells"].as_u64().unwrap();
+    assert!(cells > 1000, "{cells} cells");
+    let noise = pair(&clean)["rms_dz_m"].as_f64().unwrap();
+    assert!(noise < 0.02, "{clean}");
+    assert!(
+        pair(&clean)["mean_dz_m"].as_f64().unwrap().abs() < 0.005,
+        "{clean}"
+    );
+
+    // the tilt: a beam flown at θ + δ meets the plane at its range H / cos(θ + δ), recorded
+    // along θ: across H sin θ / cos(θ + δ) (right of the track), height H (1 − cos θ / cos(θ + δ))
+    let delta = 0.05f64.to_radians();
+    let height_at = |across: f64| {
+        let (mut lo, mut hi) = (-0.5f64, 0.5f64);
+        for _ in 0..80 {
+            let mid = 0.5 * (lo + hi);
+            if h * mid.sin() / (mid + delta).cos() < across {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        h * (1.0 - lo.cos() / (lo + delta).cos())
+    };
+    // strip 1 flies +x along y = 0 (right is −y), strip 2 flies −x along y = 40 (right is +y);
+    // the overlapping cells lie between the swaths' edges, 300 tan 15° = 80.4 m from each track
+    let half = h * 15f64.to_radians().tan();
+    let (mut sq, mut n) = (0.0, 0.0);
+    for y in ((40.0 - half).ceil() as i64)..(half.floor() as i64) {
+        let yc = y as f64 + 0.5;
+        let dz = height_at(yc - 40.0) - height_at(-yc);
+        sq += dz * dz;
+        n += 1.0;
+    }
+    let tilt = (sq / n).sqrt();
+    let want = (tilt * tilt + noise * noise).sqrt();
+    let got = pair(&tilted)["rms_dz_m"].as_f64().unwrap();
+    eprintln!("strips: RMS dz {got:.4} m with the boresight, {noise:.4} m without; the tilt alone {tilt:.4} m");
+    assert!(
+        (got / want - 1.0).abs() < 0.1,
+        "RMS dz {got} m against {want} m"
+    );
+
+    let report = std::fs::read_to_string(dir.join("tilted/report.md")).unwrap();
+    assert!(
+        report.contains("## Strip-to-strip height differences"),
+        "{report}"
+    );
+    let csv = dir.join("compare.csv");
+    let (code, out, err) = lidarsim(&[
+        "compare",
+        dir.join("clean").to_str().unwrap(),
+        dir.join("tilted").to_str().unwrap(),
+        "--csv",
+        csv.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    assert!(out.contains("strip RMS dz m"), "{out}");
+    let text = std::fs::read_to_string(&csv).unwrap();
+    let header: Vec<&str> = text.lines().next().unwrap().split(',').collect();
+    let row: Vec<&str> = text.lines().nth(2).unwrap().split(',').collect();
+    let at = header.iter().position(|c| *c == "strip_rms_dz_m").unwrap();
+    assert!(
+        (row[at].parse::<f64>().unwrap() - got).abs() < 1e-9,
+        "{text}"
+    );
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -254,6 +254,8 @@ impl Trajectory {
 }
 
 fn read_header(path: &Path, row: &str) -> Result<([usize; 7], usize)> {
+    // a spreadsheet's export may open with a byte-order mark
+    let row = row.trim_start_matches('\u{feff}');
     let names: Vec<&str> = row.split(',').map(|f| f.trim().trim_matches('"')).collect();
     let mut columns = [0usize; 7];
     for (c, want) in COLUMNS.iter().enumerate() {

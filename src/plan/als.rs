@@ -459,25 +459,30 @@ impl Als {
         }
     }
 
-    /// The scan angle LAS records for a sweep across track: the beam's angle from the scene's
-    /// nadir in the plane across the direction of travel, positive to the right (counter-
-    /// clockwise seen from behind), so a roll is in it. Other patterns keep their column.
-    fn scene_angle(&self, column: f64, d: DVec3, body: &DMat3) -> f64 {
-        match self.pattern {
-            ScanPattern::Line | ScanPattern::Oscillating | ScanPattern::RotatingPolygon => {
-                let x = body.x_axis;
-                let right = DVec3::new(x.y, -x.x, 0.0)
-                    .try_normalize()
-                    .unwrap_or_else(|| {
-                        (-body.y_axis)
-                            .with_z(0.0)
-                            .try_normalize()
-                            .unwrap_or(DVec3::X)
-                    });
-                d.dot(right).atan2(-d.z).to_degrees()
-            }
-            _ => column,
+    /// The scan angle LAS records of pulse `p` (its `scan_angle_deg` is the scanner's look
+    /// angle): for a sweep across track under a trajectory or a mount, the recorded beam's
+    /// angle from the scene's nadir in the plane across the direction of travel, positive to
+    /// the right (counter-clockwise seen from behind), so a roll is in it, as LAS defines it
+    /// ("with respect to the vertical of the coordinate system of the data"). Straight level
+    /// lines and the other patterns keep the look angle.
+    pub(crate) fn las_angle(&self, p: &Pulse) -> f32 {
+        let sweep = matches!(
+            self.pattern,
+            ScanPattern::Line | ScanPattern::Oscillating | ScanPattern::RotatingPolygon
+        );
+        if self.plain || !sweep {
+            return p.scan_angle_deg;
         }
+        let (x, d) = (p.along, p.rec_direction());
+        let right = DVec3::new(x.y, -x.x, 0.0)
+            .try_normalize()
+            .unwrap_or_else(|| {
+                (-p.up.cross(p.along))
+                    .with_z(0.0)
+                    .try_normalize()
+                    .unwrap_or(DVec3::X)
+            });
+        d.dot(right).atan2(-d.z).to_degrees() as f32
     }
 
     /// (left to right, edge of the scan line) of pulse `id`: see [`super::Plan::scan_flags`].
@@ -518,11 +523,7 @@ impl Als {
             _ => {
                 let flown = body * self.mount * self.unknown;
                 let (d, a) = self.beam(&Axes::of(&flown), j, i, t);
-                (
-                    position + body * self.offset,
-                    d,
-                    self.scene_angle(a, d, &body),
-                )
+                (position + body * self.offset, d, a)
             }
         };
         let recorded = self.recorded.then(|| match &self.errors {

@@ -306,6 +306,15 @@ impl Plan {
         }
     }
 
+    /// The scan angle LAS records for pulse `p`: its look angle, or for a sweep across track
+    /// under a trajectory or a mount, the angle from the scene's vertical (roll included).
+    pub fn las_scan_angle(&self, p: &Pulse) -> f32 {
+        match &self.platform {
+            Source::Als(a) => a.las_angle(p),
+            _ => p.scan_angle_deg,
+        }
+    }
+
     /// Whether the pulses carry a recorded pose apart from the flown one (`errors` given):
     /// pulses.parquet then has its columns.
     pub fn records_pose(&self) -> bool {

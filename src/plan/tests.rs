@@ -862,7 +862,8 @@ fn roll_shifts_and_heading_turns_the_swath() {
         h,
         [5.0, 0.0, 90.0],
     );
-    let rolled = nadir(&plan_in(&dir, &plat("roll.csv")).unwrap());
+    let roll_plan = plan_in(&dir, &plat("roll.csv")).unwrap();
+    let rolled = nadir(&roll_plan);
     assert!(rolled.len() > 10);
     for q in &rolled {
         // flying +x, left is +y
@@ -871,11 +872,10 @@ fn roll_shifts_and_heading_turns_the_swath() {
             (spot.y - h * 5f64.to_radians().tan()).abs() < 1e-6,
             "{spot}"
         );
-        assert!(
-            (q.scan_angle_deg + 5.0).abs() < 1e-4,
-            "{}",
-            q.scan_angle_deg
-        );
+        // the look angle is the scanner's; LAS's counts from the scene's vertical
+        assert!(q.scan_angle_deg.abs() < 1e-4, "{}", q.scan_angle_deg);
+        let las = roll_plan.las_scan_angle(q);
+        assert!((las + 5.0).abs() < 1e-4, "{las}");
     }
     // heading 30°: flying towards azimuth 30° from north, the swath across it
     let (s, c) = 30f64.to_radians().sin_cos();

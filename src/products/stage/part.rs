@@ -225,7 +225,9 @@ fn discrete_returns(loaded: &Loaded, plan: &Plan, waveforms: &[Waveform]) -> Vec
             let mut points =
                 points_on_axis(pulse, w.t0_ns, w.bin_ns as f64, &comps, &classes, &config);
             let (left_to_right, edge_of_line) = plan.scan_flags(pulse.id);
+            let scan_angle_deg = plan.las_scan_angle(pulse);
             for p in &mut points {
+                p.scan_angle_deg = scan_angle_deg;
                 p.wavelength_nm = w.wavelength_nm.map(|nm| nm as f32);
                 p.left_to_right = left_to_right;
                 p.edge_of_line = edge_of_line;

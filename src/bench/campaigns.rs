@@ -71,7 +71,7 @@ pub enum BenchScene {
 
 /// The bench's campaigns, in the order of its table: file stem under the campaigns folder
 /// (`pipelines/bench/`), what it measures, and the scene it flies over.
-pub const CAMPAIGNS: [(&str, &str, BenchScene); 11] = [
+pub const CAMPAIGNS: [(&str, &str, BenchScene); 12] = [
     (
         "orchard_gedi_sun",
         "orchard, GEDI-like waveform, sun 50°/180° (section 3.3)",
@@ -110,6 +110,11 @@ pub const CAMPAIGNS: [(&str, &str, BenchScene); 11] = [
     (
         "als_town",
         "town, airborne discrete return at 19 rays per pulse, method auto",
+        BenchScene::Town,
+    ),
+    (
+        "als_town_auto",
+        "the same town survey with max_order auto (the pilot keeps the orders that matter)",
         BenchScene::Town,
     ),
     (

@@ -2,7 +2,8 @@
 //! (`LIDARSIM_FUZZ_CASES` sets the count; `tools/fuzz_loaders.sh` runs a longer one).
 //!
 //! Each case mutates one file of a valid campaign (campaign YAML with a sweep, scene YAML, a
-//! heightfield, an OBJ, an instance table, an ASCII and a binary PLY) by byte flips, cuts,
+//! heightfield, an OBJ, an instance table, an ASCII and a binary PLY, a second campaign flying a
+//! trajectory CSV with a mount and navigation errors) by byte flips, cuts,
 //! copies and hostile tokens, deterministically from a seed. What must hold: exit code 0 or 1,
 //! never a panic ("internal error"), and a rejection is exactly one `error:` line.
 
@@ -62,6 +63,23 @@ objects:
   - mesh: { file: bin.ply, material: soil }
 ";
 
+/// A second campaign flying a recorded trajectory with a mount and navigation errors: its
+/// file and the trajectory's CSV are mutated and checked through it.
+const TRAJECTORY_CAMPAIGN: &str = "name: t
+scene: scene.yaml
+seed: 1
+wavelength_nm: 1064
+instrument: { kind: discrete_return, pulse_energy_j: 0.001, pulse_fwhm_ns: 3, footprint_half_angle_mrad: 0.25, fov_half_angle_mrad: 0.375, receiver_area_m2: 0.1, bin_ns: 0.5 }
+platform:
+  kind: als
+  prf_hz: 1000
+  trajectory: { file: trajectory.csv, scan: [[1000.0, 1000.2], [1000.3, 1000.4]] }
+  mount: { offset_m: [0.1, 0, -0.2], boresight_deg: [0.1, 0, 0] }
+  errors: { position_sd_m: [0.03, 0.03, 0.05], position_correlation_s: 1, attitude_sd_deg: [0.003, 0.003, 0.008], boresight_deg: [0.01, 0, 0] }
+  scanner: { pattern: oscillating, scan_angle_deg: [-10, 10], scan_frequency_hz: 20 }
+simulation: { method: forward, rays_per_pulse: 10, max_order: auto }
+";
+
 fn binary_ply() -> Vec<u8> {
     let mut b = b"ply\nformat binary_little_endian 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n".to_vec();
     for v in [[0f32, 0.0, 6.0], [1.0, 0.0, 6.0], [1.0, 1.0, 6.0]] {
@@ -85,6 +103,8 @@ fn files() -> Vec<(&'static str, Vec<u8>)> {
         ("trees.csv", b"# x y z rotation scale\n1 2 0 0 1\n3, 4, 0, 90, 1.5\n".to_vec()),
         ("roof.ply", b"ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\nproperty float z\nelement face 2\nproperty list uchar int vertex_indices\nend_header\n0 0 5\n1 0 5\n1 1 5\n0 1 5\n3 0 1 2\n3 0 2 3\n".to_vec()),
         ("bin.ply", binary_ply()),
+        ("traj.yaml", TRAJECTORY_CAMPAIGN.into()),
+        ("trajectory.csv", b"time_s,x,y,z,roll_deg,pitch_deg,heading_deg\n1000.0,0,5,100,0,0,90\n1000.25,5,5,100,1.5,0.5,91\n1000.5,10,5,101,0,0,92\n".to_vec()),
     ]
 }
 
@@ -183,16 +203,18 @@ fn mutated_inputs_never_panic_and_fail_with_one_line() {
     for (name, bytes) in &base {
         std::fs::write(whole.join(name), bytes).unwrap();
     }
-    let o = Command::new(env!("CARGO_BIN_EXE_lidarsim"))
-        .args(["check", whole.join("campaign.yaml").to_str().unwrap()])
-        .output()
-        .unwrap();
-    assert_eq!(
-        o.status.code(),
-        Some(0),
-        "{}",
-        String::from_utf8_lossy(&o.stderr)
-    );
+    for campaign in ["campaign.yaml", "traj.yaml"] {
+        let o = Command::new(env!("CARGO_BIN_EXE_lidarsim"))
+            .args(["check", whole.join(campaign).to_str().unwrap()])
+            .output()
+            .unwrap();
+        assert_eq!(
+            o.status.code(),
+            Some(0),
+            "{campaign}: {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+    }
     let mut r = SplitMix64::new(2026);
     let mut rejected = 0;
     let mut tried = vec![0usize; base.len()];
@@ -216,8 +238,13 @@ fn mutated_inputs_never_panic_and_fail_with_one_line() {
             };
             std::fs::write(d.join(name), data).unwrap();
         }
+        // the trajectory's files are read through their own campaign
+        let checked = match base[target].0 {
+            "traj.yaml" | "trajectory.csv" => "traj.yaml",
+            _ => "campaign.yaml",
+        };
         let o = Command::new(env!("CARGO_BIN_EXE_lidarsim"))
-            .args(["check", d.join("campaign.yaml").to_str().unwrap()])
+            .args(["check", d.join(checked).to_str().unwrap()])
             .output()
             .unwrap();
         let err = String::from_utf8_lossy(&o.stderr);

@@ -174,7 +174,13 @@ impl Trajectory {
     /// and `dt` apart.
     pub(crate) fn pose(&self, t0: f64, dt: f64) -> (DVec3, DQuat) {
         let t = t0 + dt;
-        let k = self.marks.partition_point(|m| m.t <= t).max(1) - 1;
+        // a block that would hold the last epoch alone (its mark is the last epoch) is never
+        // read: the block before it ends on that epoch
+        let blocks = self.marks.len()
+            - usize::from(
+                self.marks.len() > 1 && self.marks[self.marks.len() - 1].start == self.last.start,
+            );
+        let k = (self.marks.partition_point(|m| m.t <= t).max(1) - 1).min(blocks - 1);
         let block = self.block(k);
         let i = (block.partition_point(|e| e.t <= t).max(1) - 1).min(block.len() - 2);
         let (a, b) = (&block[i], &block[i + 1]);
@@ -331,4 +337,38 @@ fn parse_row(
         position: DVec3::new(v[1] - origin[0], v[2] - origin[1], v[3] - origin[2]),
         attitude: attitude(v[4], v[5], v[6]),
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// 257 epochs: the last block's mark is the last epoch itself; a pose at or past it comes
+    /// from the block before, held at the end, and every epoch's own pose is its row's.
+    #[test]
+    fn a_lone_last_epoch_is_read_with_the_block_before() {
+        let dir = crate::testdata::TempDir::new("trajectory-257");
+        let mut text = String::from("time_s,x,y,z,roll_deg,pitch_deg,heading_deg\n");
+        for k in 0..=BLOCK {
+            text += &format!("{k},{},0,100,0,0,90\n", 2 * k);
+        }
+        let path = dir.join("t.csv");
+        std::fs::write(&path, text).unwrap();
+        let spec = Spec {
+            file: path.display().to_string(),
+            scan: None,
+            resolved: None,
+            origin: [0.0; 3],
+        };
+        let t = Trajectory::open(&spec).unwrap();
+        assert_eq!(t.span(), [0.0, BLOCK as f64]);
+        for k in [0usize, 1, 255, 256] {
+            let (p, _) = t.pose(k as f64, 0.0);
+            assert_eq!(p.x, 2.0 * k as f64, "epoch {k}");
+        }
+        let (p, _) = t.pose(BLOCK as f64, 5.0);
+        assert_eq!(p.x, 2.0 * BLOCK as f64);
+        let (p, _) = t.pose(255.0, 0.5);
+        assert_eq!(p.x, 511.0);
+    }
 }

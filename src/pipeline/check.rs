@@ -19,6 +19,8 @@ pub struct CheckReport {
     pub scene: String,
     pub scene_file: String,
     pub pulses: u64,
+    /// The recorded trajectory a platform flies, as one line, when it flies one.
+    pub trajectory: Option<String>,
     pub wavelengths_nm: Vec<f64>,
     /// The water surface, as one line, when the scene has one.
     pub water: Option<String>,
@@ -108,6 +110,7 @@ pub fn check(path: &Path) -> Result<CheckReport> {
         scene: scene.name.clone(),
         scene_file: loaded.scene_path.display().to_string(),
         pulses: plan.len() as u64,
+        trajectory: plan.trajectory_note(),
         wavelengths_nm: c.wavelength_nm.all().to_vec(),
         water,
         rays_per_pulse: c.simulation.rays_per_pulse,
@@ -172,6 +175,9 @@ impl CheckReport {
             format!("scene: {} ({})", self.scene, self.scene_file),
             format!("pulses: {}", self.pulses),
         ];
+        if let Some(t) = &self.trajectory {
+            out.push(format!("trajectory: {t}"));
+        }
         if self.wavelengths_nm.len() > 1 {
             let nm: Vec<String> = self.wavelengths_nm.iter().map(|w| w.to_string()).collect();
             out.push(format!("bands: {} nm, traced in one pass", nm.join(", ")));

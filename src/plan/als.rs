@@ -68,7 +68,7 @@ enum Route {
     Lines {
         altitude: f64,
     },
-    Trajectory(Trajectory),
+    Trajectory(Box<Trajectory>),
 }
 
 /// The scanner's axes in the scene: forward, right and down.
@@ -271,7 +271,7 @@ impl Als {
                     first_id = first_id.saturating_add(scan_lines.saturating_mul(per_line));
                 }
                 let gps_start = intervals.first().map_or(span[0], |i| i[0]);
-                (Route::Trajectory(t), 0.0, lines_per_s, gps_start)
+                (Route::Trajectory(Box::new(t)), 0.0, lines_per_s, gps_start)
             }
             (None, speed) => {
                 let speed = speed.unwrap_or(1.0);
@@ -339,6 +339,24 @@ impl Als {
             self.errors = Errors::new(e, seed, n, &|id| self.time(id).1);
         }
         self
+    }
+
+    pub(crate) fn trajectory_note(&self) -> Option<String> {
+        let Route::Trajectory(t) = &self.route else {
+            return None;
+        };
+        let [t0, t1] = t.span();
+        let scanned: f64 = self
+            .flights
+            .iter()
+            .map(|f| f.scan_lines as f64 / self.lines_per_s)
+            .sum();
+        Some(format!(
+            "{} epochs from {t0} to {t1} s (GPS), {} scan interval{} firing over {scanned:.3} s",
+            t.epochs(),
+            self.flights.len(),
+            if self.flights.len() == 1 { "" } else { "s" }
+        ))
     }
 
     pub(crate) fn records_pose(&self) -> bool {

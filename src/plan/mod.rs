@@ -315,6 +315,15 @@ impl Plan {
         }
     }
 
+    /// The recorded trajectory flown, as `check` reports it: its epochs, times and scan
+    /// intervals; `None` for every other platform.
+    pub fn trajectory_note(&self) -> Option<String> {
+        match &self.platform {
+            Source::Als(a) => a.trajectory_note(),
+            _ => None,
+        }
+    }
+
     /// Whether the pulses carry a recorded pose apart from the flown one (`errors` given):
     /// pulses.parquet then has its columns.
     pub fn records_pose(&self) -> bool {

@@ -1127,3 +1127,41 @@ fn correlated_errors_decay_as_exp_minus_lag_over_tau() {
         assert!(se < 0.1, "lag {l}: SE {se}");
     }
 }
+
+/// With a `frame`, the trajectory's x, y, z are the CRS's easting, northing and ellipsoidal
+/// height: the pulses fly them less the frame's origin.
+#[test]
+fn a_trajectory_in_a_frame_is_moved_into_the_scene() {
+    let dir = TempDir::new("plan-frame");
+    let origin = [500_000.0, 4_800_000.0, 120.0];
+    trajectory_csv(
+        &dir,
+        "utm.csv",
+        (0.0, 2.0, 0.5),
+        [origin[0] + 10.0, origin[1] + 20.0],
+        [origin[0] + 110.0, origin[1] + 20.0],
+        origin[2] + 300.0,
+        [0.0, 0.0, 90.0],
+    );
+    let plan = plan_in(
+        &dir,
+        &format!(
+            "frame: {{ crs: EPSG:32631, origin: {origin:?} }}\nplatform: {{ kind: als, prf_hz: 2000, trajectory: {{ file: utm.csv }}, {OSC} }}"
+        ),
+    )
+    .unwrap();
+    assert!(!plan.is_empty());
+    for id in [0, plan.len() as u64 / 2, plan.len() as u64 - 1] {
+        let p = plan.pulse(id);
+        assert!(
+            (p.origin.y - 20.0).abs() < 1e-6 && (p.origin.z - 300.0).abs() < 1e-6,
+            "{}",
+            p.origin
+        );
+        assert!(
+            (p.origin.x - (10.0 + 50.0 * p.gps_time_s)).abs() < 1e-6,
+            "{}",
+            p.origin
+        );
+    }
+}

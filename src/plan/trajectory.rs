@@ -67,6 +67,7 @@ pub(crate) struct Trajectory {
     marks: Vec<Mark>,
     /// The last epoch (closes the last block).
     last: Mark,
+    epochs: usize,
     kept: Mutex<Vec<(usize, Arc<Vec<Epoch>>)>>,
 }
 
@@ -159,8 +160,13 @@ impl Trajectory {
             origin: DVec3::from_array(spec.origin),
             marks,
             last,
+            epochs: count,
             kept: Mutex::new(Vec::new()),
         })
+    }
+
+    pub(crate) fn epochs(&self) -> usize {
+        self.epochs
     }
 
     /// The first and last epochs' times, GPS seconds.

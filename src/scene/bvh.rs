@@ -42,6 +42,10 @@ pub(crate) struct Blas {
     /// Bounds of the stored coordinates.
     pub lo: Vec3,
     pub hi: Vec3,
+    /// Every vertex at one height (a `plane` object, flat ground): a ray that leaves one of
+    /// its facets, or a segment that ends on one, meets no other facet of the mesh away from
+    /// that point, so its traversal can be left out (see `Scene::intersect`).
+    pub flat: bool,
 }
 
 impl Blas {
@@ -86,6 +90,7 @@ impl Blas {
             offset: mesh.offset,
             lo,
             hi,
+            flat: lo.z == hi.z,
         }
     }
 

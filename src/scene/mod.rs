@@ -547,6 +547,14 @@ impl Scene {
             |ray, id| {
                 let inst = &self.instances[id];
                 let blas = &self.meshes[inst.mesh as usize];
+                // A ray leaving a facet of a flat mesh (instances turn about z only) meets
+                // the mesh's other facets at its start or not at all (it runs in their plane
+                // only with probability 0), and the coplanar rule below refuses those: the
+                // same answer without the traversal, which for the ground is most of a
+                // bounce's or a return's query.
+                if on_surface && blas.flat && inst.id == skip.instance {
+                    return f32::INFINITY;
+                }
                 let o = inst.point_to_local(ray.origin);
                 let d = inst.dir_to_local(ray.direction);
                 let wr = WatertightRay::new(Vec3::from(o), Vec3::from(d));
@@ -696,6 +704,14 @@ impl Scene {
             .ray_traverse_miss(make_ray(lr.origin, lr.dir, tmax), |ray, id| {
                 let inst = &self.instances[id];
                 let blas = &self.meshes[inst.mesh as usize];
+                // a segment from or to a facet of a flat mesh meets its other facets only at
+                // that end, where the coplanar rule refuses them (see `intersect_copy`)
+                if blas.flat
+                    && ((start_on_surface && inst.id == skip_a.instance)
+                        || (end_on_surface && inst.id == skip_b.instance))
+                {
+                    return f32::INFINITY;
+                }
                 let o = inst.point_to_local(ray.origin);
                 let d = inst.dir_to_local(ray.direction);
                 let wr = WatertightRay::new(Vec3::from(o), Vec3::from(d));
@@ -741,6 +757,16 @@ impl Scene {
                 }
             });
         !miss
+    }
+
+    /// Clears every mesh's `flat` mark, so that queries traverse flat meshes as any other;
+    /// returns how many were marked (the tests compare the two ways).
+    #[cfg(test)]
+    pub(crate) fn forget_flat(&mut self) -> usize {
+        self.meshes
+            .iter_mut()
+            .map(|m| std::mem::replace(&mut m.flat, false) as usize)
+            .sum()
     }
 
     /// Starts keeping every query the scene answers (for the bench; costs a lock per query).

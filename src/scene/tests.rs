@@ -1176,6 +1176,124 @@ fn two_level_tracing_matches_brute_force() {
     );
 }
 
+/// An instance table of `n` rows over 30 m × 30 m, raised up to `top` m, turned and scaled
+/// 0.5-2 at random.
+fn placements(rng: &mut Rand, n: usize, top: f64) -> String {
+    (0..n)
+        .map(|_| {
+            format!(
+                "{} {} {} {} {}\n",
+                rng.range(0.0, 30.0),
+                rng.range(0.0, 30.0),
+                rng.range(0.0, top),
+                rng.range(0.0, 360.0),
+                rng.range(0.5, 2.0)
+            )
+        })
+        .collect()
+}
+
+/// Rays that leave a facet of a flat mesh (the ground plane, and a flat square instanced
+/// turned, scaled and raised among the soup) and segments that start or end on one get the
+/// same answers, to the bit, whether or not the queries leave the flat mesh out.
+#[test]
+fn leaving_a_flat_mesh_out_changes_no_answer() {
+    let mut rng = Rand::new(777);
+    let d = tmp("flat_skip");
+    let mut obj = String::from("o soup\n");
+    for k in 0..300 {
+        let c = DVec3::new(
+            rng.range(-2.0, 2.0),
+            rng.range(-2.0, 2.0),
+            rng.range(0.5, 4.0),
+        );
+        for _ in 0..3 {
+            let v = c + DVec3::new(
+                rng.range(-0.4, 0.4),
+                rng.range(-0.4, 0.4),
+                rng.range(-0.4, 0.4),
+            );
+            obj += &format!("v {} {} {}\n", v.x, v.y, v.z);
+        }
+        obj += &format!("f {} {} {}\n", 3 * k + 1, 3 * k + 2, 3 * k + 3);
+    }
+    write(&d, "soup.obj", &obj);
+    write(&d, "soup.csv", &placements(&mut rng, 25, 2.0));
+    // a flat 2 m × 2 m square of four triangles at height 1.5, placed 10 times
+    write(
+        &d,
+        "square.obj",
+        "o square\nv -1 -1 1.5\nv 1 -1 1.5\nv 1 1 1.5\nv -1 1 1.5\nv 0 0 1.5\nf 1 2 5\nf 2 3 5\nf 3 4 5\nf 4 1 5\n",
+    );
+    write(&d, "square.csv", &placements(&mut rng, 10, 3.0));
+    let p = write(
+        &d,
+        "scene.yaml",
+        "name: flat\nmaterials:\n  m: { reflectance: 0.5, transmittance: 0.2 }\nobjects:\n  - plane: { z: 0, extent: [[-5, -5], [35, 35]], material: m }\n  - mesh: { file: soup.obj, material: m, instances: soup.csv }\n  - mesh: { file: square.obj, material: m, instances: square.csv }\n",
+    );
+    let flat = Scene::load(&p, 1064.0).unwrap();
+    let mut full = Scene::load(&p, 1064.0).unwrap();
+    assert_eq!(full.forget_flat(), 2, "the plane and the square are flat");
+    let key = |h: Option<Hit>| {
+        h.map(|h| {
+            (
+                h.t.to_bits(),
+                h.facet,
+                h.position.to_array().map(f64::to_bits),
+            )
+        })
+    };
+    let (mut on_flat, mut blocked) = (0usize, 0usize);
+    for i in 0..20_000 {
+        let o = DVec3::new(
+            rng.range(-5.0, 35.0),
+            rng.range(-5.0, 35.0),
+            rng.range(5.0, 50.0),
+        );
+        let target = DVec3::new(rng.range(0.0, 30.0), rng.range(0.0, 30.0), 0.0);
+        let Some(h) = full.intersect(o, (target - o).normalize(), f64::INFINITY, FacetId::NONE)
+        else {
+            continue;
+        };
+        if h.normal.z.abs() < 0.999_999 {
+            continue;
+        }
+        on_flat += 1;
+        // up and down (through a transmitting facet), some nearly grazing
+        let z = if i % 3 == 0 {
+            rng.range(-1.0, 1.0)
+        } else {
+            rng.range(-0.02, 0.02)
+        };
+        let phi = rng.range(0.0, std::f64::consts::TAU);
+        let r = (1.0 - z * z).sqrt();
+        let dir = DVec3::new(r * phi.cos(), r * phi.sin(), z);
+        assert_eq!(
+            key(flat.intersect(h.position, dir, f64::INFINITY, h.facet)),
+            key(full.intersect(h.position, dir, f64::INFINITY, h.facet)),
+            "ray {i} leaving {:?}",
+            h.facet
+        );
+        let far = h.position + dir * rng.range(0.1, 40.0);
+        let (a, b) = (
+            flat.occluded(h.position, far, h.facet, FacetId::NONE),
+            full.occluded(h.position, far, h.facet, FacetId::NONE),
+        );
+        assert_eq!(a, b, "segment {i} from {:?}", h.facet);
+        blocked += a as usize;
+        assert_eq!(
+            flat.occluded(far, h.position, FacetId::NONE, h.facet),
+            full.occluded(far, h.position, FacetId::NONE, h.facet),
+            "segment {i} to {:?}",
+            h.facet
+        );
+    }
+    assert!(
+        on_flat > 10_000 && blocked > 500,
+        "{on_flat} rays from flat facets, {blocked} blocked"
+    );
+}
+
 /// Distance from `p` to the triangle `t` in f64, by another route than the scene's: the
 /// foot on the plane if it lies inside, else the nearest of the three edges.
 fn distance_to_triangle(p: DVec3, t: &[DVec3; 3]) -> f64 {

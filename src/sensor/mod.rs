@@ -173,6 +173,27 @@ impl Receiver {
         (p.length_squared() <= self.radius * self.radius).then_some(t)
     }
 
+    /// True when no point of the aperture sees `x` within the field of view, so that every
+    /// connection of `x` to a point drawn on the aperture carries nothing. Conservative: it
+    /// says so only where [`Receiver::accepts`] would refuse the direction from every point
+    /// of the disk by a margin well above its round-off; elsewhere it leaves the decision
+    /// to the exact test. Most vertices of an airborne survey's paths past the first lie far
+    /// outside the narrow field of view, and the test spares them the aperture point's
+    /// sine and cosine and the connection's arithmetic.
+    ///
+    /// From a disk point q = c + ρ (ρ across the axis, |ρ| ≤ R), x - q has the axial part
+    /// h = (x - c)·w of x - c and an across part at least p - R, p the across distance of x
+    /// from the axis: the direction is outside the field of view when p - R > h tan θ_fov,
+    /// and for h ≤ 0 (x beside or behind the aperture's plane) whenever p > R.
+    #[inline]
+    pub fn unseen(&self, x: DVec3) -> bool {
+        let v = x - self.center;
+        let h = v.dot(self.frame.w);
+        let p = (v - self.frame.w * h).length();
+        let slack = 1e-9 * (v.length() + self.radius);
+        p - self.radius > h.max(0.0) * self.tan_fov * (1.0 + 1e-6) + slack
+    }
+
     /// Cosine between the axis and the unit direction `d` leaving the aperture towards the
     /// scene, or None when `d` is outside the field of view (W_e = 0).
     pub fn accepts(&self, d: DVec3) -> Option<f64> {
@@ -207,6 +228,65 @@ mod tests {
                     && f.v.dot(f.w).abs() < 1e-12
             );
             assert!((f.u.cross(f.v) - f.w).length() < 1e-12);
+        }
+    }
+
+    /// `unseen` never refuses a point some aperture point sees within the field of view
+    /// (narrow and wide fields, points near the cone's edge, beside and behind the disk),
+    /// and it refuses every point past 1.01 of the edge's across distance (rim points of the
+    /// disk, where the bound is tight, decide the first).
+    #[test]
+    fn unseen_is_conservative_and_tight() {
+        let mut rng = crate::rng::Rng::new(3, 0, 0);
+        for (fov_mrad, area, axis) in [
+            (0.375, 0.01, -DVec3::Z),
+            (80.0, 0.1, DVec3::new(0.3, -0.2, -1.0).normalize()),
+            (1400.0, 1.0, DVec3::X),
+        ] {
+            let mut i = inst();
+            i.fov_half_angle_mrad = fov_mrad;
+            i.receiver_area_m2 = area;
+            let r = Receiver::new(&i, DVec3::new(10.0, -4.0, 250.0), axis);
+            let (mut refused, mut outside) = (0usize, 0usize);
+            for _ in 0..20_000 {
+                // a point at range h along the axis, across it by s times the cone's edge
+                let h = if rng.uniform() < 0.1 {
+                    -50.0 * rng.uniform()
+                } else {
+                    1e-3 + 300.0 * rng.uniform()
+                };
+                let s = 3.0 * rng.uniform();
+                let phi = 2.0 * PI * rng.uniform();
+                let across = (h.max(0.0) * r.tan_fov + r.radius) * s;
+                let x = r.center
+                    + r.frame.w * h
+                    + r.frame.u * (across * phi.cos())
+                    + r.frame.v * (across * phi.sin());
+                let seen_from = |q: DVec3| r.accepts((x - q).normalize()).is_some();
+                let rim = (0..64).any(|k| {
+                    let a = 2.0 * PI * k as f64 / 64.0;
+                    let q = r.center
+                        + r.frame.u * (r.radius * a.cos())
+                        + r.frame.v * (r.radius * a.sin());
+                    seen_from(q)
+                });
+                let seen =
+                    rim || (0..16).any(|_| seen_from(r.sample_point(rng.uniform(), rng.uniform())));
+                if r.unseen(x) {
+                    refused += 1;
+                    assert!(
+                        !seen,
+                        "fov {fov_mrad} mrad: a seen point was refused: {x:?}"
+                    );
+                }
+                if s > 1.01 {
+                    outside += 1;
+                }
+            }
+            assert!(
+                refused >= outside && outside > 5_000,
+                "fov {fov_mrad} mrad: {refused} refused of {outside} outside"
+            );
         }
     }
 

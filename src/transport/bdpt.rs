@@ -564,7 +564,13 @@ fn connect_subpaths(
             }
             let light = &b.light[..s];
             let cam: &[Vertex] = if t == 1 {
-                q[0].p = recv.sample_point(rng.uniform(), rng.uniform());
+                // the draws are made whether or not the point is needed, so the streams,
+                // and the files, do not depend on the test
+                let (u1, u2) = (rng.uniform(), rng.uniform());
+                if recv.unseen(light[s - 1].p) {
+                    continue;
+                }
+                q[0].p = recv.sample_point(u1, u2);
                 &q
             } else {
                 &b.cam[..t]

@@ -97,6 +97,13 @@ fn campaign_rows_are_measured_and_missing_data_is_skipped() {
         assert_eq!(row.rays_per_pulse, 50);
         assert!(row.simulate_s > 0.0 && row.pulses_per_s > 0.0);
         assert!(row.run_pulses_per_s > 0.0 && row.run_pulses_per_s <= row.pulses_per_s);
+        // the products stage is a part of the run
+        assert!(
+            row.products_s > 0.0 && row.products_s < row.run_s,
+            "{runner:?}: {} of {}",
+            row.products_s,
+            row.run_s
+        );
         if std::path::Path::new("/proc/self/stat").exists() {
             // CPU time over wall time and threads: a fraction of the cores, never above all
             // of them (a millisecond of slack each way: the manifest rounds both to it)
@@ -167,10 +174,16 @@ fn campaign_rows_are_measured_and_missing_data_is_skipped() {
         .collect();
     assert_eq!(skipped.len(), 6, "{skipped:?}");
     assert!(skipped[0].contains("no_such_rami.yaml not found"));
+    let share = format!(
+        "{:.2} ({:.1} %)",
+        row.products_s,
+        100.0 * row.products_s / row.run_s
+    );
     let table = bc::table(&[row], &[("mabel_532".into(), "absent".into())]);
     assert!(table.contains(
-        "| campaign | what | pulses | rays/pulse | run s | simulate s | pulses/s simulate | pulses/s run | CPU | peak memory MB | result |"
+        "| campaign | what | pulses | rays/pulse | run s | simulate s | products s | pulses/s simulate | pulses/s run | CPU | peak memory MB | result |"
     ));
     assert!(table.contains("| mabel_plane | plane track | 20 | 50 |"));
+    assert!(table.contains(&share), "{share} in {table}");
     assert!(table.contains("| mabel_532 | skipped: absent |"));
 }

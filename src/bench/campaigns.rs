@@ -25,6 +25,8 @@ pub struct CampaignRow {
     /// Wall time of the simulate stage, s, and pulses per second in it.
     pub simulate_s: f64,
     pub pulses_per_s: f64,
+    /// Wall time of the products stage, s (its share of the run is in the table).
+    pub products_s: f64,
     /// Pulses per second over the whole run (plan to products).
     pub run_pulses_per_s: f64,
     /// Simulate stage: process CPU time over wall time and threads (1 = every core busy).
@@ -383,6 +385,10 @@ fn run_row_on(
     let cpu_utilisation = simulate
         .and_then(|s| s.cpu_time_s)
         .map(|cpu| cpu / simulate_s / threads as f64);
+    let products_s = manifest
+        .as_ref()
+        .and_then(|m| m.stages.get("products"))
+        .map_or(f64::NAN, |s| s.wall_time_s);
     let products = ProductsSummary::read(&run.join("products.json"));
     let (pulses, rays) = products
         .as_ref()
@@ -397,6 +403,7 @@ fn run_row_on(
         run_s,
         simulate_s,
         pulses_per_s: pulses as f64 / simulate_s,
+        products_s,
         run_pulses_per_s: pulses as f64 / run_s,
         cpu_utilisation,
         threads,
@@ -667,18 +674,27 @@ pub fn scaling_table(rows: &[Scaling]) -> String {
 /// The markdown table of the campaign rows and the skipped ones.
 pub fn table(rows: &[CampaignRow], skipped: &[(String, String)]) -> String {
     let mut s = String::from(
-        "\n### Campaigns (paper sections 3.2-3.4 and an airborne survey), whole runs through the pipeline\n\nEach campaign runs in a `lidarsim run` process of its own, as a user runs it: run s is that process's wall time, peak memory its peak resident memory (MiB). CPU is the simulate stage's process CPU time over its wall time, out of 100 % per thread. A campaign whose run takes under 2 s is run five times: its row is the run of median wall time.\n\n| campaign | what | pulses | rays/pulse | run s | simulate s | pulses/s simulate | pulses/s run | CPU | peak memory MB | result |\n| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | --- |\n",
+        "\n### Campaigns (paper sections 3.2-3.4 and an airborne survey), whole runs through the pipeline\n\nEach campaign runs in a `lidarsim run` process of its own, as a user runs it: run s is that process's wall time, products s the products stage's (with its share of the run), peak memory its peak resident memory (MiB). CPU is the simulate stage's process CPU time over its wall time, out of 100 % per thread. A campaign whose run takes under 2 s is run five times: its row is the run of median wall time.\n\n| campaign | what | pulses | rays/pulse | run s | simulate s | products s | pulses/s simulate | pulses/s run | CPU | peak memory MB | result |\n| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | --- |\n",
     );
     for r in rows {
         let _ = writeln!(
             s,
-            "| {} | {} | {} | {} | {:.1} | {:.1} | {:.0} | {:.0} | {} | {} | {} |",
+            "| {} | {} | {} | {} | {:.1} | {:.1} | {} | {:.0} | {:.0} | {} | {} | {} |",
             r.name,
             r.what,
             r.pulses,
             r.rays_per_pulse,
             r.run_s,
             r.simulate_s,
+            if r.products_s.is_finite() {
+                format!(
+                    "{:.2} ({:.1} %)",
+                    r.products_s,
+                    100.0 * r.products_s / r.run_s
+                )
+            } else {
+                "–".to_string()
+            },
             r.pulses_per_s,
             r.run_pulses_per_s,
             r.cpu_utilisation.map_or("–".to_string(), |u| format!(
@@ -691,7 +707,7 @@ pub fn table(rows: &[CampaignRow], skipped: &[(String, String)]) -> String {
         );
     }
     for (name, why) in skipped {
-        let _ = writeln!(s, "| {name} | skipped: {why} | | | | | | | | | |");
+        let _ = writeln!(s, "| {name} | skipped: {why} | | | | | | | | | | |");
     }
     s
 }

@@ -19,7 +19,7 @@ use crate::sensor::pulse_sigma_s;
 use crate::waveform::file::{part_name, read_waveforms_but_impulse, Parts};
 use crate::waveform::record::Recorder;
 use crate::waveform::Waveform;
-use part::{Part, Writer};
+use part::{Made, Part, Writer};
 use std::path::Path;
 
 /// Which products a campaign asks for: its `products:` section, or by instrument kind.
@@ -133,13 +133,25 @@ fn writers<'a>(
     Ok(list)
 }
 
+/// What `rows` make for every writer, once they are checked to be planned pulses'.
+fn make(loaded: &Loaded, plan: &Plan, out: &Path, rows: &[Waveform], want: Wanted) -> Result<Made> {
+    if rows.iter().any(|w| w.pulse_id as usize >= plan.len()) {
+        return Err(Error::msg(format!(
+            "{}: waveforms of pulses that were not planned: run again without --resume",
+            out.display()
+        )));
+    }
+    Ok(Made::new(loaded, plan, rows, want.points, want.photons))
+}
+
 /// Runs the products stage; returns the files written (relative to `out`) and a note.
 ///
 /// Memory is bounded by a part and the scene, not by the campaign's length: the writers take
 /// the waveforms a part at a time and write or spill what they make of them as they go.
 ///
-/// Long because the loop reads part k + 1 while the writers take part k (one rayon join),
-/// checks the part and logs progress; the products themselves are the writers'.
+/// Long because the loop reads part k + 1, makes part k's returns and has the writers take
+/// part k - 1 side by side, checks the parts and logs progress; the products themselves are
+/// the writers'.
 pub fn run(
     loaded: &Loaded,
     scene: &Scene,
@@ -155,15 +167,17 @@ pub fn run(
     let bar = progress(plan.len() as u64, "products");
     let start = std::time::Instant::now();
     let every = parts.div_ceil(10).max(1);
-    // Part k + 1 is read and decoded while part k is made into products, as two halves of
-    // one rayon join, as the simulate stage writes: the same threads do both, so no core
-    // waits for a reader (a reader thread beside the workers made the loop wait for it
-    // whenever it lost its share of the cores to them)
+    // Three parts are in hand at once, in two nested rayon joins on the same threads:
+    // part k + 1 is read and decoded, part k's returns are made, and the writers take part
+    // k - 1. The writers' share is serial (each file is written in order), and with only
+    // the reading beside it, it left a core idle at the end of every part.
     let read = |k: usize, spare| read_waveforms_but_impulse(&out.join(part_name(k)), spare);
     let mut next = (parts > 0).then(|| read(0, Vec::new()));
-    // The part before lends its buffers to the reading of the next.
-    let mut previous: Option<Vec<Waveform>> = None;
-    for k in 0..parts {
+    // part k - 1's rows and what was made of them, for the writers
+    let mut behind: Option<(Vec<Waveform>, Made)> = None;
+    // the rows the writers are done with lend their buffers to the reading of a later part
+    let mut spare: Vec<Waveform> = Vec::new();
+    for k in 0..=parts {
         if let Some(signal) = crate::interrupt::requested() {
             return Err(Error::interrupted(
                 signal,
@@ -171,42 +185,51 @@ pub fn run(
             ));
         }
         crate::progress::release_after_part(k);
-        let Some(rows) = next.take() else {
+        let rows = next.take().transpose()?;
+        if k < parts && rows.is_none() {
             break;
-        };
-        let rows = rows?;
-        let finished = previous.take();
-        let (ahead, done) = rayon::join(
-            || (k + 1 < parts).then(|| read(k + 1, finished.unwrap_or_default())),
-            || -> Result<()> {
-                if rows.iter().any(|w| w.pulse_id as usize >= plan.len()) {
-                    return Err(Error::msg(format!(
-                        "{}: waveforms of pulses that were not planned: run again without --resume",
-                        out.display()
-                    )));
-                }
-                let part = Part::new(loaded, plan, &rows, want.points, want.photons);
-                seen += part.first.len();
-                part.first.iter().for_each(|w| totals.add(w));
-                for w in &mut writers {
-                    w.add(&part)?;
-                }
-                bar.inc(part.first.len() as u64);
-                if bar.is_hidden() && (k + 1) % every == 0 && k + 1 < parts {
-                    let rate = seen as f64 / start.elapsed().as_secs_f64().max(1e-9);
-                    log(&format!(
-                        "products: {}/{} parts, {rate:.0} pulses/s, {:.0} s left",
-                        k + 1,
-                        parts,
-                        (plan.len() - seen.min(plan.len())) as f64 / rate
-                    ));
-                }
-                Ok(())
+        }
+        let written = behind.take();
+        let lend = std::mem::take(&mut spare);
+        let (ahead, (made, added)) = rayon::join(
+            || (k + 1 < parts).then(|| read(k + 1, lend)),
+            || {
+                rayon::join(
+                    || {
+                        rows.as_deref()
+                            .map(|rows| make(loaded, plan, out, rows, want))
+                    },
+                    || -> Result<()> {
+                        let Some((rows, made)) = &written else {
+                            return Ok(());
+                        };
+                        let part = Part::new(loaded, rows, made);
+                        seen += part.first.len();
+                        part.first.iter().for_each(|w| totals.add(w));
+                        for w in &mut writers {
+                            w.add(&part)?;
+                        }
+                        bar.inc(part.first.len() as u64);
+                        if bar.is_hidden() && k % every == 0 && k < parts {
+                            let rate = seen as f64 / start.elapsed().as_secs_f64().max(1e-9);
+                            log(&format!(
+                                "products: {k}/{parts} parts, {rate:.0} pulses/s, {:.0} s left",
+                                (plan.len() - seen.min(plan.len())) as f64 / rate
+                            ));
+                        }
+                        Ok(())
+                    },
+                )
             },
         );
-        done?;
+        added?;
         next = ahead;
-        previous = Some(rows);
+        if let Some((rows, _)) = written {
+            spare = rows;
+        }
+        if let (Some(rows), Some(made)) = (rows, made) {
+            behind = Some((rows, made?));
+        }
     }
     bar.finish_and_clear();
     if seen != plan.len() {

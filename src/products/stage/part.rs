@@ -17,41 +17,31 @@ use glam::DVec3;
 use rayon::prelude::*;
 use std::borrow::Cow;
 
-/// One part of the waveforms, as every writer sees it.
-pub(super) struct Part<'a> {
-    /// The rows of the campaign's first band (every row with one band): the DSM, the mission
-    /// files, the figures and the summaries are made of one band.
-    pub first: Vec<&'a Waveform>,
+/// What a part's waveforms make once for every writer: its discrete returns and photon
+/// events. Made apart from [`Part`] (which borrows it) so that a part's can be made while the
+/// writers take the part before.
+pub(super) struct Made {
     /// The discrete returns of every row, in pulse order then time (then band); empty when
     /// the campaign asks for no points.
-    pub points: Vec<Point>,
-    /// Those of the first band, with several bands (else [`Part::points`] are).
+    points: Vec<Point>,
+    /// Those of the first band, with several bands (else [`Made::points`] are).
     first_points: Option<Vec<Point>>,
     /// The photon events of every row; empty when the campaign asks for none.
-    pub photons: Vec<PhotonRow>,
+    photons: Vec<PhotonRow>,
     /// Those of the first band, with several bands.
     first_photons: Option<Vec<PhotonRow>>,
 }
 
-/// A product made part by part: what it makes of each part, then its files finished.
-pub(super) trait Writer {
-    fn add(&mut self, part: &Part) -> Result<()>;
-    /// Finishes the files, puts the product's figures in the summary, and returns the
-    /// files' names (relative to the run folder), in the order the manifest lists them.
-    fn finish(self: Box<Self>, summary: &mut ProductsSummary) -> Result<Vec<String>>;
-}
-
-impl<'a> Part<'a> {
+impl Made {
     pub fn new(
         loaded: &Loaded,
         plan: &Plan,
-        rows: &'a [Waveform],
+        rows: &[Waveform],
         points: bool,
         photons: bool,
-    ) -> Part<'a> {
+    ) -> Made {
         let first_nm = loaded.campaign.wavelength_nm.first();
         let several = loaded.campaign.wavelength_nm.several();
-        let first = rows.iter().filter(|w| first_band(loaded, w)).collect();
         let points = if points {
             discrete_returns(loaded, plan, rows)
         } else {
@@ -70,21 +60,52 @@ impl<'a> Part<'a> {
             let of_first = |r: &&PhotonRow| r.wavelength_nm.is_none_or(|nm| nm == first_nm);
             photons.iter().filter(of_first).copied().collect()
         });
-        Part {
-            first,
+        Made {
             points,
             first_points,
             photons,
             first_photons,
         }
     }
+}
+
+/// One part of the waveforms, as every writer sees it.
+pub(super) struct Part<'a> {
+    /// The rows of the campaign's first band (every row with one band): the DSM, the mission
+    /// files, the figures and the summaries are made of one band.
+    pub first: Vec<&'a Waveform>,
+    /// The discrete returns of every row, in pulse order then time (then band).
+    pub points: &'a [Point],
+    /// The photon events of every row.
+    pub photons: &'a [PhotonRow],
+    made: &'a Made,
+}
+
+/// A product made part by part: what it makes of each part, then its files finished.
+pub(super) trait Writer {
+    fn add(&mut self, part: &Part) -> Result<()>;
+    /// Finishes the files, puts the product's figures in the summary, and returns the
+    /// files' names (relative to the run folder), in the order the manifest lists them.
+    fn finish(self: Box<Self>, summary: &mut ProductsSummary) -> Result<Vec<String>>;
+}
+
+impl<'a> Part<'a> {
+    /// The part of `rows`, with what was made of them.
+    pub fn new(loaded: &Loaded, rows: &'a [Waveform], made: &'a Made) -> Part<'a> {
+        Part {
+            first: rows.iter().filter(|w| first_band(loaded, w)).collect(),
+            points: &made.points,
+            photons: &made.photons,
+            made,
+        }
+    }
 
     pub fn first_points(&self) -> &[Point] {
-        self.first_points.as_deref().unwrap_or(&self.points)
+        self.made.first_points.as_deref().unwrap_or(self.points)
     }
 
     pub fn first_photons(&self) -> &[PhotonRow] {
-        self.first_photons.as_deref().unwrap_or(&self.photons)
+        self.made.first_photons.as_deref().unwrap_or(self.photons)
     }
 }
 

@@ -51,7 +51,7 @@ impl PhotonsWriter {
 
 impl Writer for PhotonsWriter {
     fn add(&mut self, part: &Part) -> Result<()> {
-        self.write(&part.photons)
+        self.write(part.photons)
     }
 
     fn finish(mut self: Box<Self>, summary: &mut ProductsSummary) -> Result<Vec<String>> {

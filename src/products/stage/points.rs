@@ -80,8 +80,8 @@ impl Writer for PointsWriter<'_> {
             let (lo, hi) = self.first.get_or_insert((v, v));
             (*lo, *hi) = (lo.min(v), hi.max(v));
         }
-        self.extent.add(&self.las, &part.points)?;
-        self.spill.push(&part.points)
+        self.extent.add(&self.las, part.points)?;
+        self.spill.push(part.points)
     }
 
     fn finish(self: Box<Self>, summary: &mut ProductsSummary) -> Result<Vec<String>> {

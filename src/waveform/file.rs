@@ -265,7 +265,10 @@ fn read_waveforms_with(
         .filter(|_| pages);
     // The rows, made as their bins are read; the bins of each column go straight into them,
     // one column after another, so only one column's values are ever held besides the rows.
-    let mut out: Vec<Waveform> = Vec::new();
+    // reserved whole: grown row by row, the rows (a few hundred bytes each) would be copied
+    // over and over (a reservation, not a promise: a damaged footer must not ask for the moon)
+    let rows = usize::try_from(builder.metadata().file_metadata().num_rows()).unwrap_or(0);
+    let mut out: Vec<Waveform> = Vec::with_capacity(rows.min(1 << 16));
     // rows each bin column held
     let mut held = [0usize; BIN_COLUMNS.len()];
     let builder = match &leaves {

@@ -436,8 +436,8 @@ pub fn write_report(
 /// The DSM error product of a run: reference DSM from the scene's own surfaces, first-return
 /// DSM from the points, on one grid over the scanned area; `dsm/report.json` and plots.
 /// Built while the points and pulses stream by, so its memory is the grid's: [`Dsm::new`]
-/// once the first returns' extent is known, [`Dsm::add_points`] and [`Dsm::aim`] a chunk at
-/// a time (in point and pulse order), then [`Dsm::write`].
+/// once the first returns' extent is known, [`Dsm::add_points_and_aim`] over the points and
+/// pulses a chunk at a time (in point and pulse order), then [`Dsm::write`].
 pub struct Dsm {
     grid: Grid,
     res: f64,
@@ -497,16 +497,43 @@ impl Dsm {
         })
     }
 
-    pub fn add_points(&mut self, points: &[Point]) {
-        let firsts: Vec<DsmPoint> = points.iter().map(DsmPoint::from).collect();
-        add_first_returns(&mut self.measured, &mut self.angles, &firsts, &self.grid);
-    }
-
-    pub fn aim(&mut self, pulses: &[Pulse]) {
-        self.aims.add(pulses, &self.grid, self.ground);
-        let (lo, hi) = self.heights;
-        self.aims
-            .cross_tops(pulses, &self.grid, &self.reference, lo, hi);
+    /// The first returns among every chunk of points a pass over them hands it (in point
+    /// order), beside the aims of `parts` parts of pulses (`pulses(k)`, in order): two
+    /// threads' work, each on fields of its own, where one after the other left a core idle.
+    /// Returns what the pass returns.
+    pub fn add_points_and_aim<R: Send>(
+        &mut self,
+        pass: impl FnOnce(&mut dyn FnMut(&[Point])) -> R + Send,
+        parts: usize,
+        pulses: impl Fn(usize) -> Vec<Pulse> + Sync,
+    ) -> R {
+        let Dsm {
+            grid,
+            reference,
+            ground,
+            measured,
+            angles,
+            aims,
+            heights: (lo, hi),
+            ..
+        } = self;
+        let grid = &*grid;
+        let (out, ()) = rayon::join(
+            || {
+                pass(&mut |points: &[Point]| {
+                    let firsts: Vec<DsmPoint> = points.iter().map(DsmPoint::from).collect();
+                    add_first_returns(measured, angles, &firsts, grid);
+                })
+            },
+            || {
+                for k in 0..parts {
+                    let p = pulses(k);
+                    aims.add(&p, grid, *ground);
+                    aims.cross_tops(&p, grid, reference, *lo, *hi);
+                }
+            },
+        );
+        out
     }
 
     /// Writes `dsm/` under `out`: the report, its figures and the three rasters, in the

@@ -316,22 +316,42 @@ const SCAN_BLOCK: usize = 16;
 /// into bin by bin: a scan bin by bin from either end would be most of `decompose`'s own
 /// time on a forest's long gates.
 fn signal_span(photons: &[f32]) -> Option<(usize, usize)> {
-    let n = photons.len();
-    let lit = |a: usize| {
-        let b = &photons[a..(a + SCAN_BLOCK).min(n)];
-        // a whole block as an array, whose test the compiler unrolls and vectorises
-        // (measurably faster than a slice of unknown length); the last, shorter block is
-        // looked into bin by bin
-        let any = <&[f32; SCAN_BLOCK]>::try_from(b).map_or(true, |block| {
-            block.iter().fold(false, |any, &v| any | (v > 0.0))
-        });
-        any.then_some((a, b))
+    // whole blocks as arrays, whose test the compiler unrolls and vectorises (measurably
+    // faster than a slice of unknown length); the last, shorter block is looked into bin by
+    // bin. Plain chunks from either end: a stepped range of block starts, reversed, cost as
+    // much as the rest of `decompose`'s own time
+    let any = |block: &[f32]| {
+        <&[f32; SCAN_BLOCK]>::try_from(block)
+            .is_ok_and(|block| block.iter().fold(false, |any, &v| any | (v > 0.0)))
     };
-    let blocks = || (0..n).step_by(SCAN_BLOCK).filter_map(lit);
-    let first = blocks().find_map(|(a, b)| b.iter().position(|&v| signal(v)).map(|i| a + i))?;
-    let last = blocks()
-        .rev()
-        .find_map(|(a, b)| b.iter().rposition(|&v| signal(v)).map(|i| a + i));
+    let blocks = photons.chunks_exact(SCAN_BLOCK);
+    let tail = blocks.remainder();
+    let tail_at = photons.len() - tail.len();
+    let first = blocks
+        .clone()
+        .enumerate()
+        .filter(|(_, b)| any(b))
+        .find_map(|(k, b)| {
+            b.iter()
+                .position(|&v| signal(v))
+                .map(|i| k * SCAN_BLOCK + i)
+        })
+        .or_else(|| tail.iter().position(|&v| signal(v)).map(|i| tail_at + i))?;
+    let last = tail
+        .iter()
+        .rposition(|&v| signal(v))
+        .map(|i| tail_at + i)
+        .or_else(|| {
+            blocks
+                .enumerate()
+                .rev()
+                .filter(|(_, b)| any(b))
+                .find_map(|(k, b)| {
+                    b.iter()
+                        .rposition(|&v| signal(v))
+                        .map(|i| k * SCAN_BLOCK + i)
+                })
+        });
     Some((first, last.unwrap_or(first)))
 }
 

@@ -119,40 +119,37 @@ impl Writer for PointsWriter<'_> {
             bands: several,
         };
         let first_nm = c.wavelength_nm.first() as f32;
-        write_las_chunks(&las, &layout, |write| {
-            spill.read(|chunk| {
-                write(chunk)?;
-                let first: Vec<Point>;
-                let chunk = if several {
-                    let band = chunk.iter().filter(|p| p.wavelength_nm == Some(first_nm));
-                    first = band.cloned().collect();
-                    &first
-                } else {
-                    chunk
-                };
-                top.offer(chunk);
-                strips.add(chunk);
-                if let Some(d) = &mut dsm {
-                    d.add_points(chunk);
-                }
-                Ok(())
+        let mut pass = |dsm_points: &mut dyn FnMut(&[Point])| {
+            write_las_chunks(&las, &layout, |write| {
+                spill.read(|chunk| {
+                    write(chunk)?;
+                    let first: Vec<Point>;
+                    let chunk = if several {
+                        let band = chunk.iter().filter(|p| p.wavelength_nm == Some(first_nm));
+                        first = band.cloned().collect();
+                        &first
+                    } else {
+                        chunk
+                    };
+                    top.offer(chunk);
+                    strips.add(chunk);
+                    dsm_points(chunk);
+                    Ok(())
+                })
             })
-        })?;
+        };
+        // the pulses' aims over the DSM's grid are gathered beside the pass over the points
+        match &mut dsm {
+            Some(d) => d.add_points_and_aim(pass, cut.count(), |k| plan.pulses(cut.range(k))),
+            None => pass(&mut |_| {}),
+        }?;
         drop(spill);
         let mut outputs = vec![format.file_name().to_string()];
-        // the figures and the DSM side by side: a few hundredths of a second of one thread
-        // each, after the loop where nothing else runs
+        // the figures and the DSM's files side by side: a few hundredths of a second of one
+        // thread each, after the loop where nothing else runs
         let (figures, dsm) = rayon::join(
             || point_figures(loaded, out, examples, top, tally.points),
-            || -> Result<Vec<String>> {
-                let Some(mut d) = dsm else {
-                    return Ok(Vec::new());
-                };
-                for k in 0..cut.count() {
-                    d.aim(&plan.pulses(cut.range(k)));
-                }
-                d.write(out, c.frame.as_ref())
-            },
+            || dsm.map_or(Ok(Vec::new()), |d| d.write(out, c.frame.as_ref())),
         );
         outputs.extend(figures?);
         outputs.extend(dsm?);

@@ -24,7 +24,7 @@ pub(super) struct Made {
     /// The discrete returns of every row, in pulse order then time (then band); empty when
     /// the campaign asks for no points.
     points: Vec<Point>,
-    /// Those of the first band, with several bands (else [`Made::points`] are).
+    /// Those of the first band, with several bands (else `points` are).
     first_points: Option<Vec<Point>>,
     /// The photon events of every row; empty when the campaign asks for none.
     photons: Vec<PhotonRow>,

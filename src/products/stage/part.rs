@@ -153,16 +153,14 @@ fn decomposed<'w>(loaded: &Loaded, w: &'w Waveform) -> (Vec<Component>, Cow<'w, 
     } else {
         1.0
     };
-    let photons_of = |energies: &[f32]| {
-        let mut v = vec![0.0f32; w.laser_photons.len()];
+    let photons_of = |energies: &[f32], v: &mut Vec<f32>| {
+        v.clear();
+        v.resize(w.laser_photons.len(), 0.0);
         let span = w.span_first_bin.min(v.len())..v.len();
         for (m, &e) in v[span].iter_mut().zip(energies) {
             *m = (q * e as f64 / hv) as f32;
         }
-        v
     };
-    let mc_se = photons_of(&w.impulse_energy_se_j);
-    let leaves = photons_of(&w.class_energy_j[SurfaceClass::Vegetation.index()]);
     let (samples, sigma_s, receiver_noise) = if recorded {
         let pe = recorder.laser_photoelectrons(&recorder.record(w));
         (
@@ -187,20 +185,32 @@ fn decomposed<'w>(loaded: &Loaded, w: &'w Waveform) -> (Vec<Component>, Cow<'w, 
             .is_some()
             .then(|| inst.false_alarm_rate()),
     };
-    let mut comps = decompose(
-        &samples,
-        &mc_se,
-        &leaves,
-        q * inst.detection_threshold_photons,
-        inst.max_returns as usize,
-        Decomposition::Gaussian,
-        &receiver,
-    );
+    // the two gates of photons in a thread's buffers, kept from waveform to waveform: a gate
+    // of a few hundred bins is more than the allocator's per-thread cache holds, and two such
+    // allocations a waveform were a measurable share of the stage
+    let mut comps = GATES.with_borrow_mut(|(mc_se, leaves)| {
+        photons_of(&w.impulse_energy_se_j, mc_se);
+        photons_of(&w.class_energy_j[SurfaceClass::Vegetation.index()], leaves);
+        decompose(
+            &samples,
+            mc_se,
+            leaves,
+            q * inst.detection_threshold_photons,
+            inst.max_returns as usize,
+            Decomposition::Gaussian,
+            &receiver,
+        )
+    });
     for k in &mut comps {
         k.area_photons /= q;
         k.amplitude /= q;
     }
     (comps, samples, sigma_bins)
+}
+
+thread_local! {
+    /// [`decomposed`]'s Monte Carlo errors and leaves' photons over the gate.
+    static GATES: std::cell::RefCell<(Vec<f32>, Vec<f32>)> = std::cell::RefCell::default();
 }
 
 /// The wavelength of a waveform row, nm: its band's, or the campaign's.

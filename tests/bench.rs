@@ -133,8 +133,16 @@ fn campaign_rows_are_measured_and_missing_data_is_skipped() {
     assert!(tr.inside_per_s > 0.0 && tr.bare_per_s > 0.0, "{tr:?}");
     // the tracing is part of the simulation: each thread traced for at most its wall time
     assert!(tr.tracing_per_s >= tr.inside_per_s, "{tr:?}");
+    // the bound: the pulses the bare BVH's rate answers every query of, here 8 pulses'
+    // queries in (queries / bare rate) seconds
+    let bound = tr.bound_pulses_per_s();
+    let seconds = (tr.closest + tr.any_hit) as f64 / tr.bare_per_s;
+    assert!((bound * seconds - 8.0).abs() < 1e-9 * 8.0, "{bound} {tr:?}");
     let t = lidarsim::bench::traversal::table(&[tr]);
     assert!(t.contains("| mabel_plane | 8 |"), "{t}");
+    assert!(t.contains("bound, pulses/s"), "{t}");
+    let last = t.lines().last().unwrap_or_default();
+    assert!(last.ends_with(&format!("| {bound:.0} |")), "{t}");
     // the same campaign in three bands against one (the plane reflects alike in all three,
     // so every band receives the same energy from the same paths)
     let bands = bc::bands_row(&dir, "mabel_plane", &text, 1).unwrap();

@@ -247,7 +247,7 @@ fn read_waveforms_with(
     path: &Path,
     pages: bool,
     impulse: bool,
-    mut spare: Vec<Waveform>,
+    spare: Vec<Waveform>,
 ) -> Result<Vec<Waveform>> {
     use arrow_array::cast::AsArray;
     use arrow_array::types::{Float32Type, Float64Type, UInt32Type, UInt64Type};
@@ -265,10 +265,16 @@ fn read_waveforms_with(
         .filter(|_| pages);
     // The rows, made as their bins are read; the bins of each column go straight into them,
     // one column after another, so only one column's values are ever held besides the rows.
-    // reserved whole: grown row by row, the rows (a few hundred bytes each) would be copied
-    // over and over (a reservation, not a promise: a damaged footer must not ask for the moon)
+    // They are made in the rows of `spare`, emptied where they lie, then in rows reserved
+    // whole: rows of a few hundred bytes each, moved from one vector to the other or grown
+    // row by row, would be copied over and over (a reservation, not a promise: a damaged
+    // footer must not ask for the moon).
     let rows = usize::try_from(builder.metadata().file_metadata().num_rows()).unwrap_or(0);
-    let mut out: Vec<Waveform> = Vec::with_capacity(rows.min(1 << 16));
+    let mut out = spare;
+    out.iter_mut().for_each(empty);
+    out.reserve(rows.min(1 << 16).saturating_sub(out.len()));
+    // rows of `out` made so far: those past them are spare rows not (yet) used
+    let mut made = 0usize;
     // rows each bin column held
     let mut held = [0usize; BIN_COLUMNS.len()];
     let builder = match &leaves {
@@ -280,7 +286,7 @@ fn read_waveforms_with(
             let at: Vec<usize> = read.iter().map(|&c| leaves[c]).collect();
             crate::parquet_io::read_f32_lists(&file, &at, |k, i, bins| {
                 let c = read[k];
-                let into = bins_of(row(&mut out, &mut spare, i), c);
+                let into = bins_of(row(&mut out, &mut made, i), c);
                 refill(into, bins);
                 held[c] = held[c].max(i + 1);
             })
@@ -337,7 +343,7 @@ fn read_waveforms_with(
                 let l = typed(name, &f32t)?.as_list::<i32>().clone();
                 for i in 0..b.num_rows() {
                     let bins = l.value(i);
-                    let into = bins_of(row(&mut out, &mut spare, done + i), c);
+                    let into = bins_of(row(&mut out, &mut made, done + i), c);
                     refill(into, bins.as_primitive::<Float32Type>().values());
                 }
                 held[c] = done + b.num_rows();
@@ -449,20 +455,23 @@ fn read_waveforms_with(
         done += b.num_rows();
     }
     // bins of rows the other columns do not have
-    if out.len() > done {
+    if made > done {
         return Err(err(&format!(
-            "the bin columns hold {} rows, the others {done}",
-            out.len()
+            "the bin columns hold {made} rows, the others {done}"
         )));
     }
+    out.truncate(made);
     Ok(out)
 }
 
-/// Row `i` of `out`, made (empty, in a row of `spare` where there is one) with those before
-/// it where it is not yet.
-fn row<'o>(out: &'o mut Vec<Waveform>, spare: &mut Vec<Waveform>, i: usize) -> &'o mut Waveform {
-    while out.len() <= i {
-        out.push(spare.pop().map_or_else(Waveform::default, emptied));
+/// Row `i` of `out`, made with those before it where it is not yet (`made` of them are):
+/// in an emptied spare row where there is one, else a new one.
+fn row<'o>(out: &'o mut Vec<Waveform>, made: &mut usize, i: usize) -> &'o mut Waveform {
+    while *made <= i {
+        if *made == out.len() {
+            out.push(Waveform::default());
+        }
+        *made += 1;
     }
     &mut out[i]
 }
@@ -479,16 +488,15 @@ fn refill<T: Copy>(into: &mut Vec<T>, bins: &[T]) {
     }
 }
 
-/// A row with its lists empty, their buffers kept: every other field is written whole
-/// before the row is read.
-fn emptied(mut w: Waveform) -> Waveform {
+/// A row's lists emptied, their buffers kept: every other field is written whole before the
+/// row is read.
+fn empty(w: &mut Waveform) {
     w.laser_photons.clear();
     w.impulse_energy_j.clear();
     w.impulse_energy_se_j.clear();
     w.order_energy_j.clear();
     w.order_energy_se_j.clear();
     w.class_energy_j.iter_mut().for_each(Vec::clear);
-    w
 }
 
 /// A waveform's list of bin column `c` ([`BIN_COLUMNS`]).

@@ -16,8 +16,9 @@ pub struct Bound {
     /// The simulate stage: the part in the making, the one queued and the one being encoded,
     /// the Parquet writer's own buffers, and each worker's tally of the gate's sub-bins.
     pub simulate: f64,
-    /// The products stage besides its DSM: a part read and the next read ahead, a chunk of
-    /// points, the distance histogram and the top view's sample.
+    /// The products stage besides its DSM: the part the writers take, the part being
+    /// decomposed and the next read ahead, a chunk of points, the distance histogram and the
+    /// top view's sample.
     pub products: f64,
     /// The DSM grids over the scene's extent.
     pub dsm: f64,
@@ -52,7 +53,8 @@ pub fn bound(loaded: &Loaded, scene: &Scene, plan: &Plan) -> Bound {
     Bound {
         gate_bins: gate,
         simulate,
-        products: 3.0 * part + points + 4e6 + top_view,
+        // three parts in hand, with a part's worth for the allocator's slack
+        products: 4.0 * part + points + 4e6 + top_view,
         dsm: dsm_cells * 48.0,
         writing: crate::parquet_io::ROW_GROUP_ROWS as f64 * 2.0 * 80.0,
     }

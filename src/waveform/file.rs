@@ -16,8 +16,8 @@ const MAX_PART_PULSES: usize = 4000;
 /// Rays a part is traced with, about: at more rays per pulse a part of the fewest pulses
 /// is already seconds of work, whose files cost nothing beside it.
 const PART_RAYS: f64 = 100_000.0;
-/// Bytes of waveforms a part holds in memory, at most beyond the fewest pulses: two parts
-/// are in memory at once in either stage.
+/// Bytes of waveforms a part holds in memory, at most beyond the fewest pulses: a few parts
+/// are in memory at once in either stage (see `pipeline::memory`).
 const PART_BYTES: f64 = 64e6;
 
 /// How a run's pulses are cut into part files: parts of `size` pulses, the last one shorter.

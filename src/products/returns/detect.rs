@@ -14,10 +14,6 @@ pub(super) fn smoothing_sigma(hint: f64) -> f64 {
 /// stage's time on long waveforms. Every other bin is summed in the same order as the dense
 /// sum, so the result is the same to the bit.
 pub(super) fn smooth(y: &[f64], sigma: f64) -> Vec<f64> {
-    let reach = (3.0 * sigma).ceil() as usize;
-    let kernel: Vec<f64> = (0..=reach)
-        .map(|k| (-0.5 * (k as f64 / sigma).powi(2)).exp())
-        .collect();
     let n = y.len();
     let mut out = vec![0.0; n];
     // Only bins within reach of the first and last non-zero values can have one in their
@@ -26,45 +22,98 @@ pub(super) fn smooth(y: &[f64], sigma: f64) -> Vec<f64> {
         return out;
     };
     let last = y.iter().rposition(|&v| v != 0.0).unwrap_or(first);
-    // nonzero[i]: how many of y[first..first + i] are not zero (none lies outside them)
-    let mut nonzero = Vec::with_capacity(last - first + 2);
-    nonzero.push(0u32);
-    for &v in &y[first..=last] {
-        let seen = *nonzero.last().unwrap_or(&0);
-        nonzero.push(seen + u32::from(v != 0.0));
-    }
-    let count_before = |i: usize| nonzero[i.clamp(first, last + 1) - first];
-    // A bin whose window lies wholly inside the waveform sums the whole kernel, in the same
-    // order every time: its weight is summed once, and its sum runs over a slice of fixed
-    // length without an index to check (half the work of the edge bins' loop, the same sums
-    // in the same order, so the same bits).
-    let full: Vec<f64> = (0..=2 * reach).map(|t| kernel[t.abs_diff(reach)]).collect();
-    let full_weight = full.iter().fold(0.0, |w, &k| w + k);
-    let from = first.saturating_sub(reach);
-    let to = (last + reach).min(n - 1);
-    for (i, o) in out.iter_mut().enumerate().take(to + 1).skip(from) {
-        let lo = i.saturating_sub(reach);
-        let hi = (i + reach).min(n - 1);
-        if count_before(hi + 1) == count_before(lo) {
-            continue; // k * ±0 summed from +0 is +0, and +0 / w is +0: what `out` holds
+    SMOOTHING.with_borrow_mut(|k| {
+        k.set(sigma);
+        let Smoothing {
+            reach,
+            kernel,
+            full,
+            full_weight,
+            nonzero,
+            ..
+        } = k;
+        let (reach, full_weight) = (*reach, *full_weight);
+        // nonzero[i]: how many of y[first..first + i] are not zero (none lies outside them)
+        nonzero.clear();
+        nonzero.push(0u32);
+        for &v in &y[first..=last] {
+            let seen = *nonzero.last().unwrap_or(&0);
+            nonzero.push(seen + u32::from(v != 0.0));
         }
-        if hi - lo == 2 * reach {
-            let acc = y[lo..=hi]
-                .iter()
-                .zip(&full)
-                .fold(0.0, |acc, (&v, &k)| acc + k * v);
-            *o = acc / full_weight;
-            continue;
+        let count_before = |i: usize| nonzero[i.clamp(first, last + 1) - first];
+        let from = first.saturating_sub(reach);
+        let to = (last + reach).min(n - 1);
+        for (i, o) in out.iter_mut().enumerate().take(to + 1).skip(from) {
+            let lo = i.saturating_sub(reach);
+            let hi = (i + reach).min(n - 1);
+            if count_before(hi + 1) == count_before(lo) {
+                continue; // k * ±0 summed from +0 is +0, and +0 / w is +0: what `out` holds
+            }
+            if hi - lo == 2 * reach {
+                let acc = y[lo..=hi]
+                    .iter()
+                    .zip(full.iter())
+                    .fold(0.0, |acc, (&v, &k)| acc + k * v);
+                *o = acc / full_weight;
+                continue;
+            }
+            let (mut acc, mut w) = (0.0, 0.0);
+            for (j, &v) in y.iter().enumerate().take(hi + 1).skip(lo) {
+                let k = kernel[i.abs_diff(j)];
+                acc += k * v;
+                w += k;
+            }
+            *o = acc / w;
         }
-        let (mut acc, mut w) = (0.0, 0.0);
-        for (j, &v) in y.iter().enumerate().take(hi + 1).skip(lo) {
-            let k = kernel[i.abs_diff(j)];
-            acc += k * v;
-            w += k;
-        }
-        *o = acc / w;
-    }
+    });
     out
+}
+
+/// [`smooth`]'s kernel for one sigma, kept by each thread with its scratch: a waveform's
+/// smoothings share one sigma, whose weights (an exponential each) and buffers, made afresh
+/// for each call, were a measurable share of the products stage.
+#[derive(Default)]
+struct Smoothing {
+    /// The bits of the sigma the kernel is for; None before the first.
+    sigma: Option<u64>,
+    reach: usize,
+    /// Weight of a neighbour k bins away, k = 0..=reach.
+    kernel: Vec<f64>,
+    /// The whole kernel, -reach..=reach, for a window inside the waveform, and its weight,
+    /// summed once in the order each such bin's sum would take.
+    full: Vec<f64>,
+    full_weight: f64,
+    /// Scratch: counts of non-zero values.
+    nonzero: Vec<u32>,
+}
+
+impl Smoothing {
+    /// The kernel of `sigma`, made only when it is not the one kept: the same values, so the
+    /// same bits.
+    fn set(&mut self, sigma: f64) {
+        if self.sigma == Some(sigma.to_bits()) {
+            return;
+        }
+        let reach = (3.0 * sigma).ceil() as usize;
+        self.kernel.clear();
+        self.kernel
+            .extend((0..=reach).map(|k| (-0.5 * (k as f64 / sigma).powi(2)).exp()));
+        // A bin whose window lies wholly inside the waveform sums the whole kernel, in the
+        // same order every time: its weight is summed once, and its sum runs over a slice of
+        // fixed length without an index to check (half the work of the edge bins' loop, the
+        // same sums in the same order, so the same bits).
+        self.full.clear();
+        let kernel = &self.kernel;
+        self.full
+            .extend((0..=2 * reach).map(|t| kernel[t.abs_diff(reach)]));
+        self.full_weight = self.full.iter().fold(0.0, |w, &k| w + k);
+        self.reach = reach;
+        self.sigma = Some(sigma.to_bits());
+    }
+}
+
+thread_local! {
+    static SMOOTHING: std::cell::RefCell<Smoothing> = std::cell::RefCell::default();
 }
 
 /// Peak detection: local maxima of the lightly smoothed waveform, merged when the dip

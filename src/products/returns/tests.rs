@@ -571,8 +571,9 @@ fn no_component_leaves_its_waveform() {
     }
 }
 
-/// Skipping empty windows changes no bit: the smoothing equals the dense sum everywhere, on
-/// waveforms with empty stretches, lone spikes at the ends and negative residuals.
+/// Skipping empty windows and keeping the kernel change no bit: the smoothing equals the dense
+/// sum everywhere, on waveforms with empty stretches, lone spikes at the ends and negative
+/// residuals, made anew or with the kernel a thread kept.
 #[test]
 fn smoothing_skips_empty_windows_to_the_same_bits() {
     fn dense(y: &[f64], sigma: f64) -> Vec<f64> {
@@ -611,6 +612,15 @@ fn smoothing_skips_empty_windows_to_the_same_bits() {
         for (i, (g, w)) in got.iter().zip(&want).enumerate() {
             assert_eq!(g.to_bits(), w.to_bits(), "case {case}, bin {i}: {g} != {w}");
         }
+        // again with the kernel the thread kept for this sigma
+        let again = detect::smooth(&y, sigma);
+        assert!(
+            again
+                .iter()
+                .zip(&want)
+                .all(|(g, w)| g.to_bits() == w.to_bits()),
+            "case {case}: the kept kernel"
+        );
     }
 }
 

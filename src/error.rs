@@ -181,7 +181,23 @@ impl std::error::Error for Error {
 
 /// Reads a whole text file with an error that names it.
 pub fn read_text(path: &Path) -> Result<String> {
-    std::fs::read_to_string(path).map_err(|e| Error::io(path, "cannot read file", e))
+    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, "cannot read file", e))?;
+    // a byte-order mark (some Windows editors write one) is no part of the text
+    Ok(match text.strip_prefix('\u{feff}') {
+        Some(rest) => rest.to_string(),
+        None => text,
+    })
+}
+
+/// Why a path named as an input file is not one: the end of "FILE ..." messages.
+pub fn not_a_file(path: &Path) -> &'static str {
+    if path.is_dir() {
+        "is a folder, not a file"
+    } else if path.exists() {
+        "is not a regular file"
+    } else {
+        "does not exist"
+    }
 }
 
 #[cfg(test)]

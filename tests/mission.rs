@@ -1064,3 +1064,82 @@ fn gedi_forest_reports_rh98_against_the_true_top() {
     let report = std::fs::read_to_string(out.join("report.md")).unwrap();
     assert!(report.contains("RH98 − true canopy top"), "{report}");
 }
+
+/// A spaceborne photon-counting platform's beams fire together: in ATL03 each beam counts
+/// the shots (`ph_id_pulse`, `pce_mframe_cnt`) as ATLAS's beams share its laser's counter,
+/// one a shot, rolling over into the next major frame after 200; and photons.parquet's
+/// `along_track_m` counts along each beam's own track from its first shot, not from the
+/// first beam's (whose offset across the track would be in every other beam's figure).
+#[test]
+fn atl03_beams_share_the_shot_counter_and_count_along_their_own_track() {
+    let dir = tmp("mission_atl03_beams");
+    plane_scene(&dir, 0.5, 400.0);
+    let (step, shots) = (0.69, 260u64);
+    let camp = write(
+        &dir,
+        "c.yaml",
+        &format!(
+            "name: beams\nscene: plane.yaml\nseed: 3\nwavelength_nm: 532\nframe: {{ crs: EPSG:32631, origin: [{}, {}, {}] }}\ninstrument: {{ kind: photon_counting, pulse_energy_j: 2.0e-5, pulse_fwhm_ns: 1.5, footprint_half_angle_mrad: 0.0111, fov_half_angle_mrad: 0.0417, receiver_area_m2: 0.503, bin_ns: 0.5, quantum_efficiency: 0.15 }}\nplatform: {{ kind: spaceborne, altitude_m: 496000, ground_speed_m_s: 6900, prf_hz: 10000, track: {{ start: [0, -90], end: [0, {} ] }}, beams: [ {{ cross_track_m: -90 }}, {{ cross_track_m: 0, relative_energy: 0.25 }}, {{ cross_track_m: 90 }} ] }}\nsimulation: {{ method: forward, rays_per_pulse: 20, max_order: 1 }}\n",
+            ORIGIN[0],
+            ORIGIN[1],
+            ORIGIN[2],
+            -90.0 + step * (shots - 1) as f64 + 0.1
+        ),
+    );
+    let out = dir.join("run");
+    run_cli(&camp, &out, None);
+    // photons.parquet: pulse_id and along_track_m
+    let file = std::fs::File::open(out.join("photons.parquet")).unwrap();
+    let reader =
+        parquet::arrow::arrow_reader::ParquetRecordBatchReader::try_new(file, 1 << 16).unwrap();
+    let mut by_beam: [Vec<(u64, f64)>; 3] = Default::default();
+    for batch in reader {
+        let batch = batch.unwrap();
+        let id = batch.column_by_name("pulse_id").unwrap().clone();
+        let id = id
+            .as_any()
+            .downcast_ref::<arrow_array::UInt64Array>()
+            .unwrap();
+        let along = batch.column_by_name("along_track_m").unwrap().clone();
+        let along = along
+            .as_any()
+            .downcast_ref::<arrow_array::Float64Array>()
+            .unwrap();
+        for k in 0..batch.num_rows() {
+            let pid = id.value(k);
+            by_beam[(pid % 3) as usize].push((pid, along.value(k)));
+        }
+    }
+    let f = h5(&out.join("photons_atl03.h5"));
+    for (b, rows) in by_beam.iter().enumerate() {
+        assert!(rows.len() > 100, "beam {b}: {} photons", rows.len());
+        for &(pid, along) in rows {
+            let shot = pid / 3;
+            let want = shot as f64 * step;
+            assert!(
+                (along - want).abs() < 1e-6 * want.max(1.0),
+                "beam {b}, pulse {pid}: along_track_m {along}, want {want}"
+            );
+        }
+        // ATL03's rows are this beam's rows of photons.parquet, in order
+        let g = format!("{}/heights", ["gt1l", "gt1r", "gt2l"][b]);
+        let in_frame = f
+            .dataset(&format!("{g}/ph_id_pulse"))
+            .and_then(|d| d.read_u8())
+            .unwrap();
+        let frame = u32s(&f, &format!("{g}/pce_mframe_cnt"));
+        assert_eq!(in_frame.len(), rows.len(), "beam {b}");
+        for (k, &(pid, _)) in rows.iter().enumerate() {
+            let shot = pid / 3;
+            assert_eq!(
+                (frame[k] as u64, in_frame[k] as u64),
+                (shot / 200, shot % 200 + 1),
+                "beam {b}, pulse {pid}"
+            );
+        }
+        assert!(
+            frame.contains(&1),
+            "beam {b}: the shots reach a second major frame"
+        );
+    }
+}

@@ -799,7 +799,11 @@ impl Loaded {
         if !scene_path.is_file() {
             return Err(doc.error(
                 "scene",
-                format!("scene file {} does not exist", scene_path.display()),
+                format!(
+                    "scene file {} {}",
+                    scene_path.display(),
+                    crate::error::not_a_file(&scene_path)
+                ),
             ));
         }
         Ok(Loaded {
@@ -906,10 +910,11 @@ impl Campaign {
     /// independent checks, each naming its key: long because the campaign has many keys.
     pub fn validate(&self, doc: &Doc) -> Result<()> {
         let c = Check { doc };
-        if self.name.trim().is_empty() || self.name.contains(['/', '\\']) {
+        let name = self.name.trim();
+        if name.is_empty() || name == "." || name == ".." || self.name.contains(['/', '\\', '\0']) {
             return Err(doc.error(
                 "name",
-                "must be a non-empty name without slashes (it names the run folder)",
+                "must be a non-empty name without slashes, other than . and .. (it names the run folder)",
             ));
         }
         for (k, &w) in self.wavelength_nm.all().iter().enumerate() {
@@ -928,6 +933,14 @@ impl Campaign {
         }
         let i = &self.instrument;
         c.positive("instrument.pulse_energy_j", i.pulse_energy_j)?;
+        // bounds far beyond any instrument, where photon counts and times stay finite
+        c.within(
+            "instrument.pulse_energy_j",
+            i.pulse_energy_j,
+            0.0,
+            1e3,
+            "a pulse energy in J above 0 and at most 1000",
+        )?;
         c.non_negative("instrument.pulse_fwhm_ns", i.pulse_fwhm_ns)?;
         c.within(
             "instrument.footprint_half_angle_mrad",
@@ -954,6 +967,19 @@ impl Campaign {
         }
         c.positive("instrument.receiver_area_m2", i.receiver_area_m2)?;
         c.positive("instrument.bin_ns", i.bin_ns)?;
+        c.within(
+            "instrument.bin_ns",
+            i.bin_ns,
+            0.0,
+            1e6,
+            "a bin width in ns above 0 and at most 10^6 (1 ms)",
+        )?;
+        if i.max_returns == 0 {
+            return Err(doc.error(
+                "instrument.max_returns",
+                "must be at least 1 (returns kept per pulse; default 4)",
+            ));
+        }
         c.opt_positive("instrument.bandwidth_nm", i.bandwidth_nm)?;
         c.non_negative(
             "instrument.detection_threshold_photons",
@@ -982,6 +1008,15 @@ impl Campaign {
         }
         c.opt_non_negative("instrument.dead_time_ns", i.dead_time_ns)?;
         c.opt_non_negative("instrument.dark_count_hz", i.dark_count_hz)?;
+        if let Some(d) = i.dark_count_hz {
+            c.within(
+                "instrument.dark_count_hz",
+                d,
+                0.0,
+                1e10,
+                "a rate in Hz from 0 to 10^10 (a detector's dark counts are far fewer)",
+            )?;
+        }
         if let Some(n) = &i.noise {
             c.non_negative(
                 "instrument.noise.electronic_sd_photons",
@@ -1086,6 +1121,13 @@ impl Campaign {
             )?;
             c.finite("sun.azimuth_deg", s.azimuth_deg)?;
             c.non_negative("sun.irradiance_w_m2_um", s.irradiance_w_m2_um)?;
+            c.within(
+                "sun.irradiance_w_m2_um",
+                s.irradiance_w_m2_um,
+                0.0,
+                1e5,
+                "an irradiance in W m⁻² µm⁻¹ from 0 to 10^5 (the sun gives about 2000 at most)",
+            )?;
         }
         let s = &self.simulation;
         if s.rays_per_pulse == 0 {
@@ -1117,5 +1159,8 @@ impl Campaign {
 
 /// Error for a bad campaign path given on the command line.
 pub fn missing_campaign(path: &Path) -> Error {
-    Error::file(path, "campaign file does not exist")
+    Error::file(
+        path,
+        format!("campaign file {}", crate::error::not_a_file(path)),
+    )
 }

@@ -76,7 +76,7 @@ pub fn parse<T: DeserializeOwned>(path: &Path, text: &str) -> Result<T> {
             let key = if key == "." { String::new() } else { key };
             let inner = e.into_inner();
             let location = inner.location().map(|l| (l.line(), l.column()));
-            let message = bare_message(&inner.to_string());
+            let message = plain_words(&bare_message(&inner.to_string()));
             // serde reports an unknown key against its parent: name the key itself.
             let key = match unknown_field_name(&message) {
                 Some(field) if key.is_empty() => field,
@@ -107,6 +107,49 @@ fn bare_message(display: &str) -> String {
         }
     }
     s
+}
+
+/// serde's "invalid type: string \"high\", expected f64" in a reader's words, as the contract
+/// writes it: "expected a number, found \"high\"". Other messages pass unchanged.
+fn plain_words(message: &str) -> String {
+    let Some(rest) = message
+        .strip_prefix("invalid type: ")
+        .or_else(|| message.strip_prefix("invalid value: "))
+    else {
+        return message.to_string();
+    };
+    let Some(i) = rest.rfind(", expected ") else {
+        return message.to_string();
+    };
+    let (found, expected) = (&rest[..i], &rest[i + ", expected ".len()..]);
+    let found = if let Some(s) = found.strip_prefix("string ") {
+        s.to_string()
+    } else if let Some((kind, v)) = found.split_once(" `") {
+        match kind {
+            "integer" | "floating point" | "boolean" | "character" => {
+                v.trim_end_matches('`').to_string()
+            }
+            _ => found.to_string(),
+        }
+    } else {
+        match found {
+            "sequence" => "a list".to_string(),
+            "map" => "a mapping".to_string(),
+            "unit value" => "nothing (null)".to_string(),
+            _ => found.to_string(),
+        }
+    };
+    let expected = match expected {
+        "f64" | "f32" => "a number",
+        "u8" | "u16" | "u32" | "u64" | "u128" | "usize" => "a whole number ≥ 0",
+        "i8" | "i16" | "i32" | "i64" | "i128" | "isize" => "a whole number",
+        "a boolean" | "bool" => "true or false",
+        "a sequence" => "a list",
+        "a map" => "a mapping of keys",
+        e if e.starts_with("struct ") => "a mapping of keys",
+        e => e,
+    };
+    format!("expected {expected}, found {found}")
 }
 
 fn unknown_field_name(message: &str) -> Option<String> {
@@ -323,5 +366,58 @@ mod tests {
             locate(TEXT, "instrument.nothing"),
             locate(TEXT, "instrument")
         );
+    }
+
+    #[test]
+    fn serde_types_in_plain_words() {
+        #[derive(serde::Deserialize, Debug)]
+        #[serde(deny_unknown_fields)]
+        #[allow(dead_code)]
+        struct T {
+            x: f64,
+            n: u32,
+            b: bool,
+            l: Vec<f64>,
+        }
+        let cases = [
+            (
+                "x: high\nn: 1\nb: true\nl: []\n",
+                "x",
+                "expected a number, found \"high\"",
+            ),
+            (
+                "x: 1\nn: -3\nb: true\nl: []\n",
+                "n",
+                "expected a whole number ≥ 0, found -3",
+            ),
+            (
+                "x: 1\nn: 2.5\nb: true\nl: []\n",
+                "n",
+                "expected a whole number ≥ 0, found 2.5",
+            ),
+            (
+                "x: 1\nn: 1\nb: 7\nl: []\n",
+                "b",
+                "expected true or false, found 7",
+            ),
+            (
+                "x: 1\nn: 1\nb: true\nl: { a: 1 }\n",
+                "l",
+                "expected a list, found a mapping",
+            ),
+            (
+                "x: [1]\nn: 1\nb: true\nl: []\n",
+                "x",
+                "expected a number, found a list",
+            ),
+        ];
+        for (text, key, want) in cases {
+            let e = parse::<T>(Path::new("f.yaml"), text)
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains(&format!("{key}: {want}")), "{text:?}: {e}");
+        }
+        // a message of our own passes unchanged
+        assert_eq!(plain_words("unknown field `q`"), "unknown field `q`");
     }
 }

@@ -183,10 +183,14 @@ where
     crate::progress::tune_allocator();
     let cli = match Cli::try_parse_from(args) {
         Ok(c) => c,
+        Err(e) if e.use_stderr() => {
+            eprintln!("{}", one_line(&e.render().to_string()));
+            return 1;
+        }
         Err(e) => {
-            let code = if e.use_stderr() { 1 } else { 0 };
+            // --help and --version
             let _ = e.print();
-            return code;
+            return 0;
         }
     };
     let done = match cli.command {
@@ -208,6 +212,17 @@ where
             }
         }
     }
+}
+
+/// clap's message about a bad flag as one line: its paragraph up to the first blank line
+/// (the usage and tips after it are what `--help` prints).
+fn one_line(rendered: &str) -> String {
+    let head: Vec<&str> = rendered
+        .lines()
+        .take_while(|l| !l.trim().is_empty())
+        .map(str::trim)
+        .collect();
+    format!("{} (see --help)", head.join(" "))
 }
 
 fn run(args: RunArgs) -> Result<()> {
@@ -343,6 +358,6 @@ pub(crate) fn require_file(path: &std::path::Path) -> Result<()> {
     if path.is_file() {
         Ok(())
     } else {
-        Err(Error::file(path, "campaign file does not exist"))
+        Err(crate::campaign::missing_campaign(path))
     }
 }

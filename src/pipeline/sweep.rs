@@ -83,6 +83,10 @@ fn sub_campaigns(
         .collect()
 }
 
+/// Most runs one sweep makes: each is a whole run with its own folder, and every
+/// combination is checked (and held) before the first starts.
+const MAX_SWEEP_RUNS: usize = 10_000;
+
 /// The swept keys in the order the file gives them, and every combination of their values
 /// (the last key varying fastest).
 #[allow(clippy::type_complexity)]
@@ -99,9 +103,41 @@ fn combinations<'a>(
             .unwrap_or(usize::MAX)
     });
     for k in &keys {
-        if sweep[*k].is_empty() {
+        let values = &sweep[*k];
+        if values.is_empty() {
             return Err(loaded.doc.sweep_error(k, "the list of values is empty"));
         }
+        if k.as_str() == "scene" || k.starts_with("scene.") {
+            return Err(loaded.doc.sweep_error(
+                k,
+                "the scene cannot be swept (a sweep's runs share one scene): run one campaign per scene",
+            ));
+        }
+        // two equal values would name one sub-folder twice
+        if let Some(v) = values
+            .iter()
+            .enumerate()
+            .find_map(|(i, v)| values[..i].contains(v).then_some(v))
+        {
+            let v = serde_yaml::to_string(v).unwrap_or_default();
+            return Err(loaded
+                .doc
+                .sweep_error(k, format!("value {} is listed twice", v.trim())));
+        }
+    }
+    let runs = keys
+        .iter()
+        .try_fold(1usize, |n, k| n.checked_mul(sweep[*k].len()))
+        .filter(|&n| n <= MAX_SWEEP_RUNS);
+    if runs.is_none() {
+        let lens: Vec<String> = keys.iter().map(|k| sweep[*k].len().to_string()).collect();
+        return Err(loaded.doc.error(
+            "sweep",
+            format!(
+                "{} combinations: a sweep runs at most {MAX_SWEEP_RUNS}; split it into several campaigns",
+                lens.join(" × ")
+            ),
+        ));
     }
     let mut combos: Vec<Vec<&serde_yaml::Value>> = vec![vec![]];
     for k in &keys {

@@ -375,6 +375,11 @@ impl Als {
         })
     }
 
+    /// The first pulse of pulse `id`'s flight line (or scan interval).
+    pub(crate) fn line_start(&self, id: u64) -> u64 {
+        self.flights[self.locate(id).0].first_id
+    }
+
     /// Flight, scan line j in it and pulse i in that, of pulse `id`.
     fn locate(&self, id: u64) -> (usize, u64, u64) {
         let index = self.flights.partition_point(|f| f.first_id <= id) - 1;

@@ -306,6 +306,30 @@ impl Plan {
         }
     }
 
+    /// The first pulse of pulse `id`'s line (flight line or scan interval, spaceborne beam,
+    /// station): where along-track distances on that line count from.
+    pub fn line_start(&self, id: u64) -> u64 {
+        match &self.platform {
+            Source::Listed(v) => {
+                let line = v[id as usize].line;
+                v.iter().position(|p| p.line == line).unwrap_or(0) as u64
+            }
+            Source::Als(a) => a.line_start(id),
+            Source::Spaceborne(s) => s.line_start(id),
+            Source::Track(_) => 0,
+            Source::Tls(t) => t.station_start(id),
+        }
+    }
+
+    /// The shot pulse `id` belongs to: the index of the laser's firing, which the beams of a
+    /// spaceborne platform share; every other platform fires one pulse a shot.
+    pub fn shot(&self, id: u64) -> u64 {
+        match &self.platform {
+            Source::Spaceborne(s) => s.shot(id),
+            _ => id,
+        }
+    }
+
     /// The scan angle LAS records for pulse `p`: its look angle, or for a sweep across track
     /// under a trajectory or a mount, the angle from the scene's vertical (roll included).
     pub fn las_scan_angle(&self, p: &Pulse) -> f32 {

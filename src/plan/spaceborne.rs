@@ -59,6 +59,16 @@ impl Spaceborne {
         inclusive_steps(self.path.length, self.shot_step_m)
     }
 
+    /// The shot pulse `id` belongs to: every beam fires at once.
+    pub(crate) fn shot(&self, id: u64) -> u64 {
+        id / self.beam_count()
+    }
+
+    /// The first shot's pulse of pulse `id`'s beam.
+    pub(crate) fn line_start(&self, id: u64) -> u64 {
+        id % self.beam_count()
+    }
+
     pub(crate) fn count(&self) -> u64 {
         self.shots().saturating_mul(self.beam_count())
     }

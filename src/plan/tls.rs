@@ -69,6 +69,12 @@ impl Tls {
             .saturating_mul(self.positions.len() as u64)
     }
 
+    /// The first pulse of pulse `id`'s station.
+    pub(crate) fn station_start(&self, id: u64) -> u64 {
+        let per = self.per_station().max(1);
+        id / per * per
+    }
+
     /// Pulse `id` (< [`Tls::count`]): station-major, then azimuth, then zenith.
     pub(crate) fn pulse(&self, id: u64) -> Pulse {
         let nz = self.zeniths();

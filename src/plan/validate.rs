@@ -531,7 +531,11 @@ fn trajectory(c: &Check, p: &Platform, t: &crate::campaign::Trajectory) -> Resul
     if !path.is_file() {
         return Err(doc.error(
             "platform.trajectory.file",
-            format!("trajectory file {} does not exist", path.display()),
+            format!(
+                "trajectory file {} {}",
+                path.display(),
+                crate::error::not_a_file(&path)
+            ),
         ));
     }
     let span = super::trajectory::Trajectory::open(t)?.span();

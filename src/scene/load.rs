@@ -172,10 +172,13 @@ fn water_body(doc: &Doc, file: &SceneFile, wavelengths_nm: &[f64]) -> Result<Opt
             .zip(&phase)
             .map(|(&nm, &n_band)| {
                 let at = format!("{key}.group_index");
-                let g = match &w.group_index {
-                    Some(s) => s.at(nm).map_err(|why| doc.error(&at, why))?,
-                    None => super::water_group_index(n_band, nm),
-                };
+                // a band the table leaves out takes the formula's value, as a scene without
+                // the key does
+                let g = w
+                    .group_index
+                    .as_ref()
+                    .and_then(|s| s.at(nm).ok())
+                    .unwrap_or_else(|| super::water_group_index(n_band, nm));
                 if !(g.is_finite() && (1.0..=3.0).contains(&g)) {
                     return Err(doc.error(
                         &at,

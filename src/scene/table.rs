@@ -15,21 +15,41 @@ pub struct InstanceRow {
 
 const COLUMNS: [&str; 5] = ["x", "y", "z", "rotation_deg", "scale"];
 
-/// Fields of one line, separated by commas and/or white space, `#` starting a comment.
-/// Returns `None` for blank and comment-only lines.
-fn fields(line: &str) -> Option<impl Iterator<Item = &str>> {
+/// Fields of one line, separated by commas or white space, `#` starting a comment; `None`
+/// for blank and comment-only lines. Between commas a field may not be empty: `10,,20` is a
+/// missing value, not two columns.
+fn fields<'a>(path: &Path, n: usize, line: &'a str) -> Result<Option<Vec<&'a str>>> {
     let content = match line.find('#') {
         Some(i) => &line[..i],
         None => line,
     };
     if content.trim().is_empty() {
-        return None;
+        return Ok(None);
     }
-    Some(
-        content
-            .split(|c: char| c == ',' || c.is_whitespace())
-            .filter(|f| !f.is_empty()),
-    )
+    if !content.contains(',') {
+        return Ok(Some(content.split_whitespace().collect()));
+    }
+    let mut out = Vec::new();
+    let cells: Vec<&str> = content
+        .trim_end()
+        .trim_end_matches(',')
+        .split(',')
+        .collect();
+    for (k, cell) in cells.iter().enumerate() {
+        let words: Vec<&str> = cell.split_whitespace().collect();
+        if words.is_empty() {
+            return Err(Error::line(
+                path,
+                n,
+                format!(
+                    "column {}: empty (two commas with no value between them)",
+                    k + 1
+                ),
+            ));
+        }
+        out.extend(words);
+    }
+    Ok(Some(out))
 }
 
 /// Parses an instance table (`x y [z [rotation_deg [scale]]]` per row).
@@ -37,7 +57,9 @@ pub fn parse_instances(path: &Path, text: &str) -> Result<Vec<InstanceRow>> {
     let mut rows = Vec::new();
     for (i, line) in text.lines().enumerate() {
         let n = i + 1;
-        let Some(fs) = fields(line) else { continue };
+        let Some(fs) = fields(path, n, line)? else {
+            continue;
+        };
         let mut v = [0.0, 0.0, 0.0, 0.0, 1.0];
         let mut count = 0;
         for f in fs {
@@ -125,9 +147,11 @@ pub fn parse_grid(path: &Path, text: &str) -> Result<HeightGrid> {
     let mut first_line = 0;
     for (i, line) in text.lines().enumerate() {
         let n = i + 1;
-        let Some(fs) = fields(line) else { continue };
+        let Some(fs) = fields(path, n, line)? else {
+            continue;
+        };
         let before = z.len();
-        for (c, f) in fs.enumerate() {
+        for (c, f) in fs.into_iter().enumerate() {
             match f.parse::<f64>() {
                 Ok(v) if v.is_finite() && v.abs() <= super::MAX_COORDINATE_M => z.push(v),
                 _ => {
@@ -163,4 +187,29 @@ pub fn parse_grid(path: &Path, text: &str) -> Result<HeightGrid> {
         ));
     }
     Ok(HeightGrid { rows, cols, z })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Commas and white space both separate columns, but two commas with nothing between
+    /// them are a missing value, named by line and column, not a shorter row.
+    #[test]
+    fn an_empty_field_between_commas_is_an_error() {
+        let p = Path::new("t.csv");
+        let rows = parse_instances(p, "1, 2, 3\n4 5 6\n7,8,9,\n").unwrap();
+        assert_eq!(rows.len(), 3);
+        assert_eq!((rows[2].x, rows[2].y, rows[2].z), (7.0, 8.0, 9.0));
+        let e = parse_instances(p, "1,2\n10,,20\n").unwrap_err().to_string();
+        assert!(
+            e.starts_with("t.csv:2:") && e.contains("column 2: empty"),
+            "{e}"
+        );
+        let e = parse_grid(p, "1,2\n,3\n").unwrap_err().to_string();
+        assert!(
+            e.starts_with("t.csv:2:") && e.contains("column 1: empty"),
+            "{e}"
+        );
+    }
 }

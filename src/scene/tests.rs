@@ -1429,3 +1429,20 @@ fn bundled_scenes_load() {
         }
     }
 }
+
+/// A `group_index` table that leaves out one of the campaign's bands gives that band the
+/// formula's value, as a scene without the key does; the band it names keeps its own.
+#[test]
+fn group_index_table_falls_back_to_the_formula_for_other_bands() {
+    let dir = tmp("group_index_fallback");
+    let path = write(
+        &dir,
+        "lake.yaml",
+        "name: lake\nmaterials:\n  sand: { reflectance: 0.3 }\nobjects:\n  - water: { z: 0, extent: [[-5, -5], [5, 5]], attenuation_per_m: 0.05, refractive_index: 1.33, group_index: { 532: 1.4 } }\n  - plane: { z: -2, extent: [[-5, -5], [5, 5]], material: sand }\n",
+    );
+    let scene = Scene::load_bands(&path, &[532.0, 1064.0]).unwrap();
+    let water = scene.water.as_ref().expect("a body of water");
+    assert_eq!(water.n_group[0], 1.4);
+    assert_eq!(water.n_group[1], water_group_index(1.33, 1064.0));
+    assert!(water.n_group[1] != 1.4 && water.n_group[1] > 1.33);
+}

@@ -228,8 +228,8 @@ impl Atl03 {
             f("delta_time", Kind::F64, "seconds since 2018-01-01", "transmit time of the shot the photon belongs to, GPS seconds less atlas_sdp_gps_epoch"),
             f("dist_ph_along", Kind::F32, "meters", "along-track distance from the start of the photon's 20 m segment (geolocation/segment_dist_x)"),
             f("dist_ph_across", Kind::F32, "meters", "across-track distance from the pulse's nadir point, positive to the left of the track"),
-            f("ph_id_pulse", Kind::U8, "counts", "the shot within its major frame of 200, counted from 1: pulse_id % 200 + 1"),
-            f("pce_mframe_cnt", Kind::U32, "counts", "the major frame of 200 shots: pulse_id // 200"),
+            f("ph_id_pulse", Kind::U8, "counts", "the shot within its major frame of 200, counted from 1: shot % 200 + 1 (a shot: one firing, all beams)"),
+            f("pce_mframe_cnt", Kind::U32, "counts", "the major frame of 200 shots: shot // 200 (a shot: one firing, all beams)"),
             f("ph_id_count", Kind::U8, "counts", "photon event number within the pulse, counted from 1"),
             f("quality_ph", Kind::I8, "1", "0: nominal (always)"),
             f("signal_conf_ph", Kind::I8, "1", "confidence that the photon is signal, per surface type (land, ocean, sea ice, land ice, inland water): 4 high (laser photons), 0 noise (solar and dark)").rows_of(5),
@@ -281,14 +281,16 @@ impl Atl03 {
         Ok(())
     }
 
-    /// One pulse's photon events (its rows of photons.parquet, maybe none) and its gate.
-    pub fn add(&mut self, pulse: &Pulse, gate: Gate, rows: &[PhotonRow]) -> Result<()> {
+    /// One pulse's photon events (its rows of photons.parquet, maybe none) and its gate;
+    /// `shot` the laser's firing it belongs to, which counts the major frames (the beams
+    /// of one firing share it, as ATLAS's six do).
+    pub fn add(&mut self, pulse: &Pulse, shot: u64, gate: Gate, rows: &[PhotonRow]) -> Result<()> {
         self.track(pulse)?;
         let Some(track) = self.tracks.get_mut(&pulse.line) else {
             return Ok(());
         };
         let delta_time = pulse.gps_time_s - MISSION_EPOCH_GPS_S;
-        let frame = pulse.id / 200;
+        let frame = shot / 200;
         // the background of 50 shots: a row once the 50th is in
         let bg = &mut track.background;
         if bg.shots == 0 {
@@ -375,7 +377,7 @@ impl Atl03 {
         hw.push_f32(&format!("{b}/dist_ph_across"), &d_across)?;
         hw.push_u8(
             &format!("{b}/ph_id_pulse"),
-            &vec![(pulse.id % 200 + 1) as u8; n],
+            &vec![(shot % 200 + 1) as u8; n],
         )?;
         hw.push_u32(
             &format!("{b}/pce_mframe_cnt"),

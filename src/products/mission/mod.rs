@@ -131,23 +131,30 @@ const GEDI_BEAMS: [&str; 8] = [
 ];
 
 /// The L1B group of the campaign's beam `line`: GEDI's names for the first eight, then the
-/// beam index in five or more binary digits (a ninth beam has no GEDI name; five digits never
-/// meet one of GEDI's four, and BEAM followed by digits keeps readers that match `BEAM\d+`
-/// working).
+/// binary digits (four while they last) of the beam numbers GEDI leaves unused, 4, 7, 9, 10,
+/// 12, 13, ... (see [`beam_number`]): a name no GEDI beam has, its digits its `beam` number, so
+/// `shot_number` stays unique across the file, and BEAM followed by digits keeps readers
+/// that match `BEAM\d+` working.
 pub fn beam_name(line: u32) -> String {
-    GEDI_BEAMS
-        .get(line as usize)
-        .map_or_else(|| format!("BEAM{line:05b}"), |s| s.to_string())
+    GEDI_BEAMS.get(line as usize).map_or_else(
+        || format!("BEAM{:04b}", beam_number(line)),
+        |s| s.to_string(),
+    )
 }
 
 /// GEDI's beam numbers (the `beam` dataset: the decimal value of the name's binary digits)
-/// for the campaign's beam `line`, and its digitiser channel as GEDI's files give it.
+/// for the campaign's beam `line`, and its digitiser channel as GEDI's files give it. A beam
+/// past the eighth takes the next number GEDI does not use.
 pub fn beam_number(line: u32) -> u16 {
     const NUMBERS: [u16; 8] = [0, 1, 2, 3, 5, 6, 8, 11];
-    NUMBERS
-        .get(line as usize)
-        .copied()
-        .unwrap_or(line.min(u32::from(u16::MAX)) as u16)
+    if let Some(&n) = NUMBERS.get(line as usize) {
+        return n;
+    }
+    let extra = (line - 8) as usize;
+    (0..u16::MAX)
+        .filter(|n| !NUMBERS.contains(n))
+        .nth(extra)
+        .unwrap_or(u16::MAX)
 }
 
 pub fn channel(line: u32) -> u8 {
@@ -360,23 +367,23 @@ mod tests {
     }
 
     /// The campaign's beams take GEDI's eight names in order (not their binary indexes: the
-    /// fifth is BEAM0101, not BEAM0100), and a ninth a name of its own (five digits).
+    /// fifth is BEAM0101, not BEAM0100), and the next ones the numbers GEDI leaves unused:
+    /// every name and every number once.
     #[test]
     fn beams_take_gedis_names() {
-        let names: Vec<String> = (0..9).map(beam_name).collect();
+        let names: Vec<String> = (0..11).map(beam_name).collect();
         assert_eq!(
             names,
             [
-                "BEAM0000",
-                "BEAM0001",
-                "BEAM0010",
-                "BEAM0011",
-                "BEAM0101",
-                "BEAM0110",
-                "BEAM1000",
-                "BEAM1011",
-                "BEAM01000"
+                "BEAM0000", "BEAM0001", "BEAM0010", "BEAM0011", "BEAM0101", "BEAM0110", "BEAM1000",
+                "BEAM1011", "BEAM0100", "BEAM0111", "BEAM1001"
             ]
         );
+        let numbers: Vec<u16> = (0..20).map(beam_number).collect();
+        for (k, n) in numbers.iter().enumerate() {
+            assert!(!numbers[..k].contains(n), "beam number {n} twice");
+            let name = beam_name(k as u32);
+            assert_eq!(u16::from_str_radix(&name[4..], 2).unwrap(), *n, "{name}");
+        }
     }
 }

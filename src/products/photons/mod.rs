@@ -54,7 +54,9 @@ pub fn count_photons(
         if mu <= 0.0 {
             continue;
         }
-        let n = rng.poisson(mu);
+        // bounded, so that absurd rates (an infinite mean gives u64::MAX) cannot exhaust
+        // memory: no detector records more, and below the bound nothing changes
+        let n = rng.poisson(mu).min(MAX_EVENTS_PER_PULSE as u64);
         if n == 0 {
             continue;
         }
@@ -79,9 +81,17 @@ pub fn count_photons(
                 blind_until = t + dead;
             }
         }
+        if out.len() >= MAX_EVENTS_PER_PULSE {
+            out.truncate(MAX_EVENTS_PER_PULSE);
+            break;
+        }
     }
     out
 }
+
+/// Most photon events one pulse records: far beyond any photon-counting detector (ATLAS
+/// records a few per shot and beam), a bound only on rates no instrument has.
+pub const MAX_EVENTS_PER_PULSE: usize = 1_000_000;
 
 /// One row of photons.parquet.
 #[derive(Clone, Copy, Debug, PartialEq)]

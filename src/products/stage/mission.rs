@@ -208,7 +208,9 @@ impl Writer for Atl03Writer<'_> {
                 start_s: w.t0_ns * 1e-9,
                 length_s: w.laser_photons.len() as f64 * w.bin_ns as f64 * 1e-9,
             };
-            self.file.add(&self.plan.pulse(w.pulse_id), gate, rows)?;
+            let shot = self.plan.shot(w.pulse_id);
+            self.file
+                .add(&self.plan.pulse(w.pulse_id), shot, gate, rows)?;
         }
         Ok(())
     }

@@ -13,7 +13,6 @@ use crate::scene::SurfaceClass;
 use crate::sensor::pulse_sigma_s;
 use crate::waveform::record::Recorder;
 use crate::waveform::Waveform;
-use glam::DVec3;
 use rayon::prelude::*;
 use std::borrow::Cow;
 
@@ -273,11 +272,6 @@ fn discrete_returns(loaded: &Loaded, plan: &Plan, waveforms: &[Waveform]) -> Vec
 fn photon_events(loaded: &Loaded, plan: &Plan, waveforms: &[Waveform]) -> Vec<PhotonRow> {
     let c = &loaded.campaign;
     let inst = &c.instrument;
-    let first = if plan.is_empty() {
-        DVec3::ZERO
-    } else {
-        plan.pulse(0).origin
-    };
     let by_pulse: Vec<Vec<PhotonRow>> = waveforms
         .par_iter()
         .map(|w| {
@@ -292,6 +286,9 @@ fn photon_events(loaded: &Loaded, plan: &Plan, waveforms: &[Waveform]) -> Vec<Ph
                 SplitMix64::band_seed(c.seed, c.wavelength_nm.index_of(w.wavelength_nm)),
                 w.pulse_id,
             );
+            // from the first pulse of the pulse's own line: a spaceborne platform's beams
+            // each count from their own first shot, not from the first beam's
+            let first = plan.pulse(plan.line_start(w.pulse_id)).origin;
             let along = (pulse.origin - first).truncate().length();
             let mut rows = photon_rows(pulse, w.t0_ns, &events, along);
             for r in &mut rows {

@@ -206,7 +206,10 @@ mod tests {
             e.starts_with("t.csv:2:") && e.contains("column 2: empty"),
             "{e}"
         );
-        let e = parse_grid(p, "1,2\n,3\n").unwrap_err().to_string();
+        let e = match parse_grid(p, "1,2\n,3\n") {
+            Err(e) => e.to_string(),
+            Ok(_) => panic!("a grid with an empty field"),
+        };
         assert!(
             e.starts_with("t.csv:2:") && e.contains("column 1: empty"),
             "{e}"

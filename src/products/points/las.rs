@@ -224,20 +224,108 @@ pub fn write_las_chunks(
             error: None,
         };
         let mut w = Writer::new(sink, header).map_err(err)?;
+        let mut fix = HeaderFix::default();
         let written = chunks(&mut |points| {
             for p in points {
-                w.write_point(to_las(p, layout)).map_err(err)?;
+                let q = to_las(p, layout);
+                fix.add(&q, &w.header().transforms().clone())?;
+                w.write_point(q).map_err(err)?;
             }
             Ok(())
         });
         let mut sink = w.into_inner().map_err(err)?;
         written?;
         let flushed = sink.inner.flush();
-        match sink.error.take().map_or(flushed, Err) {
+        let patched = flushed.and_then(|()| fix.patch(sink.inner.get_mut(), layout));
+        match sink.error.take().map_or(patched, Err) {
             Ok(()) => Ok(()),
             Err(e) => Err(Error::io(path, "cannot write LAS", e).advise(WRITE_ADVICE)),
         }
     })
+}
+
+/// What the las crate leaves to be put right in a LAS 1.4 header once the points are
+/// written: its bounds round outwards from the unquantised coordinates (a step beyond the
+/// stored ones, which readers that check the header against the points report), it fills
+/// the legacy point counts, which LAS 1.4 requires to be 0 for point format 6, and it leaves
+/// the creation date 0. The date written is the day of the earliest point's GPS time (the
+/// UTC day but for the leap seconds' few seconds after midnight): the simulated
+/// acquisition's, so that the same run gives the same bytes.
+#[derive(Default)]
+struct HeaderFix {
+    /// Per axis, the least and greatest stored coordinate (in steps from the offset).
+    steps: Option<[[i32; 2]; 3]>,
+    first_gps_s: Option<f64>,
+}
+
+impl HeaderFix {
+    fn add(&mut self, p: &las::Point, t: &Vector<Transform>) -> Result<()> {
+        let q = [p.x, p.y, p.z]
+            .into_iter()
+            .zip([t.x, t.y, t.z])
+            .map(|(v, t)| t.inverse(v))
+            .collect::<std::result::Result<Vec<i32>, _>>()
+            .map_err(|e| Error::msg(format!("cannot write LAS: {e}")))?;
+        let s = self.steps.get_or_insert([[q[0]; 2], [q[1]; 2], [q[2]; 2]]);
+        for (axis, v) in q.into_iter().enumerate() {
+            s[axis][0] = s[axis][0].min(v);
+            s[axis][1] = s[axis][1].max(v);
+        }
+        if let Some(t) = p.gps_time {
+            self.first_gps_s = Some(self.first_gps_s.map_or(t, |f| f.min(t)));
+        }
+        Ok(())
+    }
+
+    fn patch(&self, file: &mut std::fs::File, layout: &Layout) -> std::io::Result<()> {
+        if let Some(t) = self.first_gps_s {
+            let (year, day) = utc_year_and_day(t);
+            let mut date = [0u8; 4];
+            date[..2].copy_from_slice(&day.to_le_bytes());
+            date[2..].copy_from_slice(&year.to_le_bytes());
+            file.seek(SeekFrom::Start(90))?;
+            file.write_all(&date)?;
+        }
+        // legacy number of point records and by return (offsets 107-130)
+        file.seek(SeekFrom::Start(107))?;
+        file.write_all(&[0u8; 24])?;
+        if let Some(s) = self.steps {
+            // max x, min x, max y, min y, max z, min z (offsets 179-226)
+            let mut b = Vec::with_capacity(48);
+            for (axis, [lo, hi]) in s.into_iter().enumerate() {
+                let at = |k: i32| layout.offset[axis] + layout.scale * k as f64;
+                b.extend_from_slice(&at(hi).to_le_bytes());
+                b.extend_from_slice(&at(lo).to_le_bytes());
+            }
+            file.seek(SeekFrom::Start(179))?;
+            file.write_all(&b)?;
+        }
+        file.seek(SeekFrom::End(0))?;
+        Ok(())
+    }
+}
+
+/// The year and day of the year (from 1) of a GPS time in seconds since 1980-01-06, on
+/// GPS's clock; clamped to the years a LAS header can hold.
+fn utc_year_and_day(gps_s: f64) -> (u16, u16) {
+    // days from 1970-01-01 (the civil-from-days algorithm's epoch) to 1980-01-06: 3657
+    let days = (gps_s / 86_400.0).floor().clamp(-3e6, 3e7) as i64 + 3657;
+    let z = days + 719_468;
+    let era = z.div_euclid(146_097);
+    let doe = z - era * 146_097;
+    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
+    let doy_march = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy_march + 2) / 153;
+    let month = if mp < 10 { mp + 3 } else { mp - 9 };
+    let year = yoe + era * 400 + i64::from(month <= 2);
+    let leap = (year % 4 == 0 && year % 100 != 0) || year % 400 == 0;
+    // day of the year from the March-based day: January and February close the year before
+    let day = if month <= 2 {
+        doy_march - 306
+    } else {
+        doy_march + 59 + i64::from(leap)
+    } + 1;
+    (year.clamp(0, 65_535) as u16, day.clamp(1, 366) as u16)
 }
 
 /// A writer that never fails: it keeps the first error and drops what follows. The las
@@ -443,6 +531,57 @@ mod tests {
         let d = crate::testdata::TempDir::new(&format!("las-{name}"));
         let p = d.join(name);
         (d, p)
+    }
+
+    /// The header's bounds are the stored coordinates' (not a step beyond), its legacy point
+    /// counts 0 (point format 6), and its creation date the earliest point's UTC day.
+    #[test]
+    fn header_bounds_counts_and_date() {
+        let mut pts = sample(500);
+        // 2019-10-21T10:30:00Z, the GPS time of the bundled ICESat-2-like campaign
+        for (i, p) in pts.iter_mut().enumerate() {
+            p.gps_time = 1_255_689_018.0 + i as f64;
+        }
+        for laz in [false, true] {
+            let (_dir, path) = tmp(if laz { "header.laz" } else { "header.las" });
+            let layout = Layout {
+                laz,
+                ..Layout::local([651_000.0, 5_432_000.0, -4.0], FINE)
+            };
+            let mut chunks = Some(&pts[..]);
+            write_las_chunks(&path, &layout, |each| match chunks.take() {
+                Some(c) => each(c),
+                None => Ok(()),
+            })
+            .unwrap();
+            let raw = std::fs::read(&path).unwrap();
+            let u16_at = |k: usize| u16::from_le_bytes([raw[k], raw[k + 1]]);
+            let f64_at = |k: usize| f64::from_le_bytes(raw[k..k + 8].try_into().unwrap());
+            assert_eq!(
+                (u16_at(92), u16_at(90)),
+                (2019, 294),
+                "2019-10-21 is day 294"
+            );
+            assert!(raw[107..131].iter().all(|&b| b == 0), "legacy counts");
+            let back = read_las(&path).unwrap();
+            for (axis, k) in [(0usize, 179usize), (1, 195), (2, 211)] {
+                let v: Vec<f64> = back.iter().map(|p| [p.x, p.y, p.z][axis]).collect();
+                let hi = v.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+                let lo = v.iter().copied().fold(f64::INFINITY, f64::min);
+                assert_eq!(
+                    (f64_at(k), f64_at(k + 8)),
+                    (hi, lo),
+                    "axis {axis}, laz {laz}"
+                );
+            }
+            let h = Reader::from_path(&path).unwrap().header().clone();
+            assert_eq!(h.number_of_points(), 500);
+        }
+        assert_eq!(utc_year_and_day(0.0), (1980, 6));
+        assert_eq!(utc_year_and_day(1_198_800_018.0), (2018, 1));
+        // 2020-12-31T12:00:00Z, the 366th day of a leap year (GPS time 18 s ahead of UTC)
+        assert_eq!(utc_year_and_day(1_293_451_218.0), (2020, 366));
+        assert_eq!(utc_year_and_day(1_235_433_618.0), (2019, 60), "2019-03-01");
     }
 
     /// Points 300 km apart do not fit i32 steps of 0.1 mm: the file falls back to 1 mm.

@@ -181,7 +181,13 @@ impl std::error::Error for Error {
 
 /// Reads a whole text file with an error that names it.
 pub fn read_text(path: &Path) -> Result<String> {
-    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, "cannot read file", e))?;
+    let text = std::fs::read_to_string(path).map_err(|e| {
+        if path.is_dir() {
+            Error::file(path, not_a_file(path))
+        } else {
+            Error::io(path, "cannot read file", e)
+        }
+    })?;
     // a byte-order mark (some Windows editors write one) is no part of the text
     Ok(match text.strip_prefix('\u{feff}') {
         Some(rest) => rest.to_string(),

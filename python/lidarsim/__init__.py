@@ -17,6 +17,9 @@ from __future__ import annotations
 
 import json
 import logging
+import math
+import numbers
+import operator
 import os
 from pathlib import Path
 from typing import Any, Dict, Iterable, List, Mapping, Optional, Sequence, Tuple, Union
@@ -46,6 +49,60 @@ __version__: str = _lidarsim.version()
 logging.getLogger("lidarsim").addHandler(logging.NullHandler())
 
 PathLike = Union[str, "os.PathLike[str]"]
+
+
+def _bad(key: str, message: str) -> InputError:
+    """An :class:`InputError` for a bad argument, named by ``key``."""
+    err = InputError(f"{key}: {message}")
+    err.key = key
+    return err
+
+
+def _whole(value: Any, key: str, least: int = 0) -> int:
+    """A whole number (a Python or numpy integer, not a bool or a float) from ``least`` to
+    2^64 - 1, or an :class:`InputError` naming ``key``."""
+    try:
+        if isinstance(value, bool):
+            raise TypeError
+        n = operator.index(value)
+    except TypeError:
+        raise _bad(key, f"expected a whole number of at least {least}, found {value!r}") from None
+    if not least <= n < 2**64:
+        raise _bad(key, f"expected a whole number from {least} to 2^64 - 1, found {n}")
+    return n
+
+
+def _point(value: Any, key: str) -> Tuple[float, float, float]:
+    """Three finite numbers, or an :class:`InputError` naming ``key``."""
+    try:
+        v = tuple(float(x) for x in value)
+    except (TypeError, ValueError):
+        v = ()
+    if len(v) != 3 or not all(math.isfinite(x) for x in v):
+        raise _bad(key, f"expected three finite numbers (x, y, z), found {value!r}")
+    return v  # type: ignore[return-value]
+
+
+def _plain(value: Any) -> Any:
+    """What ``json`` cannot write itself but a campaign value can be: a path, a numpy
+    scalar or array."""
+    if isinstance(value, os.PathLike):
+        return os.fspath(value)
+    if getattr(value, "shape", None) == () and callable(getattr(value, "item", None)):
+        return value.item()
+    if callable(getattr(value, "tolist", None)):
+        return value.tolist()
+    raise TypeError(f"{type(value).__name__} is not a number, a string, a list or a mapping")
+
+
+def _json(value: Any, key: str, indent: Optional[int] = None) -> str:
+    """``value`` as the JSON the core reads, or an :class:`InputError` naming ``key``."""
+    try:
+        return json.dumps(value, default=_plain, allow_nan=False, indent=indent)
+    except ValueError:
+        raise _bad(key, "NaN and infinity are not values a campaign can hold") from None
+    except TypeError as e:
+        raise _bad(key, str(e)) from None
 
 
 def _table(stream: Any) -> "pyarrow.Table":  # noqa: F821
@@ -81,7 +138,8 @@ def run(
         threads: worker threads; default all cores. The files do not depend on it.
         resume: keep completed stages and the waveform parts whose inputs are unchanged.
         stages: the stages to run (``"plan"``, ``"simulate"``, ``"products"``,
-            ``"report"``); default all.
+            ``"report"``), as a list or as the command line's ``"plan,simulate"``; default
+            all.
         shard: ``(k, n)``: simulate only the parts whose index is k modulo n.
         overrides: dotted keys and values applied before validation, as in a sweep:
             ``{"platform.altitude_m": 500}``.
@@ -96,18 +154,25 @@ def run(
             ``err.key`` say where).
         IoError, DataError: a file could not be written, or one read back is damaged.
     """
+    if isinstance(stages, str):
+        # "plan,simulate", as the command line takes it
+        stages = [s.strip() for s in stages.split(",") if s.strip()]
+    if shard is not None:
+        if isinstance(shard, (str, bytes)) or not isinstance(shard, Sequence) or len(shard) != 2:
+            raise _bad("shard", f"expected (k, n), two whole numbers, found {shard!r}")
+        shard = (_whole(shard[0], "shard"), _whole(shard[1], "shard"))
     kwargs: Dict[str, Any] = dict(
         out=None if out is None else os.fspath(out),
-        threads=threads,
+        threads=None if threads is None else _whole(threads, "threads"),
         resume=bool(resume),
         stages=None if stages is None else [str(s) for s in stages],
-        shard=None if shard is None else (int(shard[0]), int(shard[1])),
-        overrides=None if overrides is None else json.dumps(dict(overrides)),
+        shard=shard,
+        overrides=None if overrides is None else _json(dict(overrides), "overrides"),
     )
     if isinstance(campaign, Mapping):
         base = Path(base_dir) if base_dir is not None else Path.cwd()
         summary = _lidarsim.run(
-            text=json.dumps(campaign, indent=2),
+            text=_json(campaign, "campaign", indent=2),
             label=os.fspath(base / "<campaign>"),
             **kwargs,
         )
@@ -192,7 +257,7 @@ class Run:
     def waveforms(self, pulse_ids: Optional[Iterable[int]] = None) -> "pyarrow.Table":  # noqa: F821
         """The waveform parts' rows, in pulse order: all of them, or those of ``pulse_ids``
         (one row per pulse and band)."""
-        ids = None if pulse_ids is None else [int(i) for i in pulse_ids]
+        ids = None if pulse_ids is None else [_whole(i, "pulse_ids") for i in pulse_ids]
         return _table(self._read("waveforms", ids))
 
     def points(self) -> "pyarrow.Table":  # noqa: F821
@@ -361,17 +426,23 @@ class Scene:
             InputError: a key or value is wrong (``err.key`` names it).
         """
         sim = dict(simulation or {})
-        sim.update(method=method, rays_per_pulse=int(rays), max_order=int(max_order))
-        several = not isinstance(wavelength_nm, (int, float))
+        sim.update(
+            method=method,
+            rays_per_pulse=_whole(rays, "rays"),
+            max_order=_whole(max_order, "max_order"),
+        )
+        if isinstance(wavelength_nm, (str, bytes)):
+            raise _bad("wavelength_nm", f"expected a number or a list of numbers, found {wavelength_nm!r}")
+        several = not isinstance(wavelength_nm, numbers.Real)
         rows = self._native.simulate_pulse(
-            json.dumps(dict(instrument)),
-            tuple(float(x) for x in origin),
-            tuple(float(x) for x in direction),
-            json.dumps(list(wavelength_nm) if several else wavelength_nm),
-            json.dumps(sim),
-            int(seed),
-            None if sun is None else json.dumps(dict(sun)),
-            None if atmosphere is None else json.dumps(dict(atmosphere)),
+            _json(dict(instrument), "instrument"),
+            _point(origin, "origin"),
+            _point(direction, "direction"),
+            _json(list(wavelength_nm) if several else wavelength_nm, "wavelength_nm"),
+            _json(sim, "simulation"),
+            _whole(seed, "seed"),
+            None if sun is None else _json(dict(sun), "sun"),
+            None if atmosphere is None else _json(dict(atmosphere), "atmosphere"),
             bool(record),
         )
         waveforms = [Waveform(r) for r in rows]

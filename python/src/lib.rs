@@ -291,7 +291,7 @@ fn read_run<'py>(
             "points" => Got::Table(batch(run.points()?)),
             "photons" => Got::Table(stream(run.photons()?)),
             "campaign" => Got::Text(run.campaign_json()?),
-            "manifest" => Got::Text(run.text("manifest.json", "plan")?),
+            "manifest" => Got::Text(run.manifest_json()?),
             "report" => Got::Text(run.text("report.md", "report")?),
             other => return Err(lidarsim::Error::msg(format!("no table named {other:?}"))),
         })

@@ -3,7 +3,7 @@
 import pytest
 
 import lidarsim
-from conftest import PLANE, als_campaign, write_campaign
+from conftest import FOREST, PLANE, als_campaign, write_campaign
 
 
 def test_the_exception_classes():
@@ -115,3 +115,68 @@ def test_the_stubs_name_every_public_name():
     missing = [n for n in lidarsim.__all__ if n not in declared and n not in dir(lidarsim.errors)]
     assert not missing, missing
     assert not [a for a in lidarsim.Waveform.__slots__ if a not in declared]
+
+
+def test_arguments_of_the_wrong_kind_are_input_errors(tmp_path):
+    camp = als_campaign()
+    for kwargs, key in [
+        (dict(threads=-1), "threads"),
+        (dict(threads="2"), "threads"),
+        (dict(shard=(-1, 2)), "shard"),
+        (dict(shard=(0.5, 2)), "shard"),
+        (dict(shard=3), "shard"),
+    ]:
+        with pytest.raises(lidarsim.InputError) as e:
+            lidarsim.run(camp, out=tmp_path / "x", **kwargs)
+        assert e.value.key == key, (kwargs, e.value)
+    bad = als_campaign()
+    bad["platform"]["altitude_m"] = float("nan")
+    with pytest.raises(lidarsim.InputError) as e:
+        lidarsim.run(bad, out=tmp_path / "nan")
+    assert e.value.key == "campaign"
+    # a path and numpy numbers are values a mapping may hold; "plan" is one stage
+    import numpy as np
+
+    ok = als_campaign()
+    ok["scene"] = FOREST
+    ok["seed"] = np.int64(3)
+    ok["instrument"]["bin_ns"] = np.float32(0.5)
+    r = lidarsim.run(ok, out=tmp_path / "np", stages="plan")
+    assert r.pulses().num_rows > 0 and "simulate" not in r.manifest["stages"]
+    plane = lidarsim.Scene.load(PLANE)
+    inst = {"pulse_energy_j": 1e-3, "pulse_fwhm_ns": 2, "footprint_half_angle_mrad": 0.3,
+            "fov_half_angle_mrad": 0.4, "receiver_area_m2": 0.1}
+    for kwargs, key in [
+        (dict(seed=-1), "seed"),
+        (dict(rays=2**70), "rays"),
+        (dict(origin=(1, 2)), "origin"),
+        (dict(wavelength_nm="1064"), "wavelength_nm"),
+    ]:
+        args = dict(origin=(50, 50, 10), direction=(0, 0, -1))
+        args.update(kwargs)
+        with pytest.raises(lidarsim.InputError) as e:
+            plane.simulate_pulse(inst, **args)
+        assert e.value.key == key, (kwargs, e.value)
+    with pytest.raises(lidarsim.InputError):
+        r.waveforms([-1])
+    # a gate no memory holds is refused, as a run of the same campaign is, not attempted
+    with pytest.raises(lidarsim.InputError) as e:
+        plane.simulate_pulse(dict(inst, bin_ns=1e-30), (50, 50, 10), (0, 0, -1), rays=20)
+    assert e.value.key == "instrument.bin_ns"
+
+
+def test_an_override_of_the_wrong_type_names_its_key(tmp_path):
+    with pytest.raises(lidarsim.InputError) as e:
+        lidarsim.run(als_campaign(), out=tmp_path / "o", overrides={"platform.altitude_m": "high"})
+    assert e.value.key == "platform.altitude_m"
+    assert "expected a number" in str(e.value)
+
+
+def test_a_damaged_manifest_is_a_data_error(tmp_path):
+    r = lidarsim.run(als_campaign(), out=tmp_path / "m", stages=["plan"])
+    (r.folder / "manifest.json").write_text("[1, 2]")
+    with pytest.raises(lidarsim.DataError):
+        r.manifest
+    (r.folder / "manifest.json").write_text("{ not json")
+    with pytest.raises(lidarsim.DataError):
+        lidarsim.open_run(r.folder).manifest

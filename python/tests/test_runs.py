@@ -188,3 +188,30 @@ def test_a_sweep_returns_its_runs(session_dir):
     assert [r.campaign["platform"]["altitude_m"] for r in run.sweep] == [200, 400]
     assert lidarsim.open_run(run.folder).sweep[1].pulses().num_rows == 80
     assert lidarsim.compare([run.folder]).num_rows == 2
+
+
+def test_ctrl_c_ends_the_lidarsim_command_as_the_binary_does(session_dir):
+    # the console script pip installed (cli() may name the Rust binary instead)
+    exe = os.path.join(os.path.dirname(sys.executable), "lidarsim")
+    if not os.path.exists(exe):
+        pytest.skip("not run from an environment pip installed the package into")
+    camp = write_campaign(session_dir, track_campaign(), "track_cli.yaml")
+    out = session_dir / "track_cli_stopped"
+    child = subprocess.Popen(
+        [exe, "run", str(camp), "--out", str(out)],
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    t = time.monotonic()
+    while not (out / "waveforms" / "part-00000.parquet").is_file():
+        assert time.monotonic() - t < 120, "no part appeared"
+        assert child.poll() is None, child.stderr.read()
+        time.sleep(0.005)
+    child.send_signal(signal.SIGINT)
+    _, err = child.communicate(timeout=120)
+    if child.returncode == 0:
+        pytest.skip("the run ended before the signal arrived")
+    # what the command kept, one line, and the shell's 128 + SIGINT: no traceback on top
+    assert child.returncode == 130, (child.returncode, err)
+    assert "Traceback" not in err and "KeyboardInterrupt" not in err, err
+    assert "SIGINT" in err, err

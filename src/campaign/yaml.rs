@@ -111,7 +111,7 @@ fn bare_message(display: &str) -> String {
 
 /// serde's "invalid type: string \"high\", expected f64" in a reader's words, as the contract
 /// writes it: "expected a number, found \"high\"". Other messages pass unchanged.
-fn plain_words(message: &str) -> String {
+pub(crate) fn plain_words(message: &str) -> String {
     let Some(rest) = message
         .strip_prefix("invalid type: ")
         .or_else(|| message.strip_prefix("invalid value: "))

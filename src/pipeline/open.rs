@@ -57,6 +57,22 @@ impl RunFolder {
         crate::error::read_text(&self.file(name, stage)?)
     }
 
+    /// `manifest.json`, checked to be a JSON object (a damaged one is a data error, as
+    /// `--resume` takes it).
+    pub fn manifest_json(&self) -> Result<String> {
+        let path = self.file("manifest.json", "plan")?;
+        let text = crate::error::read_text(&path)?;
+        match serde_json::from_str::<serde_json::Value>(&text) {
+            Ok(v) if v.is_object() => Ok(text),
+            Ok(_) => Err(
+                Error::data(&path, "not a run's manifest (not a JSON object)")
+                    .advise("run the campaign again (--resume redoes what it cannot trust)"),
+            ),
+            Err(e) => Err(Error::data(&path, format!("damaged: {e}"))
+                .advise("run the campaign again (--resume redoes what it cannot trust)")),
+        }
+    }
+
     /// `campaign.resolved.yaml` as JSON text (YAML keys that are numbers become strings).
     pub fn campaign_json(&self) -> Result<String> {
         let path = self.file("campaign.resolved.yaml", "plan")?;

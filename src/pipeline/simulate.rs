@@ -241,6 +241,8 @@ pub fn simulate_in_memory(
     scratch: &mut Scratch,
 ) -> Result<Vec<Waveform>> {
     let plan = Plan::new(&loaded.campaign)?;
+    // refused as a run of the same campaign is: a gate of 10^12 bins would not fit
+    super::memory::fits(loaded, scene, &plan)?;
     let chosen = with_method_chosen(loaded, scene, &plan);
     let c = &chosen.as_ref().unwrap_or(loaded).campaign;
     let sim = PulseSimulator::new(c, scene);

@@ -154,14 +154,16 @@ pub fn load_campaign(doc: Doc, overrides: &[(String, serde_yaml::Value)]) -> Res
     for (k, v) in overrides {
         crate::campaign::yaml::set_path(&mut tree, k, v.clone()).map_err(|m| named(k, v, &m))?;
     }
-    let mut campaign: Campaign = serde_yaml::from_value(tree).map_err(|e| {
-        let e = e.to_string();
-        match overrides
-            .iter()
-            .find(|(k, _)| e.contains(k.rsplit('.').next().unwrap_or(k)))
-        {
-            Some((k, v)) => named(k, v, &e),
-            None => doc.error("", format!("with the overrides: {e}")),
+    let mut campaign: Campaign = serde_path_to_error::deserialize(tree).map_err(|e| {
+        let at = e.path().to_string();
+        let message = crate::campaign::yaml::plain_words(&e.into_inner().to_string());
+        match overrides.iter().find(|(k, _)| {
+            at == *k
+                || at.starts_with(&format!("{k}."))
+                || message.contains(&format!("`{}`", k.rsplit('.').next().unwrap_or(k)))
+        }) {
+            Some((k, v)) => named(k, v, &message),
+            None => doc.error(&at, format!("with the overrides: {message}")),
         }
     })?;
     campaign.resolve_files(&doc);

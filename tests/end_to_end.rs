@@ -810,11 +810,17 @@ fn compare_writes_csv_and_plots() {
         });
     assert!(svg.contains("<svg"), "not an SVG");
 
-    // a products.json or DSM report cut short is named, not shown as an empty row
-    for file in ["products.json", "dsm/report.json"] {
+    // a products.json or DSM report cut short, or a resolved campaign that is not one, is
+    // named, not shown as an empty row
+    for file in ["products.json", "dsm/report.json", "campaign.resolved.yaml"] {
         let path = runs[1].join(file);
         let whole = std::fs::read(&path).unwrap();
-        std::fs::write(&path, &whole[..whole.len() / 2]).unwrap();
+        if file.ends_with(".yaml") {
+            // YAML cut short mostly still parses: garbage instead
+            std::fs::write(&path, b"- [not a campaign").unwrap();
+        } else {
+            std::fs::write(&path, &whole[..whole.len() / 2]).unwrap();
+        }
         let (code, stdout, err) = lidarsim(&[
             "compare",
             runs[0].to_str().unwrap(),
@@ -960,6 +966,13 @@ fn resume_over_damaged_or_foreign_part_files() {
     run_ok(&camp, &damaged, &["--stages", "plan,simulate"]);
     truncate_half(&damaged.join("waveforms/part-00000.parquet"));
     let log = resume_redoes(&camp, &damaged, &clean);
+    assert!(log.contains("1 parts simulated"), "{log}");
+
+    // simulated, then a part's timings cut in half: the part is made again with them
+    let timings = dir.join("timings");
+    run_ok(&camp, &timings, &["--stages", "plan,simulate"]);
+    truncate_half(&timings.join("waveforms/part-00000.stats.csv"));
+    let log = resume_redoes(&camp, &timings, &clean);
     assert!(log.contains("1 parts simulated"), "{log}");
 
     // simulated, then a foreign Parquet file beside the parts: only part-NNNNN files are read

@@ -56,10 +56,21 @@ pub fn read_row(dir: &Path) -> Result<RunRow> {
     let manifest_path = dir.join("manifest.json");
     let manifest = Manifest::read(&manifest_path)
         .ok_or_else(|| Error::data(&manifest_path, "missing or not a lidarsim manifest"))?;
-    let resolved: serde_yaml::Value = std::fs::read_to_string(dir.join("campaign.resolved.yaml"))
-        .ok()
-        .and_then(|t| serde_yaml::from_str(&t).ok())
-        .unwrap_or(serde_yaml::Value::Null);
+    // a run stopped before its plan has none (its cells stay empty); one that is there but
+    // damaged is said, not shown as empty cells
+    let resolved_path = dir.join("campaign.resolved.yaml");
+    let resolved: serde_yaml::Value = match std::fs::read_to_string(&resolved_path) {
+        Err(_) => serde_yaml::Value::Null,
+        Ok(t) => match serde_yaml::from_str::<serde_yaml::Value>(&t) {
+            Ok(v) if v.is_mapping() => v,
+            _ => {
+                return Err(
+                    Error::data(&resolved_path, "damaged: not a resolved campaign")
+                        .advise("run the campaign again with --resume: its plan stage writes it"),
+                )
+            }
+        },
+    };
     // a figure with no meaning for the run (NaN in memory, null in JSON) is an empty cell
     let finite = |x: f64| Some(x).filter(|x| x.is_finite());
     let mut row = RunRow {

@@ -623,11 +623,16 @@ fn simulate_fingerprint(
 /// The first of a run's parts (in `bands` bands) that is missing or not whole, by its name.
 fn first_broken_part(out: &Path, parts: Parts, bands: usize, fp: &str) -> Option<String> {
     (0..parts.count())
-        .find(|&k| {
-            let rows = parts.range(k).len() * bands;
-            !part_is_whole(&out.join(part_name(k)), rows, fp)
-        })
+        .find(|&k| !part_done(out, parts, k, bands, fp))
         .map(part_name)
+}
+
+/// Whether part `k` is whole: its waveforms (checksum, rows, the simulation that made them)
+/// and its per-pulse timings beside them, which are made again with it when damaged.
+fn part_done(out: &Path, parts: Parts, k: usize, bands: usize, fp: &str) -> bool {
+    let pulses = parts.range(k).len();
+    part_is_whole(&out.join(part_name(k)), pulses * bands, fp)
+        && simulate::stats_are_whole(&out.join(simulate::stats_name(k)), pulses)
 }
 
 /// Bands the campaign traces: rows per pulse in its waveform parts.
@@ -658,8 +663,7 @@ fn simulate_stage(
         let _ = std::fs::remove_dir_all(&wf_dir);
     }
     write_text_atomic(&marker, fp)?;
-    let rows = |k: usize| cut.range(k).len() * bands_of(loaded);
-    let whole = |k: usize| part_is_whole(&out.join(part_name(k)), rows(k), fp);
+    let whole = |k: usize| part_done(out, cut, k, bands_of(loaded), fp);
     let todo: Vec<usize> = (0..parts)
         .filter(|k| shard.is_none_or(|(i, n)| k % n == i))
         .filter(|&k| !whole(k))

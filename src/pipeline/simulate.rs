@@ -56,7 +56,7 @@ pub(super) fn simulate_parts(
     let write = |(n, k, waveforms, secs): (usize, usize, Vec<Waveform>, Vec<f64>)| -> Result<()> {
         let [part, sidecar] = waveforms_pending(&out.join(part_name(k)), &waveforms, fingerprint)?;
         let stats = pulse_stats_pending(
-            &out.join(format!("waveforms/part-{k:05}.stats.csv")),
+            &out.join(stats_name(k)),
             waveforms.iter().step_by(bands),
             &secs,
         )?;
@@ -139,6 +139,25 @@ pub(super) fn simulate_parts(
 
 /// Per-pulse counters beside the waveforms (of the first band): effective paths per ray and
 /// time per ray. Kept out of the waveform files, which must not depend on timing.
+/// Part `k`'s per-pulse timings, beside it.
+pub(super) fn stats_name(k: usize) -> String {
+    format!("waveforms/part-{k:05}.stats.csv")
+}
+
+/// Whether a part's timings file holds its header and one whole row per pulse: a damaged
+/// one is made again with its part, as `--resume` trusts no damaged file.
+pub(super) fn stats_are_whole(path: &Path, pulses: usize) -> bool {
+    let Ok(text) = std::fs::read_to_string(path) else {
+        return false;
+    };
+    let mut lines = text.lines();
+    text.ends_with('\n')
+        && lines.next() == Some("pulse_id,rays,paths_per_ray,seconds,seconds_per_ray")
+        && lines.clone().count() == pulses
+        && lines
+            .all(|l| l.split(',').count() == 5 && l.split(',').all(|f| f.parse::<f64>().is_ok()))
+}
+
 pub(super) fn pulse_stats_pending<'w>(
     path: &Path,
     waveforms: impl Iterator<Item = &'w Waveform>,

@@ -377,7 +377,16 @@ impl PropertyAccess for PlySkip {
 pub(crate) fn load_ply(path: &Path) -> Result<MeshData> {
     let f = std::fs::File::open(path).map_err(|e| Error::io(path, "cannot read file", e))?;
     let mut reader = Reader::new(BufReader::with_capacity(1 << 20, f));
-    let bad = |e: &dyn std::fmt::Display| Error::file(path, format!("cannot parse PLY: {e}"));
+    // the ply crate's messages run over several lines (the line, the text, the cause): one
+    let bad = |e: &dyn std::fmt::Display| {
+        let text = e.to_string();
+        let one: Vec<&str> = text
+            .lines()
+            .map(str::trim)
+            .filter(|l| !l.is_empty())
+            .collect();
+        Error::file(path, format!("cannot parse PLY: {}", one.join("; ")))
+    };
     let vparser = Parser::<PlyVertex>::new();
     let fparser = Parser::<PlyFace>::new();
     let sparser = Parser::<PlySkip>::new();

@@ -737,6 +737,21 @@ fn ply_ascii_and_binary() {
         "{}",
         e.to_string()
     );
+    // a vertex line the ply crate cannot read: its several-line message told on one line
+    let ascii = std::fs::read_to_string(fixtures().join("quad_ascii.ply")).unwrap();
+    let broken = ascii.replacen("\n1 0 1 0", "\nzero 0 1 0", 1);
+    assert_ne!(broken, ascii, "the test edits a vertex line");
+    write(&d, "broken.ply", &broken);
+    let p = write(
+        &d,
+        "broken.yaml",
+        "name: ply\nmaterials:\n  soil: { reflectance: 0.2 }\nobjects:\n  - mesh: { file: broken.ply, material: soil }\n",
+    );
+    let e = Scene::load(&p, 1064.0).err().unwrap().to_string();
+    assert!(
+        e.contains("cannot parse PLY") && e.lines().count() == 1,
+        "{e}"
+    );
 }
 
 /// Objects placed by equal instance tables (a tree's foliage and trunk) are traced as one mesh,

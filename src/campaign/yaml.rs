@@ -68,6 +68,39 @@ impl Doc {
 
 /// Parses `text` (read from `path`) into `T`, with a located message on failure.
 pub fn parse<T: DeserializeOwned>(path: &Path, text: &str) -> Result<T> {
+    // A mapping's repeated key (two `bark:` under `materials:`) would keep the last value
+    // without a word where the type is a map; serde_yaml's own Value refuses it.
+    if let Err(e) = serde_yaml::from_str::<serde_yaml::Value>(text) {
+        let message = e.to_string();
+        if let Some(key) = message
+            .split_once("duplicate entry with key \"")
+            .and_then(|(_, rest)| rest.split_once('"'))
+            .map(|(k, _)| k.to_string())
+        {
+            // serde_yaml points at the mapping; the second time the key stands is the place
+            let mapping = e.location().map(|l| (l.line(), l.column()));
+            let second = mapping.and_then(|(line, col)| {
+                text.lines()
+                    .enumerate()
+                    .skip(line - 1)
+                    .filter(|(_, l)| {
+                        let indent = l.len() - l.trim_start().len();
+                        let t = l.trim_start();
+                        indent + 1 == col
+                            && (t.starts_with(&format!("{key}:"))
+                                || t.starts_with(&format!("\"{key}\":")))
+                    })
+                    .nth(1)
+                    .map(|(i, _)| (i + 1, col))
+            });
+            return Err(Error::at(
+                path,
+                second.or(mapping),
+                &key,
+                "given twice in the same mapping: keep one",
+            ));
+        }
+    }
     let de = serde_yaml::Deserializer::from_str(text);
     match serde_path_to_error::deserialize::<_, T>(de) {
         Ok(v) => Ok(v),
@@ -419,5 +452,18 @@ mod tests {
         }
         // a message of our own passes unchanged
         assert_eq!(plain_words("unknown field `q`"), "unknown field `q`");
+        // a key given twice in a mapping is refused where it stands, not silently replaced
+        let text = "materials:\n  bark: 1\n  leaf: 2\n  bark: 3\n";
+        let e =
+            parse::<std::collections::BTreeMap<String, std::collections::BTreeMap<String, f64>>>(
+                Path::new("f.yaml"),
+                text,
+            )
+            .unwrap_err()
+            .to_string();
+        assert_eq!(
+            e,
+            "f.yaml:4:3: bark: given twice in the same mapping: keep one"
+        );
     }
 }

@@ -189,7 +189,7 @@ fn campaign_rows_are_measured_and_missing_data_is_skipped() {
     );
     let table = bc::table(&[row], &[("mabel_532".into(), "absent".into())]);
     assert!(table.contains(
-        "| campaign | what | pulses | rays/pulse | run s | simulate s | products s | pulses/s simulate | pulses/s run | CPU | peak memory MB | result |"
+        "| campaign | what | pulses | rays/pulse | run s | simulate s | products s | pulses/s simulate | pulses/s run | CPU | peak memory MiB | result |"
     ));
     assert!(table.contains("| mabel_plane | plane track | 20 | 50 |"));
     assert!(table.contains(&share), "{share} in {table}");

@@ -33,7 +33,7 @@ pub struct CampaignRow {
     pub cpu_utilisation: Option<f64>,
     /// Threads the run used.
     pub threads: usize,
-    /// Peak resident memory during the run, MB (None where the OS does not tell).
+    /// Peak resident memory during the run, MiB (None where the OS does not tell).
     pub peak_mb: Option<f64>,
     /// What the run measured: solar photons per bin, photons per shot, points per pulse.
     pub result: String,
@@ -52,7 +52,7 @@ pub enum Planned {
     },
 }
 
-/// Peak resident memory since the last reset, MB.
+/// Peak resident memory since the last reset, MiB.
 pub fn peak_memory_mb() -> Option<f64> {
     crate::progress::peak_rss_bytes().map(|b| b as f64 / (1024.0 * 1024.0))
 }
@@ -674,7 +674,7 @@ pub fn scaling_table(rows: &[Scaling]) -> String {
 /// The markdown table of the campaign rows and the skipped ones.
 pub fn table(rows: &[CampaignRow], skipped: &[(String, String)]) -> String {
     let mut s = String::from(
-        "\n### Campaigns (paper sections 3.2-3.4 and an airborne survey), whole runs through the pipeline\n\nEach campaign runs in a `lidarsim run` process of its own, as a user runs it: run s is that process's wall time, products s the products stage's (with its share of the run), peak memory its peak resident memory (MiB). CPU is the simulate stage's process CPU time over its wall time, out of 100 % per thread. A campaign whose run takes under 2 s is run five times: its row is the run of median wall time.\n\n| campaign | what | pulses | rays/pulse | run s | simulate s | products s | pulses/s simulate | pulses/s run | CPU | peak memory MB | result |\n| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | --- |\n",
+        "\n### Campaigns (paper sections 3.2-3.4 and an airborne survey), whole runs through the pipeline\n\nEach campaign runs in a `lidarsim run` process of its own, as a user runs it: run s is that process's wall time, products s the products stage's (with its share of the run), peak memory its peak resident memory (MiB). CPU is the simulate stage's process CPU time over its wall time, out of 100 % per thread. A campaign whose run takes under 2 s is run five times: its row is the run of median wall time.\n\n| campaign | what | pulses | rays/pulse | run s | simulate s | products s | pulses/s simulate | pulses/s run | CPU | peak memory MiB | result |\n| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | --- |\n",
     );
     for r in rows {
         let _ = writeln!(

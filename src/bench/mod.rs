@@ -249,7 +249,7 @@ pub fn run(opts: &BenchOptions) -> Result<String> {
     if let Some(mb) = single_pulse_peak_mb {
         let _ = writeln!(
             text,
-            "\nPeak memory of the single-pulse runs (scene and tracer): {mb:.0} MB."
+            "\nPeak memory of the single-pulse runs (scene and tracer): {mb:.0} MiB."
         );
     }
     text += &sun_section(opts, &b, &reference);

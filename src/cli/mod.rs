@@ -22,7 +22,10 @@ pub enum Command {
     /// Run a campaign into a run folder (default runs/<name>).
     Run(RunArgs),
     /// Validate a campaign and its scene; print pulses, facets, instances and memory.
-    Check { campaign: PathBuf },
+    Check {
+        /// The campaign file (YAML).
+        campaign: PathBuf,
+    },
     /// One table of products across runs (a sweep folder stands for its sub-runs).
     Compare(CompareArgs),
     /// Procedural scenes.
@@ -40,7 +43,9 @@ pub enum Command {
 
 #[derive(Args, Debug)]
 pub struct RunArgs {
+    /// The campaign file (YAML).
     campaign: PathBuf,
+    /// The run folder (default: runs/<name>, <name> the campaign's).
     #[arg(long)]
     out: Option<PathBuf>,
     /// Worker threads (default: all cores). The output does not depend on it.
@@ -59,6 +64,7 @@ pub struct RunArgs {
 
 #[derive(Args, Debug)]
 pub struct CompareArgs {
+    /// Run folders (a sweep's folder stands for its sub-runs).
     #[arg(required = true)]
     runs: Vec<PathBuf>,
     /// Also write the table as CSV.
@@ -95,6 +101,7 @@ pub struct BenchArgs {
     /// Folder of the campaign rows' files (one YAML per row, quick.yaml for quick mode).
     #[arg(long, default_value = "pipelines/bench")]
     campaigns: PathBuf,
+    /// Worker threads (default: all cores).
     #[arg(long)]
     threads: Option<usize>,
     /// Field-of-view half angle, mrad, 0 < x < 1500.
@@ -114,8 +121,10 @@ pub enum SceneCommand {
 
 #[derive(Args, Debug)]
 pub struct GenerateArgs {
+    /// What to generate.
     #[arg(value_enum, ignore_case = true)]
     kind: SceneKind,
+    /// Seed of every random draw: the same seed, the same files.
     #[arg(long, default_value_t = 1)]
     seed: u64,
     /// Output folder (the scene file is OUT/scene.yaml or similar, printed at the end).
@@ -138,7 +147,6 @@ pub struct GenerateArgs {
     leaves: Option<usize>,
 }
 
-/// Parses the arguments and runs the command; returns the process exit code.
 /// Why this build cannot run on this CPU, if it cannot: `.cargo/config.toml` builds for
 /// x86-64-v3, and a CPU without its instructions would otherwise stop on the first one it
 /// meets, with no message.
@@ -165,6 +173,7 @@ pub fn unsupported_cpu() -> Option<String> {
     None
 }
 
+/// Parses the arguments and runs the command; returns the process exit code.
 pub fn main() -> i32 {
     main_with(std::env::args_os())
 }

@@ -388,7 +388,7 @@ fn trees(
         .map(|(i, p)| {
             let mut rng = stream(seed, 1000 + i as u64);
             let title = format!(
-                "{} template {i} (lidarsim generate, seed {seed})",
+                "{} template {i} (lidarsim scene generate, seed {seed})",
                 p.species
             );
             let t = tree::build(
@@ -564,7 +564,7 @@ fn pick(rng: &mut Rand, weights: &[f64]) -> usize {
 
 fn header(kind: SceneKind, seed: u64, lines: &[String]) -> String {
     let mut s = format!(
-        "# Procedural {} scene written by lidarsim generate (seed {seed}).\n",
+        "# Procedural {} scene written by lidarsim scene generate (seed {seed}).\n",
         kind.name()
     );
     for l in lines {
@@ -955,7 +955,7 @@ fn place_buildings(rng: &mut crate::rng::Rand, o: &StandOptions) -> Result<Vec<B
 fn buildings_obj(seed: u64, buildings: &[Building]) -> String {
     let n_buildings = buildings.len();
     let mut obj = format!(
-        "# {n_buildings} box buildings (lidarsim generate, seed {seed})
+        "# {n_buildings} box buildings (lidarsim scene generate, seed {seed})
 "
     );
     for b in buildings {

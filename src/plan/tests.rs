@@ -984,6 +984,17 @@ fn trajectory_files_stream_and_their_errors_are_located() {
         "time_s,x,y,z,roll_deg,pitch_deg,heading_deg\n0,0,0,100,0,0,90\n1,5,0,100,0\n",
     );
     assert!(e.contains("e.csv:3") && e.contains("fields"), "{e}");
+    // a time or a place beyond any flight, named where it stands
+    let e = bad(
+        "f.csv",
+        "time_s,x,y,z,roll_deg,pitch_deg,heading_deg\n0,0,0,100,0,0,90\n1e300,5,0,100,0,0,90\n",
+    );
+    assert!(e.contains("f.csv:3:1: time_s:"), "{e}");
+    let e = bad(
+        "g.csv",
+        "time_s,x,y,z,roll_deg,pitch_deg,heading_deg\n0,0,0,100,0,0,90\n1,1e300,0,100,0,0,90\n",
+    );
+    assert!(e.contains("g.csv:3:3: x:"), "{e}");
     let e = plan_in(
         &dir,
         &format!(

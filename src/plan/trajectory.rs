@@ -337,6 +337,28 @@ fn parse_row(
                 ))
             }
         };
+        // GPS seconds to the year 2296; positions within 10,000 km of the frame's origin
+        let (limit, what) = match c {
+            0 => (1e10, "a GPS time in seconds within ±10^10"),
+            1..=3 => (
+                1e7,
+                "a coordinate in metres within 10,000 km of the frame's origin",
+            ),
+            _ => (f64::INFINITY, ""),
+        };
+        let off = if (1..=3).contains(&c) {
+            origin[c - 1]
+        } else {
+            0.0
+        };
+        if (v[c] - off).abs() > limit {
+            return Err(Error::at(
+                path,
+                Some((line, column)),
+                name,
+                format!("must be {what}, found {field}"),
+            ));
+        }
     }
     Ok(Epoch {
         t: v[0],

@@ -114,11 +114,23 @@ fn check_material(
 /// A horizontal rectangle at `z` over `extent` (a plane's, the water's), finite and not empty.
 fn check_rectangle(doc: &Doc, key: &str, what: &str, z: f64, extent: [[f64; 2]; 2]) -> Result<()> {
     let [a, b] = extent;
-    let finite = z.is_finite() && a.iter().chain(b.iter()).all(|v| v.is_finite());
-    if !finite || a[0] == b[0] || a[1] == b[1] {
+    let within = |v: &f64| v.is_finite() && v.abs() <= super::MAX_COORDINATE_M;
+    if !within(&z) {
+        return Err(doc.error(
+            &format!("{key}.z"),
+            format!(
+                "expected a height in metres within ±{} km, found {z}",
+                super::MAX_COORDINATE_M / 1e3
+            ),
+        ));
+    }
+    if !a.iter().chain(b.iter()).all(within) || a[0] == b[0] || a[1] == b[1] {
         return Err(doc.error(
             &format!("{key}.extent"),
-            format!("the {what} must have a finite, non-empty extent [[x0, y0], [x1, y1]] with x0 ≠ x1 and y0 ≠ y1"),
+            format!(
+                "the {what} must have a non-empty extent [[x0, y0], [x1, y1]] with x0 ≠ x1 and y0 ≠ y1, every coordinate within ±{} km",
+                super::MAX_COORDINATE_M / 1e3
+            ),
         ));
     }
     Ok(())
@@ -442,18 +454,28 @@ impl Objects<'_> {
     fn heightfield(&mut self, key: String, h: &HeightfieldSpec) -> Result<ObjectPlan> {
         let doc = self.doc;
         check_material(doc, &format!("{key}.material"), &h.material, self.materials)?;
-        if !(h.cell_m.is_finite() && h.cell_m > 0.0) {
+        // between a micrometre and 10 km: a grid's cells and its extent stay in f32's reach
+        if !(h.cell_m.is_finite() && (1e-6..=1e4).contains(&h.cell_m)) {
             return Err(doc.error(
                 &format!("{key}.cell_m"),
                 format!(
-                    "expected a positive cell size in metres, found {}",
+                    "expected a cell size in metres from 10^-6 to 10^4, found {}",
                     h.cell_m
                 ),
             ));
         }
         let origin = h.origin.unwrap_or([0.0, 0.0]);
-        if !origin.iter().all(|v| v.is_finite()) {
-            return Err(doc.error(&format!("{key}.origin"), "expected finite coordinates"));
+        if !origin
+            .iter()
+            .all(|v| v.is_finite() && v.abs() <= super::MAX_COORDINATE_M)
+        {
+            return Err(doc.error(
+                &format!("{key}.origin"),
+                format!(
+                    "expected coordinates in metres within ±{} km",
+                    super::MAX_COORDINATE_M / 1e3
+                ),
+            ));
         }
         let p = existing(doc, &format!("{key}.file"), &h.file)?;
         self.files.push(p.clone());

@@ -1461,3 +1461,46 @@ fn group_index_table_falls_back_to_the_formula_for_other_bands() {
     assert_eq!(water.n_group[1], water_group_index(1.33, 1064.0));
     assert!(water.n_group[1] != 1.4 && water.n_group[1] > 1.33);
 }
+
+/// Coordinates beyond any scene (a plane a 10^300 m wide, a grid of 10^300 m cells) are
+/// refused at their key with the bound, not met later as a vertex without a place.
+#[test]
+fn planes_and_grids_beyond_any_scene_are_refused_at_their_key() {
+    let dir = tmp("beyond");
+    write(&dir, "dem.csv", "0 1\n1 0\n");
+    for (object, key) in [
+        (
+            "plane: { z: 0, extent: [[-1e300, 0], [1, 1]], material: soil }",
+            "objects[0].plane.extent",
+        ),
+        (
+            "plane: { z: 1e9, extent: [[0, 0], [1, 1]], material: soil }",
+            "objects[0].plane.z",
+        ),
+        (
+            "heightfield: { file: dem.csv, cell_m: 1e300, material: soil }",
+            "objects[0].heightfield.cell_m",
+        ),
+        (
+            "heightfield: { file: dem.csv, cell_m: 1e-300, material: soil }",
+            "objects[0].heightfield.cell_m",
+        ),
+        (
+            "heightfield: { file: dem.csv, cell_m: 1, origin: [1e12, 0], material: soil }",
+            "objects[0].heightfield.origin",
+        ),
+    ] {
+        let p = write(
+            &dir,
+            "scene.yaml",
+            &format!(
+                "name: s\nmaterials:\n  soil: {{ reflectance: 0.3 }}\nobjects:\n  - {object}\n"
+            ),
+        );
+        let e = Scene::load(&p, 1064.0).err().expect(object).to_string();
+        assert!(
+            e.contains("scene.yaml:5:") && e.contains(key) && e.lines().count() == 1,
+            "{object}: {e}"
+        );
+    }
+}

@@ -180,6 +180,58 @@ const NAMES_MTL: &str = "__lidarsim_usemtl_names__";
 ///
 /// Long because each kind of bad input (no faces, indices out of range, non-finite
 /// vertices, degenerate triangles) gets its own located message.
+/// The first line (1-based) of an OBJ text whose face names a vertex index beyond the
+/// vertices given so far (or 0, or a relative index reaching before the first).
+fn obj_line_out_of_range(text: &str) -> Option<usize> {
+    let mut vertices = 0i64;
+    for (k, line) in text.lines().enumerate() {
+        let mut words = line.split_whitespace();
+        match words.next() {
+            Some("v") => vertices += 1,
+            Some("f") | Some("l") => {
+                let bad = words.any(|w| {
+                    let i: i64 = w
+                        .split('/')
+                        .next()
+                        .and_then(|s| s.parse().ok())
+                        .unwrap_or(0);
+                    i == 0 || i > vertices || -i > vertices
+                });
+                if bad {
+                    return Some(k + 1);
+                }
+            }
+            _ => {}
+        }
+    }
+    None
+}
+
+/// The first line (1-based) of an OBJ text whose vertex, normal, texture coordinate or face
+/// does not hold the numbers its keyword needs.
+fn obj_line_unparsable(text: &str) -> Option<usize> {
+    text.lines().enumerate().find_map(|(k, line)| {
+        let mut words = line.split_whitespace();
+        let ok = match words.next() {
+            Some("v") | Some("vn") => {
+                let n: Vec<&str> = words.collect();
+                n.len() >= 3 && n.iter().all(|w| w.parse::<f32>().is_ok())
+            }
+            Some("vt") => words.all(|w| w.parse::<f32>().is_ok()),
+            Some("f") => {
+                let n: Vec<&str> = words.collect();
+                n.len() >= 3
+                    && n.iter().all(|w| {
+                        w.split('/')
+                            .all(|p| p.is_empty() || p.parse::<i64>().is_ok())
+                    })
+            }
+            _ => true,
+        };
+        (!ok).then_some(k + 1)
+    })
+}
+
 pub(crate) fn load_obj(path: &Path) -> Result<MeshData> {
     let bytes = std::fs::read(path).map_err(|e| Error::io(path, "cannot read file", e))?;
     let text = std::str::from_utf8(&bytes)
@@ -222,12 +274,19 @@ pub(crate) fn load_obj(path: &Path) -> Result<MeshData> {
             Ok((Vec::new(), std::iter::empty().collect()))
         }
     })
-    .map_err(|e| match e {
-        tobj::LoadError::FaceVertexOutOfBounds => Error::file(
-            path,
-            "a face refers to a vertex that does not exist (index out of range)",
-        ),
-        e => Error::file(path, format!("cannot parse OBJ: {e}")),
+    .map_err(|e| {
+        // tobj says what, not where: the line is found again here
+        let (what, line) = match e {
+            tobj::LoadError::FaceVertexOutOfBounds => (
+                "a face refers to a vertex that does not exist (index out of range)".to_string(),
+                obj_line_out_of_range(text),
+            ),
+            e => (format!("cannot parse OBJ: {e}"), obj_line_unparsable(text)),
+        };
+        match line {
+            Some(n) => Error::line(path, n, what),
+            None => Error::file(path, what),
+        }
     })?;
 
     let file_stem = stem(path);
@@ -258,10 +317,11 @@ pub(crate) fn load_obj(path: &Path) -> Result<MeshData> {
         );
         for t in m.mesh.indices.chunks_exact(3) {
             if t.iter().any(|&i| i as usize >= nv) {
-                return Err(Error::file(
-                    path,
-                    "a face refers to a vertex that does not exist (index out of range)",
-                ));
+                let what = "a face refers to a vertex that does not exist (index out of range)";
+                return Err(match obj_line_out_of_range(text) {
+                    Some(n) => Error::line(path, n, what),
+                    None => Error::file(path, what),
+                });
             }
             b.tris.push([base + t[0], base + t[1], base + t[2]]);
             b.slots.push(slot);

@@ -614,11 +614,20 @@ fn mesh_errors() {
     assert!(e.contains("flat.obj") && e.contains("zero area"), "{e}");
     write(&d, "oob.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 7\n");
     let e = load(&scene("  - mesh: { file: oob.obj, material: bark }\n"));
-    assert!(e.contains("oob.obj") && e.contains("out of range"), "{e}");
-    write(&d, "junk.obj", "v 0 0 zero\nf 1 2 3\n");
+    assert!(
+        e.contains("oob.obj:4:") && e.contains("out of range"),
+        "{e}"
+    );
+    write(&d, "junk.obj", "v 0 0 0\nv 0 0 zero\nf 1 2 3\n");
     let e = load(&scene("  - mesh: { file: junk.obj, material: bark }\n"));
     assert!(
-        e.contains("junk.obj") && e.contains("cannot parse OBJ"),
+        e.contains("junk.obj:2:") && e.contains("cannot parse OBJ"),
+        "{e}"
+    );
+    write(&d, "junkf.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 x\n");
+    let e = load(&scene("  - mesh: { file: junkf.obj, material: bark }\n"));
+    assert!(
+        e.contains("junkf.obj:4:") && e.contains("cannot parse OBJ"),
         "{e}"
     );
     // One degenerate triangle among good ones is dropped silently.

@@ -662,7 +662,8 @@ from pyproj import Transformer
 d = sys.argv[1]
 bin_m = 299792458.0 * 1e-9 / 2
 with h5py.File(d + "/gedi/waveforms_l1b.h5", "r") as f:
-    assert f.attrs["crs"].decode() == "EPSG:32631", dict(f.attrs)
+    # text attributes as GEDI stores them: one-element arrays of variable-length strings
+    assert f.attrs["crs"][0] == "EPSG:32631", dict(f.attrs)
     b = f["BEAM0000"]
     for k in ["rxwaveform", "rx_sample_count", "rx_sample_start_index", "txwaveform",
               "shot_number", "delta_time", "noise_mean_corrected", "stale_return_flag",
@@ -875,6 +876,39 @@ def same_types(ours, real, group_ours, group_real, extra):
         assert not alone, (ours, "not in the real product:", alone)
         return len(shared)
 
+# ATL03's reference keeps its attributes: every units, long_name and _FillValue it gives a
+# dataset we write too is ours, equal
+def same_attrs(ours, real, group):
+    def text(v):
+        return v.decode() if isinstance(v, bytes) else v
+    n = 0
+    with h5py.File(ours) as o, h5py.File(real) as r:
+        mine, theirs = datasets(o[group]), datasets(r[group])
+        for k in [k for k in mine if k in theirs]:
+            for a in ["units", "long_name", "_FillValue"]:
+                if a in theirs[k].attrs:
+                    assert a in mine[k].attrs, (k, a, "missing")
+                    x, y = text(mine[k].attrs[a]), text(theirs[k].attrs[a])
+                    assert x == y, (k, a, x, y)
+                    n += 1
+    return n
+
+# GEDI's text attributes (root, METADATA, beams) are one-element arrays of variable-length
+# strings: a reader that indexes them reads ours as theirs
+for ours, real in [(ours_l1b, real_l1b), (ours_l2a, real_l2a)]:
+    with h5py.File(ours) as o, h5py.File(real) as r:
+        for (go, gr) in [("/", "/"), ("METADATA/DatasetIdentification", "METADATA/DatasetIdentification"), ("BEAM0000", "BEAM0101")]:
+            shared = [k for k in o[go].attrs if k in r[gr].attrs]
+            assert shared or go == "BEAM0000", (ours, go)
+            for k in shared:
+                a, b = o[go].attrs[k], r[gr].attrs[k]
+                assert (a.shape, a.dtype, type(a[0])) == (b.shape, b.dtype, type(b[0])), (ours, go, k, a, b)
+    with h5py.File(ours) as o:
+        assert o.attrs["short_name"][0] == ("GEDI_L1B" if ours == ours_l1b else "GEDI_L2A")
+
+n4 = same_attrs(ours_atl, real_atl, "gt1l")
+assert n4 >= 60, n4
+print("ATL03 attributes equal to the real product's:", n4)
 n1 = same_types(ours_l1b, real_l1b, "BEAM0000", "BEAM0101", [])
 n2 = same_types(ours_l2a, real_l2a, "BEAM0000", "BEAM0101", ["truth_"])
 n3 = same_types(ours_atl, real_atl, "gt1l", "gt1l", ["truth_source", "geolocation/reference_photon_index"])
@@ -885,7 +919,7 @@ with h5py.File(ours_l2a) as f:
               "num_detectedmodes", "solar_elevation", "beam", "channel", "truth_ground_elev",
               "truth_canopy_top", "truth_rh"]:
         assert k in f["BEAM0000"], k
-    assert f.attrs["short_name"].decode() == "GEDI_L2A"
+    assert f.attrs["short_name"][0] == "GEDI_L2A"
     assert "METADATA/DatasetIdentification" in f
 
 # one reader for both: an rGEDI-like waveform and geolocation reader on L1B, the usual filter

@@ -74,6 +74,13 @@ impl<'a> Field<'a> {
         self
     }
 
+    /// The `long_name` attribute: the real product's short title of the dataset.
+    pub fn long_name(mut self, name: &str) -> Self {
+        self.attrs
+            .push(("long_name", AttrValue::String(name.to_string())));
+        self
+    }
+
     /// The product's fill value for the elements the simulation does not define, in the
     /// `_FillValue` attribute (as netCDF and the missions' readers look for it).
     pub fn fill(mut self, value: AttrValue) -> Self {
@@ -138,6 +145,20 @@ pub struct H5Writer {
     groups: Vec<(String, Vec<(String, AttrValue)>)>,
     columns: Vec<Column>,
     index: HashMap<String, usize>,
+    /// Text attributes of the root and groups as GEDI's files store them: one-element arrays
+    /// of variable-length strings (so `attrs["short_name"][0]` reads on ours as on theirs),
+    /// rather than fixed-width scalars.
+    gedi_strings: bool,
+}
+
+/// A text attribute: a fixed-width scalar, or as GEDI stores its text (a one-element array of
+/// variable-length ASCII strings, UTF-8 where the text is not ASCII).
+fn text_attr(value: &str, gedi: bool) -> AttrValue {
+    match (gedi, value.is_ascii()) {
+        (false, _) => AttrValue::String(value.to_string()),
+        (true, true) => AttrValue::VarLenAsciiStringArray(vec![value.to_string()]),
+        (true, false) => AttrValue::VarLenStringArray(vec![value.to_string()]),
+    }
 }
 
 /// A write the HDF5 writer could not make: the system's refusal, as far as lidarsim can
@@ -173,14 +194,25 @@ impl H5Writer {
             groups: Vec::new(),
             columns: Vec::new(),
             index: HashMap::new(),
+            gedi_strings: false,
         })
+    }
+
+    /// From here on (and for the root's), text attributes as GEDI's files store them.
+    pub fn gedi_strings(&mut self) {
+        self.gedi_strings = true;
+        for (_, v) in &mut self.root_attrs {
+            if let AttrValue::String(s) = v {
+                *v = text_attr(s, true);
+            }
+        }
     }
 
     /// Declares a group (after its parent) with string attributes.
     pub fn group(&mut self, name: &str, attrs: &[(&str, String)]) -> Result<()> {
         let attrs = attrs
             .iter()
-            .map(|(k, v)| (k.to_string(), AttrValue::String(v.clone())))
+            .map(|(k, v)| (k.to_string(), text_attr(v, self.gedi_strings)))
             .collect();
         self.group_with(name, attrs)
     }

@@ -67,6 +67,7 @@ impl L1b {
         let mut attrs = root_attrs(setup.campaign, setup.frame, "GEDI_L1B")?;
         attrs.push(("simulated", format!("simulated by lidarsim {}, not a GEDI granule: laid out as GEDI01_B so its readers open it", env!("CARGO_PKG_VERSION"))));
         let mut h5 = H5Writer::create(path, &attrs)?;
+        h5.gedi_strings();
         dataset_identification(
             &mut h5,
             "GEDI_L1B",

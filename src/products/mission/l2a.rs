@@ -55,6 +55,7 @@ impl L2a {
         attrs.push(("simulated", format!("simulated by lidarsim {}, not a GEDI granule: laid out as GEDI02_A so its readers open it", env!("CARGO_PKG_VERSION"))));
         attrs.push(("algorithm", algorithm()));
         let mut h5 = H5Writer::create(path, &attrs)?;
+        h5.gedi_strings();
         dataset_identification(
             &mut h5,
             "GEDI_L2A",

@@ -118,6 +118,15 @@ impl Geo {
             Geo::Frame { .. } => "degrees",
         }
     }
+
+    /// Latitude's and longitude's units as ATL03 gives them (CF's names), or metres without
+    /// a frame.
+    fn lat_lon_units(&self) -> (&'static str, &'static str) {
+        match self {
+            Geo::Local => ("m", "m"),
+            Geo::Frame { .. } => ("degrees_north", "degrees_east"),
+        }
+    }
 }
 
 /// GPS seconds (since 1980-01-06) of 2018-01-01T00:00:00 UTC, the GEDI and ATLAS epoch: the

@@ -2,7 +2,6 @@
 
 mod common;
 use common::*;
-use std::path::PathBuf;
 
 const SCENE: &str = "name: s
 materials:
@@ -29,7 +28,7 @@ simulation: { rays_per_pulse: 100 }
 ";
 
 /// Writes a campaign and scene (either may be edited) and runs `lidarsim check` on it.
-fn check(name: &str, campaign: &str, scene: &str) -> (i32, String, PathBuf) {
+fn check(name: &str, campaign: &str, scene: &str) -> (i32, String, Tmp) {
     let dir = tmp(&format!("bad_{name}"));
     write(&dir, "scene.yaml", scene);
     let path = write(&dir, "campaign.yaml", campaign);

@@ -236,7 +236,7 @@ fn the_first_receiver_surface_leaves_the_solar_signal_as_it_was() {
 
 /// A campaign over leaves on soil in sunlight (30°, fixed selection; bdpt, receiver depth
 /// first, `rays` rays, order 5) and its folder.
-fn leaves_in_sunlight(name: &str, rays: u64) -> (std::path::PathBuf, String) {
+fn leaves_in_sunlight(name: &str, rays: u64) -> (Tmp, String) {
     let dir = tmp(name);
     let scene = leaf_layer(&dir);
     let inst = Inst {

@@ -225,10 +225,11 @@ pub fn write_las_chunks(
         };
         let mut w = Writer::new(sink, header).map_err(err)?;
         let mut fix = HeaderFix::default();
+        let transforms = *w.header().transforms();
         let written = chunks(&mut |points| {
             for p in points {
                 let q = to_las(p, layout);
-                fix.add(&q, &w.header().transforms().clone())?;
+                fix.add(&q, &transforms)?;
                 w.write_point(q).map_err(err)?;
             }
             Ok(())
@@ -279,7 +280,7 @@ impl HeaderFix {
 
     fn patch(&self, file: &mut std::fs::File, layout: &Layout) -> std::io::Result<()> {
         if let Some(t) = self.first_gps_s {
-            let (year, day) = utc_year_and_day(t);
+            let (year, day) = gps_year_and_day(t);
             let mut date = [0u8; 4];
             date[..2].copy_from_slice(&day.to_le_bytes());
             date[2..].copy_from_slice(&year.to_le_bytes());
@@ -307,7 +308,7 @@ impl HeaderFix {
 
 /// The year and day of the year (from 1) of a GPS time in seconds since 1980-01-06, on
 /// GPS's clock; clamped to the years a LAS header can hold.
-fn utc_year_and_day(gps_s: f64) -> (u16, u16) {
+fn gps_year_and_day(gps_s: f64) -> (u16, u16) {
     // days from 1970-01-01 (the civil-from-days algorithm's epoch) to 1980-01-06: 3657
     let days = (gps_s / 86_400.0).floor().clamp(-3e6, 3e7) as i64 + 3657;
     let z = days + 719_468;
@@ -577,11 +578,11 @@ mod tests {
             let h = Reader::from_path(&path).unwrap().header().clone();
             assert_eq!(h.number_of_points(), 500);
         }
-        assert_eq!(utc_year_and_day(0.0), (1980, 6));
-        assert_eq!(utc_year_and_day(1_198_800_018.0), (2018, 1));
+        assert_eq!(gps_year_and_day(0.0), (1980, 6));
+        assert_eq!(gps_year_and_day(1_198_800_018.0), (2018, 1));
         // 2020-12-31T12:00:00Z, the 366th day of a leap year (GPS time 18 s ahead of UTC)
-        assert_eq!(utc_year_and_day(1_293_451_218.0), (2020, 366));
-        assert_eq!(utc_year_and_day(1_235_433_618.0), (2019, 60), "2019-03-01");
+        assert_eq!(gps_year_and_day(1_293_451_218.0), (2020, 366));
+        assert_eq!(gps_year_and_day(1_235_433_618.0), (2019, 60), "2019-03-01");
     }
 
     /// Points 300 km apart do not fit i32 steps of 0.1 mm: the file falls back to 1 mm.

@@ -1125,8 +1125,8 @@ impl Campaign {
                 "sun.irradiance_w_m2_um",
                 s.irradiance_w_m2_um,
                 0.0,
-                1e5,
-                "an irradiance in W m⁻² µm⁻¹ from 0 to 10^5 (the sun gives about 2000 at most)",
+                1e8,
+                "an irradiance in W m⁻² µm⁻¹ from 0 to 10^8 (the sun gives about 2000 at most)",
             )?;
         }
         let s = &self.simulation;

@@ -151,7 +151,14 @@ impl Process {
 
     fn value(&self, seed: u64, n: u64, id: u64, time: &dyn Fn(u64) -> f64) -> [f64; 3] {
         if self.tau <= 0.0 {
-            let w = self.draw(seed, id);
+            // channels that fire together (a multibeam head's, one time) share one error:
+            // the firing's first pulse's draw
+            let t = time(id);
+            let mut first = id;
+            while first > 0 && time(first - 1) == t {
+                first -= 1;
+            }
+            let w = self.draw(seed, first);
             return std::array::from_fn(|d| self.sd[d] * w[d]);
         }
         let last = n - 1;

@@ -1059,6 +1059,40 @@ fn mount_and_boresight() {
     }
 }
 
+/// The channels of a multibeam head fire together: with white errors (correlation 0) as with
+/// correlated ones, they share one recorded pose's error, and successive firings do not.
+#[test]
+fn channels_that_fire_together_share_one_error() {
+    for tau in [
+        "",
+        ", position_correlation_s: 0.1, attitude_correlation_s: 0.1",
+    ] {
+        let p = pulses(&format!(
+            "platform: {{ kind: als, altitude_m: 30, speed_m_s: 11, prf_hz: 3000, lines: [ {{ start: [0, 0], end: [10, 0] }} ],
+                scanner: {{ pattern: multibeam, channels_deg: [-25, -10.5, 0, 7, 22], rotation_hz: 7 }},
+                errors: {{ position_sd_m: [0.05, 0.05, 0.05], attitude_sd_deg: [0.1, 0.1, 0.1]{tau} }} }}"
+        ));
+        assert!(p.len() >= 500 && p.len() % 5 == 0, "{}", p.len());
+        let mut differ = 0;
+        for firing in p.chunks_exact(5) {
+            let d0 = firing[0].rec_origin() - firing[0].origin;
+            for q in firing {
+                assert_eq!(q.gps_time_s, firing[0].gps_time_s, "one firing, one time");
+                let d = q.rec_origin() - q.origin;
+                assert!((d - d0).length() < 1e-12, "{tau}: {d} against {d0}");
+            }
+            differ += usize::from(
+                firing[0].gps_time_s != p[0].gps_time_s
+                    && (d0 - (p[0].rec_origin() - p[0].origin)).length() > 1e-9,
+            );
+        }
+        assert!(
+            differ > p.len() / 5 - 2,
+            "{tau}: firings share errors: {differ}"
+        );
+    }
+}
+
 /// White navigation errors (correlation 0) over 10^5 pulses: the recorded positions scatter
 /// about the flown ones with the configured standard deviations (within 5 %: the estimate's
 /// relative SE is 1/sqrt(2N) = 0.22 %), attitude errors turn the recorded beam by as much.

@@ -1177,3 +1177,50 @@ fn atl03_beams_share_the_shot_counter_and_count_along_their_own_track() {
         );
     }
 }
+
+/// A spaceborne platform pointing off nadir: every photon's `dist_ph_along` lies within its
+/// 20 m segment, the first shot's too (its direction of travel is the platform's), and
+/// `dist_ph_across`, from the pulse's nadir point, is altitude × tan(off-nadir) on one side
+/// for every shot.
+#[test]
+fn atl03_off_nadir_photons_stay_in_their_segments() {
+    let dir = tmp("mission_atl03_off_nadir");
+    plane_scene(&dir, 0.5, 100.0);
+    let (h, off_deg) = (496_000.0f64, 1.5f64);
+    let camp = write(
+        &dir,
+        "c.yaml",
+        &format!(
+            "name: off\nscene: plane.yaml\nseed: 1\nwavelength_nm: 532\nframe: {{ crs: EPSG:32756, origin: [334000, 6252000, 45.5] }}\ninstrument: {{ kind: photon_counting, pulse_energy_j: 1.0e-4, pulse_fwhm_ns: 1.5, footprint_half_angle_mrad: 0.0111, fov_half_angle_mrad: 0.0417, receiver_area_m2: 0.503, bin_ns: 0.2, quantum_efficiency: 0.15, dead_time_ns: 3.2 }}\nplatform: {{ kind: spaceborne, altitude_m: {h}, ground_speed_m_s: 6900, prf_hz: 10000, off_nadir_deg: {off_deg}, track: {{ start: [0, -50], end: [0, 50] }}, beams: [ {{ cross_track_m: 0 }} ] }}\nsimulation: {{ method: forward, rays_per_pulse: 20, max_order: 1 }}\n"
+        ),
+    );
+    let out = dir.join("run");
+    run_cli(&camp, &out, None);
+    let f = h5(&out.join("photons_atl03.h5"));
+    let along = f32s(&f, "gt1l/heights/dist_ph_along");
+    let across = f32s(&f, "gt1l/heights/dist_ph_across");
+    let shot = f
+        .dataset("gt1l/heights/ph_id_pulse")
+        .and_then(|d| d.read_u8())
+        .unwrap();
+    assert!(
+        along.len() > 100 && shot.contains(&1),
+        "{} photons",
+        along.len()
+    );
+    assert!(
+        along.iter().all(|&a| (0.0..20.0).contains(&a)),
+        "{:?}",
+        along
+            .iter()
+            .filter(|a| !(0.0..20.0).contains(*a))
+            .collect::<Vec<_>>()
+    );
+    let want = h * off_deg.to_radians().tan();
+    for (c, s) in across.iter().zip(&shot) {
+        assert!(
+            ((c.abs() as f64) - want).abs() < 1.0 && c.signum() == across[0].signum(),
+            "shot {s}: dist_ph_across {c} against ±{want}"
+        );
+    }
+}

@@ -312,7 +312,13 @@ impl Atl03 {
         }
         let b = format!("{}/heights", track.name);
         let along = (pulse.origin - track.first).truncate();
-        let unit = along.try_normalize();
+        // the direction of travel: the platform's, which the track's first pulse has too (the
+        // way from the first pulse is no direction at the first pulse itself)
+        let unit = pulse
+            .along
+            .truncate()
+            .try_normalize()
+            .or_else(|| along.try_normalize());
         // the pulse's segment, by its nadir point's distance along the track; the one before
         // is written once the track leaves it, with any it skipped (no pulse: no photons)
         let k = (along.length() / SEGMENT_M).floor() as i64;

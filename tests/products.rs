@@ -570,44 +570,46 @@ fn simulation_noise_against_photon_noise_falls_as_one_over_rays() {
 /// Two returns that the waveform separates are never merged: noise-free waveforms of two
 /// Gaussians (analytic, bin-integrated), the weaker 5-50 % of the stronger, 1.5 to 5 pulse
 /// FWHMs apart, decompose into two returns, each centre within 1 cm of its Gaussian's
-/// (1 ns bins: 15 cm of range).
+/// (1 ns bins: 15 cm of range); with the pulse sampled finely (σ of 3 bins) and coarsely (a
+/// 1.5 ns pulse in 1 ns bins: σ of 0.64 bins, where the two are 2.2 bins apart at 1.5 FWHM).
 #[test]
 fn two_gaussians_give_two_returns_at_their_centres() {
     use lidarsim::products::returns::{decompose, Decomposition, Receiver};
     use lidarsim::waveform::normal_cdf;
-    let sigma = 3.0f64;
-    let fwhm = 2.0 * (2.0 * 2f64.ln()).sqrt() * sigma;
-    let bin_m = 1e-9 * C / 2.0;
-    let receiver = Receiver {
-        sigma_bins: sigma,
-        footprint_edge_sigmas: None,
-        noise_floor: 0.0,
-        false_alarm_rate: None,
-    };
-    for ratio in [0.05, 0.1, 0.2, 0.3, 0.5] {
-        for separation in [1.5, 2.0, 2.5, 3.0, 4.0, 5.0] {
-            let (c1, c2) = (100.3, 100.3 + separation * fwhm);
-            let bin = |c: f64, a: f64, i: usize| {
-                let (x0, x1) = ((i as f64 - c) / sigma, (i as f64 + 1.0 - c) / sigma);
-                a * (normal_cdf(x1) - normal_cdf(x0))
-            };
-            let n = 260;
-            let y: Vec<f32> = (0..n)
-                .map(|i| (bin(c1, 1e5, i) + bin(c2, ratio * 1e5, i)) as f32)
-                .collect();
-            let zero = vec![0.0f32; n];
-            let comps = decompose(&y, &zero, &zero, 5.0, 4, Decomposition::Gaussian, &receiver);
-            let centres: Vec<f64> = comps.iter().map(|c| c.centre_bin).collect();
-            assert_eq!(
-                comps.len(),
-                2,
-                "ratio {ratio}, {separation} FWHM: {centres:?}"
-            );
-            for (got, want) in centres.iter().zip([c1, c2]) {
-                assert!(
-                    (got - want).abs() * bin_m < 0.01,
-                    "ratio {ratio}, {separation} FWHM: {got} against {want}"
+    for sigma in [3.0f64, 1.5 / (2.0 * (2.0 * 2f64.ln()).sqrt())] {
+        let fwhm = 2.0 * (2.0 * 2f64.ln()).sqrt() * sigma;
+        let bin_m = 1e-9 * C / 2.0;
+        let receiver = Receiver {
+            sigma_bins: sigma,
+            footprint_edge_sigmas: None,
+            noise_floor: 0.0,
+            false_alarm_rate: None,
+        };
+        for ratio in [0.05, 0.1, 0.2, 0.3, 0.5] {
+            for separation in [1.5, 2.0, 2.5, 3.0, 4.0, 5.0] {
+                let (c1, c2) = (100.3, 100.3 + separation * fwhm);
+                let bin = |c: f64, a: f64, i: usize| {
+                    let (x0, x1) = ((i as f64 - c) / sigma, (i as f64 + 1.0 - c) / sigma);
+                    a * (normal_cdf(x1) - normal_cdf(x0))
+                };
+                let n = 260;
+                let y: Vec<f32> = (0..n)
+                    .map(|i| (bin(c1, 1e5, i) + bin(c2, ratio * 1e5, i)) as f32)
+                    .collect();
+                let zero = vec![0.0f32; n];
+                let comps = decompose(&y, &zero, &zero, 5.0, 4, Decomposition::Gaussian, &receiver);
+                let centres: Vec<f64> = comps.iter().map(|c| c.centre_bin).collect();
+                assert_eq!(
+                    comps.len(),
+                    2,
+                    "σ {sigma} bins, ratio {ratio}, {separation} FWHM: {centres:?}"
                 );
+                for (got, want) in centres.iter().zip([c1, c2]) {
+                    assert!(
+                        (got - want).abs() * bin_m < 0.01,
+                        "σ {sigma} bins, ratio {ratio}, {separation} FWHM: {got} against {want}"
+                    );
+                }
             }
         }
     }

@@ -239,8 +239,10 @@ fn fit_group(
             .collect();
         excess.sort_by(|&a, &b| z[b].total_cmp(&z[a]));
         excess.truncate(3);
+        // A pulse sampled coarsely (σ under a bin) keeps its own width here, down to half a
+        // bin: a trial as wide as a bin would blend two returns 2 bins apart into one.
         for j in excess {
-            let half = (2.0 * hint.max(1.0)).ceil() as usize;
+            let half = (2.0 * hint.max(0.5)).ceil() as usize;
             let (a, b) = (j.saturating_sub(half), (j + half + 1).min(r.len()));
             let area: f64 = r[a..b].iter().sum();
             let lo = win.offset as usize;
@@ -253,14 +255,14 @@ fn fit_group(
             // Only a loose screen: the deviance test below decides.
             if area > threshold.area && area > 2.0 * sd {
                 let mut t = params.clone();
-                t.push([win.offset + j as f64 + 0.5, hint.max(1.0), area]);
+                t.push([win.offset + j as f64 + 0.5, hint.max(0.5), area]);
                 trials.push(t);
             }
         }
         // Two returns closer than their widths blend into one wide component: try it split.
         let widest = (0..params.len())
             .max_by(|&a, &b| params[a][1].total_cmp(&params[b][1]))
-            .filter(|&w| params[w][1] > 1.3 * floor.max(1.0));
+            .filter(|&w| params[w][1] > 1.3 * floor.max(hint.clamp(0.5, 1.0)));
         if let Some(w) = widest {
             let p = params[w];
             let s2 = (0.6 * p[1]).max(floor);

@@ -1072,7 +1072,7 @@ fn channels_that_fire_together_share_one_error() {
                 scanner: {{ pattern: multibeam, channels_deg: [-25, -10.5, 0, 7, 22], rotation_hz: 7 }},
                 errors: {{ position_sd_m: [0.05, 0.05, 0.05], attitude_sd_deg: [0.1, 0.1, 0.1]{tau} }} }}"
         ));
-        assert!(p.len() >= 500 && p.len() % 5 == 0, "{}", p.len());
+        assert!(p.len() >= 500 && p.len().is_multiple_of(5), "{}", p.len());
         let mut differ = 0;
         for firing in p.chunks_exact(5) {
             let d0 = firing[0].rec_origin() - firing[0].origin;

@@ -995,6 +995,29 @@ fn trajectory_files_stream_and_their_errors_are_located() {
         "time_s,x,y,z,roll_deg,pitch_deg,heading_deg\n0,0,0,100,0,0,90\n1,1e300,0,100,0,0,90\n",
     );
     assert!(e.contains("g.csv:3:3: x:"), "{e}");
+    // a scanner stepped along track has no speed to step by under a trajectory
+    let e = plan_in(
+        &dir,
+        "platform: { kind: als, prf_hz: 2000, trajectory: { file: turn.csv }, scanner: { pattern: line, scan_angle_deg: [-10, 10], look_angle_step_deg: 1, along_track_step_m: 1 } }",
+    )
+    .err()
+    .expect("refused")
+    .to_string();
+    assert!(e.contains("platform.scanner.along_track_step_m"), "{e}");
+    // a byte that is no UTF-8 names its line
+    std::fs::write(
+        dir.join("h.csv"),
+        b"time_s,x,y,z,roll_deg,pitch_deg,heading_deg\n0,0,0,100,0,0,90\n1,5,0,1\xff0,0,0,90\n",
+    )
+    .unwrap();
+    let e = plan_in(
+        &dir,
+        &format!("platform: {{ kind: als, prf_hz: 2000, trajectory: {{ file: h.csv }}, {OSC} }}"),
+    )
+    .err()
+    .expect("refused")
+    .to_string();
+    assert!(e.contains("h.csv:3:") && e.contains("UTF-8"), "{e}");
     let e = plan_in(
         &dir,
         &format!(

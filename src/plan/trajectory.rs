@@ -87,9 +87,14 @@ impl Trajectory {
         let (mut marks, mut last, mut count) = (Vec::new(), None::<Mark>, 0usize);
         loop {
             text.clear();
-            let n = reader
-                .read_line(&mut text)
-                .map_err(|e| Error::io(&path, "cannot read the trajectory file", e))?;
+            let n = reader.read_line(&mut text).map_err(|e| {
+                if e.kind() == std::io::ErrorKind::InvalidData {
+                    // the line that is not UTF-8 text is the next one
+                    Error::at(&path, Some((line + 1, 1)), "", "is not UTF-8 text")
+                } else {
+                    Error::io(&path, "cannot read the trajectory file", e)
+                }
+            })?;
             if n == 0 {
                 break;
             }

@@ -527,6 +527,15 @@ fn mount_and_errors(c: &Check, p: &Platform) -> Result<()> {
 /// intervals within the file's times, and a scan line in each.
 fn trajectory(c: &Check, p: &Platform, t: &crate::campaign::Trajectory) -> Result<()> {
     let doc = c.doc;
+    if p.scanner
+        .as_ref()
+        .is_some_and(|s| s.along_track_step_m.is_some())
+    {
+        return Err(doc.error(
+            "platform.scanner.along_track_step_m",
+            "not used with a trajectory (it has no constant speed): give scan_frequency_hz",
+        ));
+    }
     let path = t.resolved.clone().unwrap_or_else(|| t.file.clone().into());
     if !path.is_file() {
         return Err(doc.error(

@@ -608,7 +608,7 @@ fn runs_that_cannot_fit_in_memory() {
         (
             "pulse",
             CAMPAIGN.replace("pulse_fwhm_ns: 2", "pulse_fwhm_ns: 1.0e9"),
-            "shorter pulse",
+            "instrument.pulse_fwhm_ns",
         ),
     ] {
         let (code, err, dir) = check(&format!("memory_{name}"), &campaign, SCENE);

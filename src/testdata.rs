@@ -83,10 +83,16 @@ pub struct TempDir(PathBuf);
 impl TempDir {
     pub fn new(name: &str) -> TempDir {
         let d = std::env::temp_dir().join(format!("lidarsim-{name}-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&d);
-        std::fs::create_dir_all(&d)
-            .unwrap_or_else(|e| panic!("cannot make the test folder {}: {e}", d.display()));
-        TempDir(d)
+        TempDir::at(d)
+    }
+
+    /// The folder `dir` itself, made fresh (emptied if it was there) and removed when
+    /// dropped: an integration test's folder under cargo's `CARGO_TARGET_TMPDIR`.
+    pub fn at(dir: PathBuf) -> TempDir {
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir)
+            .unwrap_or_else(|e| panic!("cannot make the test folder {}: {e}", dir.display()));
+        TempDir(dir)
     }
 
     pub fn path(&self) -> &std::path::Path {
@@ -104,6 +110,12 @@ impl std::ops::Deref for TempDir {
 impl AsRef<std::path::Path> for TempDir {
     fn as_ref(&self) -> &std::path::Path {
         &self.0
+    }
+}
+
+impl AsRef<std::ffi::OsStr> for TempDir {
+    fn as_ref(&self) -> &std::ffi::OsStr {
+        self.0.as_os_str()
     }
 }
 

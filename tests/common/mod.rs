@@ -14,38 +14,10 @@ pub use lidarsim::C;
 /// A fresh, empty folder for one test under cargo's folder for tests' files, removed with
 /// everything in it when the value is dropped (at the end of the test, passed or failed): a
 /// test run leaves nothing behind. It derefs to its path.
-pub struct Tmp(PathBuf);
-
-impl std::ops::Deref for Tmp {
-    type Target = Path;
-    fn deref(&self) -> &Path {
-        &self.0
-    }
-}
-
-impl AsRef<Path> for Tmp {
-    fn as_ref(&self) -> &Path {
-        &self.0
-    }
-}
-
-impl AsRef<std::ffi::OsStr> for Tmp {
-    fn as_ref(&self) -> &std::ffi::OsStr {
-        self.0.as_os_str()
-    }
-}
-
-impl Drop for Tmp {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
-    }
-}
+pub type Tmp = lidarsim::testdata::TempDir;
 
 pub fn tmp(name: &str) -> Tmp {
-    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join(name);
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    Tmp(dir)
+    Tmp::at(Path::new(env!("CARGO_TARGET_TMPDIR")).join(name))
 }
 
 pub fn write(dir: &Path, name: &str, text: &str) -> PathBuf {

@@ -147,15 +147,10 @@ lidarsim.run(sys.argv[1], out=sys.argv[2])
 """
 
 
-def test_ctrl_c_stops_at_a_part_and_resume_finishes_the_same_bytes(session_dir):
-    camp = write_campaign(session_dir, track_campaign(), "track.yaml")
-    reference = lidarsim.run(camp, out=session_dir / "track_reference")
-    out = session_dir / "track_stopped"
-    child = subprocess.Popen(
-        [sys.executable, "-c", SCRIPT, str(camp), str(out)],
-        stderr=subprocess.PIPE,
-        text=True,
-    )
+def interrupted(command, out):
+    """Starts `command`, a run into `out`, sends it SIGINT once its first part is written,
+    and returns the finished process and its stderr (skips when the run ended first)."""
+    child = subprocess.Popen(command, stderr=subprocess.PIPE, text=True)
     t = time.monotonic()
     while not (out / "waveforms" / "part-00000.parquet").is_file():
         assert time.monotonic() - t < 120, "no part appeared"
@@ -165,6 +160,14 @@ def test_ctrl_c_stops_at_a_part_and_resume_finishes_the_same_bytes(session_dir):
     _, err = child.communicate(timeout=120)
     if child.returncode == 0:
         pytest.skip("the run ended before the signal arrived")
+    return child, err
+
+
+def test_ctrl_c_stops_at_a_part_and_resume_finishes_the_same_bytes(session_dir):
+    camp = write_campaign(session_dir, track_campaign(), "track.yaml")
+    reference = lidarsim.run(camp, out=session_dir / "track_reference")
+    out = session_dir / "track_stopped"
+    child, err = interrupted([sys.executable, "-c", SCRIPT, str(camp), str(out)], out)
     assert "KeyboardInterrupt" in err, err
     # the logger said how far it got, and nothing after the simulate stage counts as done
     assert "simulate" in err, err
@@ -197,20 +200,7 @@ def test_ctrl_c_ends_the_lidarsim_command_as_the_binary_does(session_dir):
         pytest.skip("not run from an environment pip installed the package into")
     camp = write_campaign(session_dir, track_campaign(), "track_cli.yaml")
     out = session_dir / "track_cli_stopped"
-    child = subprocess.Popen(
-        [exe, "run", str(camp), "--out", str(out)],
-        stderr=subprocess.PIPE,
-        text=True,
-    )
-    t = time.monotonic()
-    while not (out / "waveforms" / "part-00000.parquet").is_file():
-        assert time.monotonic() - t < 120, "no part appeared"
-        assert child.poll() is None, child.stderr.read()
-        time.sleep(0.005)
-    child.send_signal(signal.SIGINT)
-    _, err = child.communicate(timeout=120)
-    if child.returncode == 0:
-        pytest.skip("the run ended before the signal arrived")
+    child, err = interrupted([exe, "run", str(camp), "--out", str(out)], out)
     # what the command kept, one line, and the shell's 128 + SIGINT: no traceback on top
     assert child.returncode == 130, (child.returncode, err)
     assert "Traceback" not in err and "KeyboardInterrupt" not in err, err

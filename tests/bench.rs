@@ -138,11 +138,28 @@ fn campaign_rows_are_measured_and_missing_data_is_skipped() {
     let bound = tr.bound_pulses_per_s();
     let seconds = (tr.closest + tr.any_hit) as f64 / tr.bare_per_s;
     assert!((bound * seconds - 8.0).abs() < 1e-9 * 8.0, "{bound} {tr:?}");
-    let t = lidarsim::bench::traversal::table(&[tr]);
+    // the replay's time by kind: each kind replayed took some time, and the three are the
+    // whole (first segments: the laser's and the aperture's rays, which leave no facet)
+    let [first, scattered, visibility] = tr.shares;
+    assert!(
+        first > 0.0 && visibility > 0.0 && scattered >= 0.0,
+        "{tr:?}"
+    );
+    assert!(
+        (first + scattered + visibility - 1.0).abs() < 1e-12,
+        "{tr:?}"
+    );
+    let t = lidarsim::bench::traversal::table(std::slice::from_ref(&tr));
     assert!(t.contains("| mabel_plane | 8 |"), "{t}");
     assert!(t.contains("bound, pulses/s"), "{t}");
     let last = t.lines().last().unwrap_or_default();
-    assert!(last.ends_with(&format!("| {bound:.0} |")), "{t}");
+    let kinds = format!(
+        "{:.0}% / {:.0}% / {:.0}%",
+        100.0 * first,
+        100.0 * scattered,
+        100.0 * visibility
+    );
+    assert!(last.ends_with(&format!("| {bound:.0} | {kinds} |")), "{t}");
     // the same campaign in three bands against one (the plane reflects alike in all three,
     // so every band receives the same energy from the same paths)
     let bands = bc::bands_row(&dir, "mabel_plane", &text, 1).unwrap();

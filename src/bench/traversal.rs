@@ -4,7 +4,7 @@
 
 use crate::error::Result;
 use crate::pipeline::simulate::simulate;
-use crate::scene::{LoggedRay, Scene};
+use crate::scene::{FacetId, LoggedRay, Scene};
 use indicatif::ProgressBar;
 use rayon::prelude::*;
 use std::fmt::Write as _;
@@ -30,6 +30,10 @@ pub struct TraversalRow {
     pub any_hit_per_s: f64,
     /// All queries replayed alone, per second.
     pub bare_per_s: f64,
+    /// The replay's time by kind of query, as fractions: closest hits that leave a sensor or
+    /// the sun (a path's first segment, what tracing a pulse's rays together would share),
+    /// closest hits that leave a surface (scattering), and visibility tests.
+    pub shares: [f64; 3],
 }
 
 /// Simulates up to `max_pulses` of the campaign at `path` (spread over its plan) twice, once
@@ -50,11 +54,10 @@ pub fn measure(name: &str, path: &Path, max_pulses: usize) -> Result<TraversalRo
     scene.start_ray_log();
     let _ = simulate(loaded, &scene, &pulses, &hidden, true);
     let log = scene.take_ray_log();
-    let closest: Vec<LoggedRay> = log
+    let (first, scattered): (Vec<LoggedRay>, Vec<LoggedRay>) = log
         .iter()
         .filter(|r| matches!(r, LoggedRay::Closest { .. }))
-        .copied()
-        .collect();
+        .partition(|r| matches!(r, LoggedRay::Closest { skip, .. } if *skip == FacetId::NONE));
     let any: Vec<LoggedRay> = log
         .iter()
         .filter(|r| matches!(r, LoggedRay::Occluded { .. }))
@@ -82,17 +85,19 @@ pub fn measure(name: &str, path: &Path, max_pulses: usize) -> Result<TraversalRo
         std::hint::black_box(hits);
         t.elapsed().as_secs_f64().max(1e-9)
     };
-    let (tc, ta) = (replay(&closest), replay(&any));
+    let (tf, ts, ta) = (replay(&first), replay(&scattered), replay(&any));
+    let (tc, closest) = (tf + ts, first.len() + scattered.len());
     Ok(TraversalRow {
         name: name.to_string(),
         pulses: pulses.len(),
-        closest: closest.len(),
+        closest,
         any_hit: any.len(),
         inside_per_s: log.len() as f64 / inside_s.max(1e-9),
         tracing_per_s: log.len() as f64 / tracing_s.max(1e-9),
-        closest_per_s: closest.len() as f64 / tc,
+        closest_per_s: closest as f64 / tc,
         any_hit_per_s: any.len() as f64 / ta,
         bare_per_s: log.len() as f64 / (tc + ta),
+        shares: [tf, ts, ta].map(|t| t / (tc + ta)),
     })
 }
 
@@ -113,12 +118,12 @@ impl TraversalRow {
 /// The markdown table of the traversal rows.
 pub fn table(rows: &[TraversalRow]) -> String {
     let mut s = String::from(
-        "\n### Traversals: inside the transport against the bare BVH\n\nThe queries a campaign's pulses make (closest hits and visibility tests), counted in a timed simulation of those pulses, then replayed alone on the same threads. \"Inside the simulation\" is over the simulation's wall time, waveforms built from the tallies included; \"inside the tracing\" over the time the threads spent tracing the pulses' paths (their summed time over the thread count). \"Bound\" is the pulses a second the transport would simulate were its own work free: the queries a pulse makes at the bare BVH's rate.\n\n| campaign | pulses | closest-hit queries | any-hit queries | inside the simulation /s | inside the tracing /s | closest hit alone /s | any hit alone /s | all alone /s | simulation / alone | tracing / alone | bound, pulses/s |\n| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n",
+        "\n### Traversals: inside the transport against the bare BVH\n\nThe queries a campaign's pulses make (closest hits and visibility tests), counted in a timed simulation of those pulses, then replayed alone on the same threads. \"Inside the simulation\" is over the simulation's wall time, waveforms built from the tallies included; \"inside the tracing\" over the time the threads spent tracing the pulses' paths (their summed time over the thread count). \"Bound\" is the pulses a second the transport would simulate were its own work free: the queries a pulse makes at the bare BVH's rate. \"Alone, by kind\" splits the replay's time: closest hits leaving the laser, the aperture or the sun (paths' first segments, what tracing a pulse's rays together could share), closest hits leaving a surface (scattered light), and visibility tests.\n\n| campaign | pulses | closest-hit queries | any-hit queries | inside the simulation /s | inside the tracing /s | closest hit alone /s | any hit alone /s | all alone /s | simulation / alone | tracing / alone | bound, pulses/s | alone, by kind: first / scattered / visibility |\n| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n",
     );
     for r in rows {
         let _ = writeln!(
             s,
-            "| {} | {} | {} | {} | {:.3e} | {:.3e} | {:.3e} | {:.3e} | {:.3e} | {:.0}% | {:.0}% | {:.0} |",
+            "| {} | {} | {} | {} | {:.3e} | {:.3e} | {:.3e} | {:.3e} | {:.3e} | {:.0}% | {:.0}% | {:.0} | {:.0}% / {:.0}% / {:.0}% |",
             r.name,
             r.pulses,
             r.closest,
@@ -130,7 +135,10 @@ pub fn table(rows: &[TraversalRow]) -> String {
             r.bare_per_s,
             100.0 * r.inside_per_s / r.bare_per_s,
             100.0 * r.tracing_per_s / r.bare_per_s,
-            r.bound_pulses_per_s()
+            r.bound_pulses_per_s(),
+            100.0 * r.shares[0],
+            100.0 * r.shares[1],
+            100.0 * r.shares[2]
         );
     }
     s

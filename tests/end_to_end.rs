@@ -844,7 +844,7 @@ fn sweep_writes_subruns_and_summaries() {
     let camp = write(
         &dir,
         "campaign.yaml",
-        "name: swept\nscene: plane.yaml\nseed: 6\nwavelength_nm: 1064\ninstrument: { pulse_energy_j: 0.001, pulse_fwhm_ns: 2, footprint_half_angle_mrad: 0.5, fov_half_angle_mrad: 1.5, receiver_area_m2: 0.01, bin_ns: 1 }\nplatform: { kind: track, altitude_m: 100, track: { start: [0, 0], end: [10, 0] }, along_track_step_m: 1 }\nsimulation: { method: forward, rays_per_pulse: 100, max_order: 1 }\nsweep:\n  platform.altitude_m: [100, 200]\n",
+        "name: swept\nscene: plane.yaml\nseed: 6\nwavelength_nm: 1064\ninstrument: { pulse_energy_j: 0.001, pulse_fwhm_ns: 2, footprint_half_angle_mrad: 0.5, fov_half_angle_mrad: 1.5, receiver_area_m2: 0.01, bin_ns: 1 }\nplatform: { kind: track, altitude_m: 100, track: { start: [25.5, 0], end: [35.5, 0] }, along_track_step_m: 1 }\nsimulation: { method: forward, rays_per_pulse: 100, max_order: 1 }\nsweep:\n  platform.altitude_m: [100, 200]\n",
     );
     let out = dir.join("runs");
     let log = run_ok(&camp, &out, &[]);
@@ -868,6 +868,15 @@ fn sweep_writes_subruns_and_summaries() {
     let e: Vec<f64> = rows.iter().map(|r| r[energy].parse().unwrap()).collect();
     let ratio = e[0] / e[1];
     assert!((3.6..4.4).contains(&ratio), "energy ∝ 1/H²: ratio {ratio}");
+    // half the pulses miss the plane (it ends at x = 30): the footprint's BRF is the mean
+    // over the lit ones, the plane's ρ = 0.3 (a Lambertian plane's BRF is its albedo), not
+    // spoilt by the dark ones' nulls; without a sun the solar BRF has no value at all
+    let brf = col("brf_footprint_laser");
+    for r in &rows {
+        let b: f64 = r[brf].parse().unwrap();
+        assert!((0.28..0.32).contains(&b), "BRF {b}");
+        assert_eq!(&r[col("brf_fov_solar")], "");
+    }
 
     let index: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("sweep.json")).unwrap()).unwrap();

@@ -240,6 +240,9 @@ impl RunTotals {
         let mut t = RunTotals::default();
         // with several bands, the first band's rows (the first row's band: pulse 0's first)
         let mut first_band = None;
+        // a BRF is null (read as NaN) where it has no meaning (no sun; a pulse that received
+        // no laser energy): its mean is over the pulses that have one, as report.md's
+        let (mut solar_n, mut laser_n) = (0usize, 0usize);
         // the parts by index (part-00000, part-00001, ...), as every stage reads them
         for k in 0.. {
             let f = run.join(part_name(k));
@@ -253,15 +256,23 @@ impl RunTotals {
                 t.pulses += 1;
                 t.received_energy_j += w.received_energy_j;
                 t.solar_photons_per_bin += w.solar_photons_per_bin as f64;
-                t.brf_fov_solar += w.brf_fov_solar as f64;
-                t.brf_footprint_laser += w.brf_footprint_laser as f64;
+                if w.brf_fov_solar.is_finite() {
+                    t.brf_fov_solar += w.brf_fov_solar as f64;
+                    solar_n += 1;
+                }
+                if w.brf_footprint_laser.is_finite() {
+                    t.brf_footprint_laser += w.brf_footprint_laser as f64;
+                    laser_n += 1;
+                }
             }
         }
         let n = t.pulses.max(1) as f64;
         t.received_energy_j /= n;
         t.solar_photons_per_bin /= n;
-        t.brf_fov_solar /= n;
-        t.brf_footprint_laser /= n;
+        // NaN (an empty cell, no point on a plot) where no pulse has one
+        let mean = |sum: f64, n: usize| if n > 0 { sum / n as f64 } else { f64::NAN };
+        t.brf_fov_solar = mean(t.brf_fov_solar, solar_n);
+        t.brf_footprint_laser = mean(t.brf_footprint_laser, laser_n);
         Ok(t)
     }
 }
@@ -281,6 +292,14 @@ pub(super) fn write_sweep_summary(
         "brf_fov_solar",
         "brf_footprint_laser",
     ]);
+    // a value with no meaning for the run is an empty cell, not "NaN"
+    let cell = |v: f64| {
+        if v.is_finite() {
+            format!("{v:.6}")
+        } else {
+            String::new()
+        }
+    };
     let table = rows.iter().map(|(vals, t)| {
         let mut row: Vec<String> = vals
             .iter()
@@ -295,8 +314,8 @@ pub(super) fn write_sweep_summary(
             t.pulses.to_string(),
             format!("{:.6e}", t.received_energy_j),
             format!("{:.6e}", t.solar_photons_per_bin),
-            format!("{:.6}", t.brf_fov_solar),
-            format!("{:.6}", t.brf_footprint_laser),
+            cell(t.brf_fov_solar),
+            cell(t.brf_footprint_laser),
         ]);
         row
     });

@@ -378,13 +378,15 @@ fn a_georeferenced_survey_is_the_local_one_shifted_into_its_crs() {
         "local.yaml",
         &format!("name: local\n{base}products: {{ points: true, dsm: {{ resolution_m: 4 }} }}\n"),
     );
-    // the georeferenced survey as LAZ, and as LAS for laspy to read beside it
+    // the georeferenced survey as LAZ, and as LAS for laspy to read beside it, flown on a
+    // real date (GPS time past week 0: adjusted standard GPS time in the files)
+    let dated = base.replace("kind: als,", "kind: als, gps_start_s: 1300000000.5,");
     let georeferenced = |name: &str, format: &str| {
         write(
             &dir,
             &format!("{name}.yaml"),
             &format!(
-                "name: {name}\n{base}products: {{ points: true, dsm: {{ resolution_m: 4 }}, points_format: {format} }}\nframe: {{ crs: EPSG:32631, origin: [{}, {}, {}] }}\n",
+                "name: {name}\n{dated}products: {{ points: true, dsm: {{ resolution_m: 4 }}, points_format: {format} }}\nframe: {{ crs: EPSG:32631, origin: [{}, {}, {}] }}\n",
                 origin[0], origin[1], origin[2]
             ),
         )
@@ -409,6 +411,9 @@ fn a_georeferenced_survey_is_the_local_one_shifted_into_its_crs() {
     assert_eq!(pa.len(), pb.len());
     for (p, q) in pa.iter().zip(&pb) {
         assert_eq!(p.pulse_id, q.pulse_id);
+        // week time as it is, standard time read back as the GPS seconds
+        let dt = q.gps_time - p.gps_time - 1_300_000_000.5;
+        assert!(dt.abs() < 1e-6, "{} against {}", q.gps_time, p.gps_time);
         for (u, v, o) in [
             (p.x, q.x, origin[0]),
             (p.y, q.y, origin[1]),
@@ -424,6 +429,11 @@ fn a_georeferenced_survey_is_the_local_one_shifted_into_its_crs() {
     assert!(header.point_format().is_compressed && header.has_wkt_crs());
     let wkt = String::from_utf8_lossy(header.get_wkt_crs_bytes().unwrap()).into_owned();
     assert!(wkt.starts_with("PROJCS[\"WGS 84 / UTM zone 31N\""), "{wkt}");
+    assert!(
+        wkt.ends_with("]\0"),
+        "not one null-terminated string: {wkt}"
+    );
+    assert_eq!(wkt.matches('\0').count(), 1, "{wkt}");
     let local_header = las::Reader::from_path(a.join("points.las"))
         .unwrap()
         .header()
@@ -470,6 +480,9 @@ f = laspy.read(sys.argv[1] + "/points.laz")
 assert len(f.points) == {n}, len(f.points)
 wkt = [v for v in f.header.vlrs if v.record_id == 2112][0].string
 assert "UTM zone 31N" in wkt, wkt
+# GPS times of 2021: adjusted standard GPS time, as the header says
+assert f.header.global_encoding.gps_time_type == laspy.header.GpsTimeType.STANDARD
+assert 300_000_000.5 <= float(f.gps_time.min()) < 300_000_100, f.gps_time.min()
 assert abs(float(f.x.min()) - {xmin}) < 0.0011, f.x.min()
 # the LAS of the same survey: the same points, fields and CRS
 g = laspy.read(sys.argv[1] + "/../geo_las/points.las")

@@ -71,7 +71,10 @@ pub fn write_las(path: &Path, points: &[Point]) -> Result<()> {
     let mut extent = Extent::default();
     extent.add(path, points)?;
     let offset = extent.offset(path, [0.0; 3])?;
-    let layout = Layout::local(offset, extent.scale(offset, [0.0; 3]));
+    let layout = Layout {
+        gps_offset_s: extent.gps_offset_s(),
+        ..Layout::local(offset, extent.scale(offset, [0.0; 3]))
+    };
     let mut chunks = Some(points);
     write_las_chunks(path, &layout, |each| match chunks.take() {
         Some(c) => each(c),
@@ -91,7 +94,17 @@ pub struct Layout {
     pub laz: bool,
     /// A run of several bands: each point's `wavelength_nm` is written too.
     pub bands: bool,
+    /// Subtracted from every GPS time as it is written ([`Extent::gps_offset_s`]): 0 for
+    /// GPS week time (the header's GPS time type bit clear), [`STANDARD_GPS_OFFSET_S`] for
+    /// adjusted standard GPS time (the bit set).
+    pub gps_offset_s: f64,
 }
+
+/// Adjusted standard GPS time is GPS seconds less 10⁹ (LAS 1.4, global encoding bit 0).
+pub const STANDARD_GPS_OFFSET_S: f64 = 1e9;
+
+/// A GPS week, s: the range of GPS week time.
+const GPS_WEEK_S: f64 = 604_800.0;
 
 impl Layout {
     /// Local metres, no CRS, LAS.
@@ -103,6 +116,7 @@ impl Layout {
             wkt: None,
             laz: false,
             bands: false,
+            gps_offset_s: 0.0,
         }
     }
 }
@@ -114,6 +128,8 @@ pub struct Extent {
     min: Option<[f64; 3]>,
     /// Per axis, the point with the largest coordinate.
     max: [Option<Point>; 3],
+    /// The earliest and latest GPS times.
+    gps: Option<(f64, f64)>,
 }
 
 impl Extent {
@@ -127,6 +143,8 @@ impl Extent {
                     format!("point of pulse {} has a non-finite coordinate", p.pulse_id),
                 ));
             }
+            let (lo, hi) = self.gps.get_or_insert((p.gps_time, p.gps_time));
+            (*lo, *hi) = (lo.min(p.gps_time), hi.max(p.gps_time));
             let min = self.min.get_or_insert(v);
             for axis in 0..3 {
                 min[axis] = min[axis].min(v[axis]);
@@ -164,6 +182,18 @@ impl Extent {
             }
         }
         Ok(offset)
+    }
+
+    /// How the GPS times are written ([`Layout::gps_offset_s`]). Times within GPS week 0
+    /// (a campaign's default `gps_start_s` of 0) are the same numbers as GPS week time, and
+    /// are written as they are; any later time is not a time of the week, and LAS 1.4 asks
+    /// for adjusted standard GPS time, exact for the times of any real acquisition (from
+    /// 1995 on, where the subtraction of 10⁹ is exact).
+    pub fn gps_offset_s(&self) -> f64 {
+        match self.gps {
+            Some((lo, hi)) if !(lo >= 0.0 && hi < GPS_WEEK_S) => STANDARD_GPS_OFFSET_S,
+            _ => 0.0,
+        }
     }
 
     /// [`FINE`] when every shifted coordinate is within i32 steps of it from `offset`, else
@@ -213,10 +243,16 @@ pub fn write_las_chunks(
         z: transform(offset[2]),
     };
     b.generating_software = format!("lidarsim {}", env!("CARGO_PKG_VERSION"));
+    if layout.gps_offset_s != 0.0 {
+        b.gps_time_type = las::GpsTimeType::Standard;
+    }
     b.vlrs.push(extra_bytes_vlr(layout.bands));
     let mut header = b.into_header().map_err(err)?;
     if let Some(wkt) = layout.wkt {
-        header.set_wkt_crs(wkt.as_bytes().to_vec()).map_err(err)?;
+        // LAS 1.4: "The OGC Coordinate System WKT VLR data shall be a null-terminated string"
+        let mut bytes = wkt.as_bytes().to_vec();
+        bytes.push(0);
+        header.set_wkt_crs(bytes).map_err(err)?;
     }
     write_atomic(path, |file| {
         let sink = Sticky {
@@ -280,7 +316,7 @@ impl HeaderFix {
 
     fn patch(&self, file: &mut std::fs::File, layout: &Layout) -> std::io::Result<()> {
         if let Some(t) = self.first_gps_s {
-            let (year, day) = gps_year_and_day(t);
+            let (year, day) = gps_year_and_day(t + layout.gps_offset_s);
             let mut date = [0u8; 4];
             date[..2].copy_from_slice(&day.to_le_bytes());
             date[2..].copy_from_slice(&year.to_le_bytes());
@@ -397,7 +433,7 @@ fn to_las(p: &Point, layout: &Layout) -> las::Point {
         },
         is_edge_of_flight_line: p.edge_of_line,
         point_source_id: p.point_source_id,
-        gps_time: Some(p.gps_time),
+        gps_time: Some(p.gps_time - layout.gps_offset_s),
         extra_bytes: extra,
         ..Default::default()
     }
@@ -418,6 +454,12 @@ fn scan_angle_for_las(deg: f32) -> f32 {
 pub fn read_las(path: &Path) -> Result<Vec<Point>> {
     let err = |e: las::Error| Error::data(path, format!("cannot read LAS: {e}"));
     let mut reader = Reader::from_path(path).map_err(err)?;
+    // the pulses' GPS seconds again, from adjusted standard GPS time when the header says so
+    let gps_offset_s = if reader.header().gps_time_type().is_standard() {
+        STANDARD_GPS_OFFSET_S
+    } else {
+        0.0
+    };
     let offsets = {
         let vlr = reader
             .header()
@@ -478,7 +520,7 @@ pub fn read_las(path: &Path) -> Result<Vec<Point>> {
             x: p.x,
             y: p.y,
             z: p.z,
-            gps_time: p.gps_time.unwrap_or(0.0),
+            gps_time: p.gps_time.unwrap_or(0.0) + gps_offset_s,
             intensity: p.intensity,
             return_number: p.return_number,
             number_of_returns: p.number_of_returns,
@@ -535,9 +577,11 @@ mod tests {
     }
 
     /// The header's bounds are the stored coordinates' (not a step beyond), its legacy point
-    /// counts 0 (point format 6), and its creation date the earliest point's UTC day.
+    /// counts 0 (point format 6), its creation date the earliest point's UTC day, and GPS
+    /// times past week 0 in adjusted standard GPS time (GPS seconds less 10⁹, the global
+    /// encoding's bit 0 set), read back as the GPS seconds they were.
     #[test]
-    fn header_bounds_counts_and_date() {
+    fn header_bounds_counts_date_and_gps_time() {
         let mut pts = sample(500);
         // 2019-10-21T10:30:00Z, the GPS time of the bundled ICESat-2-like campaign
         for (i, p) in pts.iter_mut().enumerate() {
@@ -545,8 +589,12 @@ mod tests {
         }
         for laz in [false, true] {
             let (_dir, path) = tmp(if laz { "header.laz" } else { "header.las" });
+            let mut extent = Extent::default();
+            extent.add(&path, &pts).unwrap();
+            assert_eq!(extent.gps_offset_s(), STANDARD_GPS_OFFSET_S);
             let layout = Layout {
                 laz,
+                gps_offset_s: extent.gps_offset_s(),
                 ..Layout::local([651_000.0, 5_432_000.0, -4.0], FINE)
             };
             let mut chunks = Some(&pts[..]);
@@ -564,7 +612,17 @@ mod tests {
                 "2019-10-21 is day 294"
             );
             assert!(raw[107..131].iter().all(|&b| b == 0), "legacy counts");
+            assert_eq!(u16_at(6) & 1, 1, "GPS time type: adjusted standard");
+            let data = Reader::from_path(&path).unwrap().read_all().unwrap();
+            let stored: Vec<f64> = data
+                .points()
+                .map(|p| p.unwrap().gps_time.unwrap())
+                .collect();
+            assert_eq!(stored[7], 255_689_025.0);
             let back = read_las(&path).unwrap();
+            for (a, b) in pts.iter().zip(&back) {
+                assert_eq!(a.gps_time, b.gps_time);
+            }
             for (axis, k) in [(0usize, 179usize), (1, 195), (2, 211)] {
                 let v: Vec<f64> = back.iter().map(|p| [p.x, p.y, p.z][axis]).collect();
                 let hi = v.iter().copied().fold(f64::NEG_INFINITY, f64::max);
@@ -578,6 +636,17 @@ mod tests {
             let h = Reader::from_path(&path).unwrap().header().clone();
             assert_eq!(h.number_of_points(), 500);
         }
+        // within GPS week 0 (the default `gps_start_s` of 0), GPS week time: the same numbers
+        let mut extent = Extent::default();
+        extent.add(Path::new("week"), &sample(3)).unwrap();
+        assert_eq!(extent.gps_offset_s(), 0.0);
+        let (_dir, path) = tmp("week.las");
+        write_las(&path, &sample(3)).unwrap();
+        assert!(!Reader::from_path(&path)
+            .unwrap()
+            .header()
+            .gps_time_type()
+            .is_standard());
         assert_eq!(gps_year_and_day(0.0), (1980, 6));
         assert_eq!(gps_year_and_day(1_198_800_018.0), (2018, 1));
         // 2020-12-31T12:00:00Z, the 366th day of a leap year (GPS time 18 s ahead of UTC)

@@ -117,6 +117,7 @@ impl Writer for PointsWriter<'_> {
             wkt,
             laz: format == PointsFormat::Laz,
             bands: several,
+            gps_offset_s: extent.gps_offset_s(),
         };
         let first_nm = c.wavelength_nm.first() as f32;
         let mut pass = |dsm_points: &mut dyn FnMut(&[Point])| {

@@ -739,6 +739,34 @@ fn sweeps_that_cannot_run_are_refused() {
     let scene = format!("{CAMPAIGN}sweep:\n  scene: [scene.yaml, other.yaml]\n");
     let (code, err, _) = check("sweep_scene", &scene, SCENE);
     assert_one_message(code, &err, &["sweep.scene", "cannot be swept"]);
+    // a key the campaign does not know is named at its entry, as a bad value is; the sweep
+    // cannot sweep itself, nor a key with no name
+    for (entry, words) in [
+        (
+            "platform.nope: [1, 2]",
+            &[
+                "campaign.yaml:",
+                "sweep.platform.nope",
+                "unknown field `nope`",
+            ][..],
+        ),
+        ("sweep: [1]", &["sweep.sweep", "its own"]),
+        ("\"\": [1]", &["campaign.yaml:", "a key is empty"]),
+        // a combination whose run no memory holds is refused before any runs, at its value
+        (
+            "instrument.bin_ns: [1, 1e-6]",
+            &[
+                "campaign.yaml:",
+                "sweep.instrument.bin_ns",
+                "value 1e-6",
+                "in memory",
+            ],
+        ),
+    ] {
+        let text = format!("{CAMPAIGN}sweep:\n  {entry}\n");
+        let (code, err, _) = check("sweep_key", &text, SCENE);
+        assert_one_message(code, &err, words);
+    }
 }
 
 /// A byte-order mark before the text is no part of it; a folder given as the campaign is

@@ -18,6 +18,7 @@ pub struct CheckReport {
     pub campaign_file: String,
     pub scene: String,
     pub scene_file: String,
+    /// Pulses the run fires: over all of its runs for a sweep.
     pub pulses: u64,
     /// The recorded trajectory a platform flies, as one line, when it flies one.
     pub trajectory: Option<String>,
@@ -90,14 +91,16 @@ pub fn check(path: &Path) -> Result<CheckReport> {
     let rate = super::probe_rays_per_second(run, &scene, &plan);
     let mut total_rays = plan.len() as f64 * c.simulation.rays_per_pulse as f64;
     let mut sweep = Vec::new();
+    let mut pulses = plan.len() as u64;
     // a sweep: every combination checked as the run would check it, its rays counted at the
     // rate measured on the campaign as written
     if let Some(spec) = &c.sweep {
-        let runs = super::sweep::sweep_runs(run, spec)?;
-        total_rays = 0.0;
+        let runs = super::sweep::sweep_runs(run, spec, &scene)?;
+        (total_rays, pulses) = (0.0, 0);
         for (sub, name) in runs {
-            let pulses = Plan::new(&sub.campaign)?.len();
-            total_rays += pulses as f64 * sub.campaign.simulation.rays_per_pulse as f64;
+            let n = Plan::new(&sub.campaign)?.len();
+            total_rays += n as f64 * sub.campaign.simulation.rays_per_pulse as f64;
+            pulses += n as u64;
             sweep.push(name);
         }
     }
@@ -109,7 +112,7 @@ pub fn check(path: &Path) -> Result<CheckReport> {
         campaign_file: path.display().to_string(),
         scene: scene.name.clone(),
         scene_file: loaded.scene_path.display().to_string(),
-        pulses: plan.len() as u64,
+        pulses,
         trajectory: plan.trajectory_note(),
         wavelengths_nm: c.wavelength_nm.all().to_vec(),
         water,

@@ -8,6 +8,7 @@ use crate::fsutil::write_text_atomic;
 use crate::plan;
 use crate::products::figures::plot::{line_plot, Series};
 use crate::progress::log;
+use crate::scene::Scene;
 use crate::waveform::file::{part_name, read_waveforms};
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -20,9 +21,12 @@ pub(super) fn run_sweep(
     opts: &RunOptions,
 ) -> Result<RunSummary> {
     let (keys, combos) = combinations(loaded, sweep)?;
-    // every combination is checked before any runs: a bad value ends the run at once
+    // every combination is checked before any runs, its memory too: a bad value ends the
+    // run at once
     let subs = sub_campaigns(loaded, &keys, &combos)?;
     let mut cache = SceneCache::default();
+    let scene = cache.get(&loaded.scene_path, loaded.campaign.wavelength_nm.all())?;
+    fits_each(loaded, &keys, &combos, &subs, scene)?;
     let mut total = RunSummary {
         out: out.to_path_buf(),
         pulses: 0,
@@ -62,14 +66,61 @@ pub(super) fn run_sweep(
     Ok(total)
 }
 
-/// Every sub-run of a sweep, checked, with its sub-folder's name, in the order the run takes
-/// them (`lidarsim check` estimates them all).
+/// Every sub-run of a sweep over `scene`, checked as the run checks them (its memory bound
+/// included), with its sub-folder's name, in the order the run takes them (`lidarsim check`
+/// estimates them all).
 pub fn sweep_runs(
     loaded: &Loaded,
     sweep: &BTreeMap<String, Vec<serde_yaml::Value>>,
+    scene: &Scene,
 ) -> Result<Vec<(Loaded, String)>> {
     let (keys, combos) = combinations(loaded, sweep)?;
-    sub_campaigns(loaded, &keys, &combos)
+    let subs = sub_campaigns(loaded, &keys, &combos)?;
+    fits_each(loaded, &keys, &combos, &subs, scene)?;
+    Ok(subs)
+}
+
+/// Each combination's memory bound against the machine's ([`super::memory::fits`]); one
+/// that cannot fit is refused at the swept value that sizes it (the scene is the same for
+/// every combination: a sweep cannot sweep it).
+fn fits_each(
+    loaded: &Loaded,
+    keys: &[&String],
+    combos: &[Vec<&serde_yaml::Value>],
+    subs: &[(Loaded, String)],
+    scene: &Scene,
+) -> Result<()> {
+    for (combo, (sub, name)) in combos.iter().zip(subs) {
+        let plan = plan::Plan::new(&sub.campaign)?;
+        super::memory::fits(sub, scene, &plan)
+            .map_err(|e| at_swept_key(loaded, keys, combo, name, e))?;
+    }
+    Ok(())
+}
+
+/// An error in one combination's campaign, at the entry under `sweep:` of the swept key it
+/// names (or a key within it), else said to be of that combination.
+fn at_swept_key(
+    loaded: &Loaded,
+    keys: &[&String],
+    combo: &[&serde_yaml::Value],
+    name: &str,
+    e: Error,
+) -> Error {
+    let swept = e.key.as_deref().and_then(|ek| {
+        keys.iter()
+            .zip(combo)
+            .find(|(k, _)| ek == k.as_str() || ek.starts_with(&format!("{k}.")))
+    });
+    match swept {
+        Some((k, v)) => {
+            let value = serde_yaml::to_string(v).unwrap_or_default();
+            loaded
+                .doc
+                .sweep_error(k, format!("value {}: {}", value.trim(), e.message))
+        }
+        None => e.within(format!("in the sweep combination {name}")),
+    }
 }
 
 fn sub_campaigns(
@@ -106,6 +157,17 @@ fn combinations<'a>(
         let values = &sweep[*k];
         if values.is_empty() {
             return Err(loaded.doc.sweep_error(k, "the list of values is empty"));
+        }
+        if k.is_empty() {
+            return Err(loaded.doc.sweep_error(
+                k,
+                "a key is empty: name a campaign key, such as platform.altitude_m",
+            ));
+        }
+        if k.as_str() == "sweep" || k.starts_with("sweep.") {
+            return Err(loaded
+                .doc
+                .sweep_error(k, "a sweep cannot sweep its own `sweep:` section"));
         }
         if k.as_str() == "scene" || k.starts_with("scene.") {
             return Err(loaded.doc.sweep_error(
@@ -167,38 +229,40 @@ fn sub_campaign(
     for (k, v) in keys.iter().zip(combo) {
         crate::campaign::yaml::set_path(&mut tree, k, (*v).clone())
             .map_err(|m| loaded.doc.sweep_error(k, m))?;
-        let value = serde_yaml::to_string(v)
-            .unwrap_or_default()
-            .trim()
-            .to_string();
-        names.push(format!("{}={}", k.rsplit('.').next().unwrap_or(k), value));
+        names.push(format!(
+            "{}={}",
+            k.rsplit('.').next().unwrap_or(k),
+            folder_value(v)
+        ));
     }
     if let serde_yaml::Value::Mapping(m) = &mut tree {
         m.remove("sweep");
     }
-    let mut campaign: Campaign = serde_yaml::from_value(tree).map_err(|e| {
-        loaded.doc.error(
-            "sweep",
-            format!("a combination does not make a valid campaign: {e}"),
-        )
-    })?;
-    campaign.resolve_files(&loaded.doc);
-    plan::check_campaign(&loaded.doc, &campaign).map_err(|e| {
-        let swept = e.key.as_deref().and_then(|ek| {
-            keys.iter()
-                .zip(combo)
-                .find(|(k, _)| ek == k.as_str() || ek.starts_with(&format!("{k}.")))
+    let mut campaign: Campaign = serde_path_to_error::deserialize(tree).map_err(|e| {
+        // at the swept key the value went to, or whose field it does not know
+        let at = e.path().to_string();
+        let message = crate::campaign::yaml::plain_words(&e.into_inner().to_string());
+        let swept = keys.iter().zip(combo).find(|(k, _)| {
+            at == k.as_str()
+                || at.starts_with(&format!("{k}."))
+                || message.contains(&format!("`{}`", k.rsplit('.').next().unwrap_or(k)))
         });
         match swept {
             Some((k, v)) => {
                 let value = serde_yaml::to_string(v).unwrap_or_default();
                 loaded
                     .doc
-                    .sweep_error(k, format!("value {}: {}", value.trim(), e.message))
+                    .sweep_error(k, format!("value {}: {message}", value.trim()))
             }
-            None => e.within(format!("in the sweep combination {}", names.join(", "))),
+            None => loaded.doc.error(
+                "sweep",
+                format!("a combination does not make a valid campaign: {at}: {message}"),
+            ),
         }
     })?;
+    campaign.resolve_files(&loaded.doc);
+    plan::check_campaign(&loaded.doc, &campaign)
+        .map_err(|e| at_swept_key(loaded, keys, combo, &names.join(", "), e))?;
     let sub = Loaded {
         campaign,
         doc: loaded.doc.clone(),
@@ -207,6 +271,34 @@ fn sub_campaign(
     };
     let name = names.join("_").replace(['/', '\\', ' '], "-");
     Ok((sub, name))
+}
+
+/// A swept value as it stands in a sub-folder's name: a scalar as YAML writes it, a list's
+/// items joined by commas (`[-4.5, 4.5]` → `-4.5,4.5`), a mapping's as `key:value`; never a
+/// line break or a space, which YAML's block style would put in a name.
+fn folder_value(v: &serde_yaml::Value) -> String {
+    use serde_yaml::Value;
+    match v {
+        Value::Sequence(items) => items.iter().map(folder_value).collect::<Vec<_>>().join(","),
+        Value::Mapping(m) => m
+            .iter()
+            .map(|(k, v)| format!("{}:{}", folder_value(k), folder_value(v)))
+            .collect::<Vec<_>>()
+            .join(","),
+        Value::Tagged(t) => folder_value(&t.value),
+        v => serde_yaml::to_string(v)
+            .unwrap_or_default()
+            .trim()
+            .chars()
+            .map(|c| {
+                if c.is_whitespace() || c.is_control() {
+                    '-'
+                } else {
+                    c
+                }
+            })
+            .collect(),
+    }
 }
 
 /// `sweep.json`: the sub-runs of a sweep, in order (fields in the file's sorted key order).
@@ -359,4 +451,24 @@ pub(super) fn write_sweep_summary(
         )?;
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::folder_value;
+
+    /// A swept value names its sub-folder on one line and without spaces: a list's items
+    /// joined by commas (YAML's block style would put a line break in the name), a
+    /// mapping's as key:value, a scalar as YAML writes it.
+    #[test]
+    fn swept_values_name_folders_on_one_line() {
+        let v = |t: &str| serde_yaml::from_str::<serde_yaml::Value>(t).unwrap();
+        assert_eq!(folder_value(&v("250")), "250");
+        assert_eq!(folder_value(&v("-4.5")), "-4.5");
+        assert_eq!(folder_value(&v("[-4.5, 4.5]")), "-4.5,4.5");
+        assert_eq!(folder_value(&v("[[0, 1], [2, 3]]")), "0,1,2,3");
+        assert_eq!(folder_value(&v("{ a: 1, b: [2, 3] }")), "a:1,b:2,3");
+        assert_eq!(folder_value(&v("'two words'")), "two-words");
+        assert_eq!(folder_value(&v("line")), "line");
+    }
 }

@@ -420,27 +420,76 @@ fn a_full_disk_ends_the_run_with_a_message_and_resume_finishes_it() {
     assert_eq!(products(&out), products(&reference));
 }
 
-/// A part changed in the middle after its run finished (one flipped bit, which its Parquet
-/// footer does not notice) is caught by the checksum written beside it: `--resume` names it,
-/// simulates it again, and the run's files equal an untouched run's.
-#[test]
-fn a_part_damaged_after_the_run_is_found_and_redone() {
-    let dir = tmp("pipe_bitflip");
+/// Runs the track twice, damages the second run's `waveforms/` folder with `damage`, and
+/// checks that `--resume` names part 2 as damaged, simulates it again, and leaves the run's
+/// files equal to the untouched run's.
+fn part_2_damaged_is_redone(name: &str, damage: impl FnOnce(&Path)) {
+    let dir = tmp(name);
     let camp = track_campaign(&dir, 200);
     let camp = camp.to_str().unwrap();
     let reference = dir.join("reference");
     run_ok(&["run", camp, "--out", reference.to_str().unwrap()]);
     let out = dir.join("damaged");
     run_ok(&["run", camp, "--out", out.to_str().unwrap()]);
-    let part = out.join("waveforms/part-00002.parquet");
-    let mut bytes = std::fs::read(&part).unwrap();
-    let middle = bytes.len() / 2;
-    bytes[middle] ^= 0x01;
-    std::fs::write(&part, &bytes).unwrap();
+    damage(&out.join("waveforms"));
     let log = run_ok(&["run", camp, "--out", out.to_str().unwrap(), "--resume"]);
     assert!(
         log.contains("a part file is missing or damaged (waveforms/part-00002.parquet)"),
         "{log}"
     );
+    assert_eq!(products(&out), products(&reference));
+}
+
+/// A part changed in the middle after its run finished (one flipped bit, which its Parquet
+/// footer does not notice) is caught by the checksum written beside it.
+#[test]
+fn a_part_damaged_after_the_run_is_found_and_redone() {
+    part_2_damaged_is_redone("pipe_bitflip", |wf| {
+        let part = wf.join("part-00002.parquet");
+        let mut bytes = std::fs::read(&part).unwrap();
+        let middle = bytes.len() / 2;
+        bytes[middle] ^= 0x01;
+        std::fs::write(&part, &bytes).unwrap();
+    });
+}
+
+/// Another part's file under a part's name, its checksum record copied with it (the bytes
+/// and the record agree), holds other pulses: it is no part 2.
+#[test]
+fn a_part_holding_another_parts_pulses_is_redone() {
+    part_2_damaged_is_redone("pipe_swapped", |wf| {
+        for ext in ["parquet", "fnv"] {
+            let from = wf.join(format!("part-00001.{ext}"));
+            std::fs::copy(from, wf.join(format!("part-00002.{ext}"))).unwrap();
+        }
+    });
+}
+
+/// Shards of an edited campaign of fewer parts, in a folder of the first one's: the parts
+/// past the new last are the old campaign's, and go; the folder then equals one run's.
+#[test]
+fn shards_of_a_shorter_campaign_leave_no_part_of_the_longer() {
+    let dir = tmp("pipe_shorter");
+    let camp = track_campaign(&dir, 200);
+    let camp = camp.to_str().unwrap();
+    let out = dir.join("out");
+    let o = out.to_str().unwrap();
+    run_ok(&["run", camp, "--out", o]);
+    assert!(out.join("waveforms/part-00003.parquet").is_file());
+    // the track cut to half its length: two parts of 1000 pulses
+    let text = std::fs::read_to_string(camp).unwrap();
+    std::fs::write(camp, text.replace("end: [90, 50]", "end: [50, 50]")).unwrap();
+    let reference = dir.join("reference");
+    run_ok(&["run", camp, "--out", reference.to_str().unwrap()]);
+    for shard in ["0/2", "1/2"] {
+        run_ok(&["run", camp, "--out", o, "--shard", shard]);
+    }
+    run_ok(&["run", camp, "--out", o, "--resume"]);
+    for k in 2..4 {
+        for ext in ["parquet", "fnv", "stats.csv"] {
+            let old = out.join(format!("waveforms/part-0000{k}.{ext}"));
+            assert!(!old.exists(), "{} left", old.display());
+        }
+    }
     assert_eq!(products(&out), products(&reference));
 }

@@ -620,6 +620,24 @@ fn simulate_fingerprint(
     Ok(fingerprint(&inputs))
 }
 
+/// Removes the files of parts `first` and later (`part-NNNNN.*`) from the waveforms folder.
+fn remove_parts_from(wf_dir: &Path, first: usize) {
+    let Ok(entries) = std::fs::read_dir(wf_dir) else {
+        return;
+    };
+    for e in entries.flatten() {
+        let name = e.file_name();
+        let index = name
+            .to_str()
+            .and_then(|n| n.strip_prefix("part-"))
+            .and_then(|n| n.split('.').next())
+            .and_then(|k| k.parse::<usize>().ok());
+        if index.is_some_and(|k| k >= first) {
+            let _ = std::fs::remove_file(e.path());
+        }
+    }
+}
+
 /// The first of a run's parts (in `bands` bands) that is missing or not whole, by its name.
 fn first_broken_part(out: &Path, parts: Parts, bands: usize, fp: &str) -> Option<String> {
     (0..parts.count())
@@ -630,8 +648,9 @@ fn first_broken_part(out: &Path, parts: Parts, bands: usize, fp: &str) -> Option
 /// Whether part `k` is whole: its waveforms (checksum, rows, the simulation that made them)
 /// and its per-pulse timings beside them, which are made again with it when damaged.
 fn part_done(out: &Path, parts: Parts, k: usize, bands: usize, fp: &str) -> bool {
-    let pulses = parts.range(k).len();
-    part_is_whole(&out.join(part_name(k)), pulses * bands, fp)
+    let range = parts.range(k);
+    let pulses = range.len();
+    part_is_whole(&out.join(part_name(k)), range, pulses * bands, fp)
         && simulate::stats_are_whole(&out.join(simulate::stats_name(k)), pulses)
 }
 
@@ -662,6 +681,10 @@ fn simulate_stage(
     if stale && shard.is_none() && wf_dir.exists() {
         let _ = std::fs::remove_dir_all(&wf_dir);
     }
+    // a shard leaves the folder to the others, but no part past this run's last is any
+    // shard's: those are another campaign's (one of more parts), whose rows a reader of
+    // `part-*.parquet` would take for this run's
+    remove_parts_from(&wf_dir, parts);
     write_text_atomic(&marker, fp)?;
     let whole = |k: usize| part_done(out, cut, k, bands_of(loaded), fp);
     let todo: Vec<usize> = (0..parts)

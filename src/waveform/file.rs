@@ -510,11 +510,18 @@ fn bins_of(w: &mut Waveform, c: usize) -> &mut Vec<f32> {
 }
 
 /// Whether a part file is whole: its bytes match the checksum written beside it, it was made
-/// for the simulation whose `fingerprint` is given, its Parquet footer reads and it holds
-/// `rows` pulses. A part cut short or changed in the middle (a kill mid-write that escaped the
-/// atomic rename, a full disk, a bad copy, a flipped bit), or left by another campaign in the
-/// same folder, fails; `--resume` and shards redo such a part instead of trusting it.
-pub fn part_is_whole(path: &Path, rows: usize, fingerprint: &str) -> bool {
+/// for the simulation whose `fingerprint` is given, its Parquet footer reads, it holds `rows`
+/// rows and its pulse ids span `pulses` (the `pulse_id` statistics of its row groups). A part
+/// cut short or changed in the middle (a kill mid-write that escaped the atomic rename, a full
+/// disk, a bad copy, a flipped bit), left by another campaign in the same folder, or another
+/// part's file under its name, fails; `--resume` and shards redo such a part instead of
+/// trusting it.
+pub fn part_is_whole(
+    path: &Path,
+    pulses: std::ops::Range<usize>,
+    rows: usize,
+    fingerprint: &str,
+) -> bool {
     use parquet::file::reader::{FileReader, SerializedFileReader};
     let Ok(record) = std::fs::read_to_string(checksum_path(path)) else {
         return false;
@@ -529,8 +536,31 @@ pub fn part_is_whole(path: &Path, rows: usize, fingerprint: &str) -> bool {
     let Ok(file) = std::fs::File::open(path) else {
         return false;
     };
-    SerializedFileReader::new(file)
-        .is_ok_and(|r| r.metadata().file_metadata().num_rows() == rows as i64)
+    let Ok(reader) = SerializedFileReader::new(file) else {
+        return false;
+    };
+    let meta = reader.metadata();
+    let want = (pulses.start as u64, pulses.end.saturating_sub(1) as u64);
+    meta.file_metadata().num_rows() == rows as i64
+        && (pulses.is_empty() || pulse_span(meta) == Some(want))
+}
+
+/// The least and greatest `pulse_id` of a Parquet file, from its row groups' statistics;
+/// None when a row group has none.
+fn pulse_span(meta: &parquet::file::metadata::ParquetMetaData) -> Option<(u64, u64)> {
+    use parquet::file::statistics::Statistics;
+    let schema = meta.file_metadata().schema_descr();
+    let column = (0..schema.num_columns()).find(|&c| schema.column(c).name() == "pulse_id")?;
+    let mut span: Option<(u64, u64)> = None;
+    for group in meta.row_groups() {
+        let Some(Statistics::Int64(s)) = group.column(column).statistics() else {
+            return None;
+        };
+        // u64 ids are stored as INT64 with the UINT_64 annotation: the same bits
+        let (lo, hi) = (*s.min_opt()? as u64, *s.max_opt()? as u64);
+        span = Some(span.map_or((lo, hi), |(a, b)| (a.min(lo), b.max(hi))));
+    }
+    span
 }
 
 /// Whether a column of the waveform files holds one list per pulse.

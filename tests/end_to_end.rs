@@ -769,6 +769,14 @@ fn compare_writes_csv_and_plots() {
     assert_eq!(code, 0, "{err}");
     assert!(stdout.contains("| h100,a | 100 |"), "{stdout}");
     assert!(stdout.contains("| h150,b | 150 |"), "{stdout}");
+    // the markdown is the CSV's table: its columns, in its order
+    let md_header: Vec<&str> = stdout.lines().next().unwrap().split('|').collect();
+    assert_eq!(
+        md_header.len() - 2,
+        lidarsim::compare::CSV_COLUMNS.len(),
+        "{stdout}"
+    );
+    assert!(md_header[5].contains("points") && md_header[19].contains("strip max mean"));
 
     let text = std::fs::read_to_string(&csv_path).unwrap();
     let lines: Vec<&str> = text.lines().collect();
@@ -831,6 +839,15 @@ fn compare_writes_csv_and_plots() {
         assert!(!err.contains("panicked"), "{err}");
         std::fs::write(&path, whole).unwrap();
     }
+    // a run without its products yet: its planned pulses, the products' cells empty
+    std::fs::remove_file(runs[1].join("products.json")).unwrap();
+    std::fs::remove_dir_all(runs[1].join("dsm")).unwrap();
+    let (code, stdout, err) = lidarsim(&["compare", runs[1].to_str().unwrap()]);
+    assert_eq!(code, 0, "{err}");
+    assert!(
+        stdout.contains("| h150,b | 150 | – | 400 | – |"),
+        "{stdout}"
+    );
 }
 
 /// A sweep of `platform.altitude_m: [100, 200]` over a 10-shot profiler: one sub-folder per
@@ -885,6 +902,19 @@ fn sweep_writes_subruns_and_summaries() {
 
     let svg = std::fs::read_to_string(out.join("sweep_energy.svg")).unwrap();
     assert!(svg.contains("<svg"));
+
+    // a sweep stopped before its last run: compared as far as it went, that run's row empty
+    std::fs::remove_dir_all(out.join(names[1])).unwrap();
+    let (code, stdout, err) = lidarsim(&["compare", out.to_str().unwrap()]);
+    assert_eq!(code, 0, "{err}");
+    assert!(
+        stdout.contains("| altitude_m=100 | 100 | – | 10 |"),
+        "{stdout}"
+    );
+    assert!(
+        stdout.contains("| altitude_m=200 | – | – | – | – |"),
+        "{stdout}"
+    );
 }
 
 // ---------------------------------------------------------------------------------------------

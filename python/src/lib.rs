@@ -259,13 +259,9 @@ fn check(py: Python<'_>, path: PathBuf) -> PyResult<String> {
 #[pyfunction]
 fn compare(py: Python<'_>, runs: Vec<PathBuf>) -> PyResult<ArrowStream> {
     detached(py, || {
-        let mut rows = Vec::new();
-        for r in &runs {
-            for dir in lidarsim::compare::expand(r)? {
-                rows.push(lidarsim::compare::read_row(&dir)?);
-            }
-        }
-        Ok(batch(lidarsim::compare::table(&rows)))
+        Ok(batch(lidarsim::compare::table(&lidarsim::compare::rows(
+            &runs,
+        )?)))
     })
 }
 

@@ -267,12 +267,7 @@ fn run(args: RunArgs) -> Result<()> {
 
 fn compare(args: CompareArgs) -> Result<()> {
     use crate::compare;
-    let mut rows = Vec::new();
-    for r in &args.runs {
-        for dir in compare::expand(r)? {
-            rows.push(compare::read_row(&dir)?);
-        }
-    }
+    let rows = compare::rows(&args.runs)?;
     print!("{}", compare::markdown(&rows));
     if let Some(path) = args.csv {
         compare::write_csv(&path, &rows)?;

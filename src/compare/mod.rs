@@ -17,7 +17,8 @@ pub struct RunRow {
     pub run: String,
     pub altitude_m: Option<f64>,
     pub prf_hz: Option<f64>,
-    pub pulses: u64,
+    /// The planned pulses (`products.json`, or before the products `pulses.parquet`).
+    pub pulses: Option<u64>,
     pub points: Option<u64>,
     pub points_per_pulse: Option<f64>,
     pub pulse_density_m2: Option<f64>,
@@ -52,8 +53,31 @@ pub fn expand(dir: &Path) -> Result<Vec<PathBuf>> {
     ))
 }
 
+/// The rows of the runs and sweeps `runs` names, in order (see [`expand`]).
+pub fn rows(runs: &[PathBuf]) -> Result<Vec<RunRow>> {
+    let mut rows = Vec::new();
+    for r in runs {
+        for dir in expand(r)? {
+            rows.push(read_row(&dir)?);
+        }
+    }
+    Ok(rows)
+}
+
+/// One run's row. A sweep's sub-run not yet begun (no folder, or no manifest in it) is a row
+/// of empty cells: a sweep stopped early is compared as far as it went.
 pub fn read_row(dir: &Path) -> Result<RunRow> {
+    let name = dir
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
     let manifest_path = dir.join("manifest.json");
+    if !manifest_path.exists() {
+        return Ok(RunRow {
+            run: name,
+            ..RunRow::default()
+        });
+    }
     let manifest = Manifest::read(&manifest_path)
         .ok_or_else(|| Error::data(&manifest_path, "missing or not a lidarsim manifest"))?;
     // a run stopped before its plan has none (its cells stay empty); one that is there but
@@ -74,10 +98,7 @@ pub fn read_row(dir: &Path) -> Result<RunRow> {
     // a figure with no meaning for the run (NaN in memory, null in JSON) is an empty cell
     let finite = |x: f64| Some(x).filter(|x| x.is_finite());
     let mut row = RunRow {
-        run: dir
-            .file_name()
-            .map(|n| n.to_string_lossy().into_owned())
-            .unwrap_or_default(),
+        run: name,
         altitude_m: resolved["platform"]["altitude_m"].as_f64(),
         prf_hz: resolved["platform"]["prf_hz"].as_f64(),
         rays_per_pulse: resolved["simulation"]["rays_per_pulse"].as_u64(),
@@ -104,8 +125,15 @@ pub fn read_row(dir: &Path) -> Result<RunRow> {
         Some(path) => Some(DsmReport::read(&path).ok_or_else(|| unreadable(&path))?),
         None => None,
     };
+    // before its products, a run's pulses are its plan's
+    row.pulses = match present("pulses.parquet") {
+        Some(path) if products.is_none() => {
+            Some(planned_pulses(&path).ok_or_else(|| unreadable(&path))?)
+        }
+        _ => None,
+    };
     if let Some(p) = products {
-        row.pulses = p.pulses as u64;
+        row.pulses = Some(p.pulses as u64);
         if let Some(s) = &p.strips {
             row.strip_cells = Some(s.cells as u64);
             row.strip_rms_dz_m = s.rms_dz_m.and_then(finite);
@@ -135,38 +163,50 @@ pub fn read_row(dir: &Path) -> Result<RunRow> {
     Ok(row)
 }
 
+/// The rows of a Parquet file, from its footer.
+fn planned_pulses(path: &Path) -> Option<u64> {
+    use parquet::file::reader::{FileReader, SerializedFileReader};
+    let reader = SerializedFileReader::new(std::fs::File::open(path).ok()?).ok()?;
+    u64::try_from(reader.metadata().file_metadata().num_rows()).ok()
+}
+
 fn cell(v: Option<f64>, digits: usize) -> String {
     v.filter(|x| x.is_finite())
         .map(|x| format!("{x:.digits$}"))
         .unwrap_or_else(|| "–".into())
 }
 
+/// The table as markdown: the CSV's columns ([`CSV_COLUMNS`]) in its order, with units in
+/// the headers, percentages, millimetres and fixed digits.
 pub fn markdown(rows: &[RunRow]) -> String {
     let mut s = String::from(
-        "| run | altitude m | PRF Hz | rays | sampler | pulses | points/pulse | within 5 cm | within 25 cm | median distance mm | pulses/m² | DSM bias m | DSM RMSE m | coverage | strip cells | strip RMS dz m | run s |\n| --- | ---: | ---: | ---: | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n",
+        "| run | altitude m | PRF Hz | pulses | points | points/pulse | pulses/m² | DSM bias m | DSM RMSE m | coverage | run s | rays | sampler | within 5 cm | within 25 cm | median distance mm | strip cells | strip RMS dz m | strip max mean dz m |\n| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | --- | ---: | ---: | ---: | ---: | ---: | ---: |\n",
     );
     let percent =
         |v: Option<f64>| cell(v.map(|x| 100.0 * x), 2) + if v.is_some() { " %" } else { "" };
+    let count = |n: Option<u64>| cell(n.map(|n| n as f64), 0);
     for r in rows {
         s += &format!(
-            "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {:.1} |\n",
+            "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |\n",
             r.run,
             cell(r.altitude_m, 0),
             cell(r.prf_hz, 0),
-            cell(r.rays_per_pulse.map(|n| n as f64), 0),
-            r.sampler.as_deref().unwrap_or("–"),
-            r.pulses,
+            count(r.pulses),
+            count(r.points),
             cell(r.points_per_pulse, 3),
-            percent(r.within_5cm),
-            percent(r.within_25cm),
-            cell(r.median_distance_m.map(|m| 1e3 * m), 3),
             cell(r.pulse_density_m2, 1),
             cell(r.dsm_bias_m, 3),
             cell(r.dsm_rmse_m, 3),
             cell(r.dsm_coverage, 3),
-            cell(r.strip_cells.map(|n| n as f64), 0),
+            cell(Some(r.run_time_s), 1),
+            count(r.rays_per_pulse),
+            r.sampler.as_deref().unwrap_or("–"),
+            percent(r.within_5cm),
+            percent(r.within_25cm),
+            cell(r.median_distance_m.map(|m| 1e3 * m), 3),
+            count(r.strip_cells),
             cell(r.strip_rms_dz_m, 3),
-            r.run_time_s
+            cell(r.strip_max_mean_dz_m, 3),
         );
     }
     s
@@ -213,7 +253,7 @@ pub fn table(rows: &[RunRow]) -> arrow_array::RecordBatch {
         t(|r| Some(r.run.clone())),
         f(|r| r.altitude_m),
         f(|r| r.prf_hz),
-        u(|r| Some(r.pulses)),
+        u(|r| r.pulses),
         u(|r| r.points),
         f(|r| r.points_per_pulse),
         f(|r| r.pulse_density_m2),
@@ -242,7 +282,7 @@ pub fn write_csv(path: &Path, rows: &[RunRow]) -> Result<()> {
             r.run.clone(),
             o(r.altitude_m),
             o(r.prf_hz),
-            r.pulses.to_string(),
+            r.pulses.map(|x| x.to_string()).unwrap_or_default(),
             r.points.map(|x| x.to_string()).unwrap_or_default(),
             o(r.points_per_pulse),
             o(r.pulse_density_m2),

@@ -160,6 +160,25 @@ fn surface_and_bottom_returns_match_fresnel_and_beer_lambert() {
             w.order_energy_j[1], 0.0,
             "no path of order 2 reaches the telescope"
         );
+        // the bottom's light is the ground's (the class its returns are labelled with), the
+        // surface's reflection the water's own ("other")
+        let class = |c: lidarsim::scene::SurfaceClass| -> f64 {
+            w.class_energy_j[c.index()].iter().map(|&v| v as f64).sum()
+        };
+        let (ground, other) = (
+            class(lidarsim::scene::SurfaceClass::Ground),
+            class(lidarsim::scene::SurfaceClass::Other),
+        );
+        let (surface_j, bottom_j) = (w.order_energy_j[0], w.order_energy_j[2]);
+        println!("{name} classes: ground {ground:.6e}, other {other:.6e}");
+        assert!(
+            (ground / bottom_j - 1.0).abs() < 0.01,
+            "{ground} against {bottom_j}"
+        );
+        assert!(
+            (other / surface_j - 1.0).abs() < 0.01,
+            "{other} against {surface_j}"
+        );
         // times: the surface at 2H/c, the bottom at 2(H + n d)/c, within one bin
         let peak = |lo: usize, hi: usize| {
             (lo..hi)

@@ -11,9 +11,25 @@ use crate::scene::FacetId;
 use glam::DVec3;
 
 /// Index of the surface class (ground, vegetation, building, other) of the path's first
-/// surface: the one the laser lit, which a return's range points at.
+/// surface `first`, the one the laser lit, which a return's range points at; `next` is the
+/// vertex after it. Light that enters the water there returns from what lies under it (the
+/// bottom, an object in the column): its class is that of `next`, and the water surface's
+/// own ("other") only for what it reflects.
 #[inline]
-pub(super) fn class_of(setup: &PulseSetup, v: &Vertex) -> usize {
+pub(super) fn class_of(setup: &PulseSetup, first: &Vertex, next: &Vertex) -> usize {
+    let surfaces = &setup.scene.surfaces;
+    let v = match &setup.scene.water {
+        Some(w)
+            if next.kind == VertexKind::Surface
+                && surfaces
+                    .get(first.surface as usize)
+                    .is_some_and(|s| s.water.is_some())
+                && w.holds(first.p, next.p) =>
+        {
+            next
+        }
+        _ => first,
+    };
     // a vertex off every surface (none lit) counts as "other", as an unknown class does
     setup
         .scene
@@ -183,14 +199,15 @@ pub(super) fn walk(
                         if sun {
                             acc.add_solar_bands(q.beta * w, &r);
                         } else {
-                            let class = class_of(setup, &path[1]);
+                            let class = class_of(setup, &path[1], &path[2]);
                             let len = (q.len, q.wlen, group_indices(setup));
                             acc.add_bands(len, q.beta * w, surfaces, class, &r);
                         }
                     } else if sun {
                         acc.add_solar(q.beta * w);
                     } else {
-                        acc.add(q.len, q.beta * w, surfaces, class_of(setup, &path[1]));
+                        let class = class_of(setup, &path[1], &path[2]);
+                        acc.add(q.len, q.beta * w, surfaces, class);
                     }
                     path.pop();
                 }
@@ -230,6 +247,12 @@ pub(super) fn walk(
         }
         dir = next;
     }
+}
+
+/// [`class_of`] the path `light` joined to the receiver sub-path's vertex `y`.
+#[inline]
+fn first_class(setup: &PulseSetup, light: &[Vertex], y: &Vertex) -> usize {
+    class_of(setup, &light[1], light.get(2).unwrap_or(y))
 }
 
 /// The geometric length in water of the path that joins `x` (a light sub-path's end) to `y`
@@ -502,9 +525,9 @@ fn connect_to_lights(setup: &PulseSetup, acc: &mut Accum, b: &mut Buffers, sun_o
                         joined_water(setup, &laser_end, y),
                         group_indices(setup),
                     );
-                    acc.add_bands(len, c * w, t - 1, class_of(setup, y), &r);
+                    acc.add_bands(len, c * w, t - 1, class_of(setup, y, &cam[t - 2]), &r);
                 } else {
-                    acc.add(length, c * w, t - 1, class_of(setup, y));
+                    acc.add(length, c * w, t - 1, class_of(setup, y, &cam[t - 2]));
                 }
             }
         }
@@ -591,12 +614,12 @@ fn connect_subpaths(
                     acc.add_solar_bands(c * w, &r);
                 } else {
                     let len = (length, joined_water(setup, x, y), group_indices(setup));
-                    acc.add_bands(len, c * w, order, class_of(setup, &light[1]), &r);
+                    acc.add_bands(len, c * w, order, first_class(setup, light, y), &r);
                 }
             } else if is_sun {
                 acc.add_solar(c * w);
             } else {
-                acc.add(length, c * w, order, class_of(setup, &light[1]));
+                acc.add(length, c * w, order, first_class(setup, light, y));
             }
         }
     }

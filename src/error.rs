@@ -130,6 +130,12 @@ impl Error {
         self
     }
 
+    /// The same error about the argument or key `key` (a host's argument: `threads`).
+    pub fn for_key(mut self, key: impl Into<String>) -> Self {
+        self.0.key = Some(key.into());
+        self
+    }
+
     /// The same error, saying where its file was reached from (a scene file's key, a sweep
     /// entry): `mesh.obj:12: bad face (scene.yaml: objects.tree.mesh)`.
     pub fn within(mut self, place: impl Into<String>) -> Self {

@@ -72,6 +72,23 @@ def _whole(value: Any, key: str, least: int = 0) -> int:
     return n
 
 
+def _path(value: Any, key: str) -> str:
+    """A file or folder path (a ``str`` or an ``os.PathLike``), or an :class:`InputError`
+    naming ``key``."""
+    if isinstance(value, (str, os.PathLike)):
+        p = os.fspath(value)
+        if isinstance(p, str):
+            return p
+    raise _bad(key, f"expected a path (a str or a pathlib.Path), found {value!r}")
+
+
+def _mapping(value: Any, key: str) -> Dict[str, Any]:
+    """A mapping's items as a dict, or an :class:`InputError` naming ``key``."""
+    if isinstance(value, Mapping):
+        return dict(value)
+    raise _bad(key, f"expected a mapping of keys to values, found {value!r}")
+
+
 def _point(value: Any, key: str) -> Tuple[float, float, float]:
     """Three finite numbers, or an :class:`InputError` naming ``key``."""
     try:
@@ -157,27 +174,32 @@ def run(
     if isinstance(stages, str):
         # "plan,simulate", as the command line takes it
         stages = [s.strip() for s in stages.split(",") if s.strip()]
+    if stages is not None:
+        names = list(stages) if isinstance(stages, Iterable) else None
+        if names is None or not all(isinstance(s, str) for s in names):
+            raise _bad("stages", f"expected stage names (plan, simulate, products, report), found {stages!r}")
+        stages = names
     if shard is not None:
         if isinstance(shard, (str, bytes)) or not isinstance(shard, Sequence) or len(shard) != 2:
             raise _bad("shard", f"expected (k, n), two whole numbers, found {shard!r}")
         shard = (_whole(shard[0], "shard"), _whole(shard[1], "shard"))
     kwargs: Dict[str, Any] = dict(
-        out=None if out is None else os.fspath(out),
-        threads=None if threads is None else _whole(threads, "threads"),
+        out=None if out is None else _path(out, "out"),
+        threads=None if threads is None else _whole(threads, "threads", least=1),
         resume=bool(resume),
-        stages=None if stages is None else [str(s) for s in stages],
+        stages=None if stages is None else list(stages),
         shard=shard,
-        overrides=None if overrides is None else _json(dict(overrides), "overrides"),
+        overrides=None if overrides is None else _json(_mapping(overrides, "overrides"), "overrides"),
     )
     if isinstance(campaign, Mapping):
-        base = Path(base_dir) if base_dir is not None else Path.cwd()
+        base = Path(_path(base_dir, "base_dir")) if base_dir is not None else Path.cwd()
         summary = _lidarsim.run(
             text=_json(campaign, "campaign", indent=2),
             label=os.fspath(base / "<campaign>"),
             **kwargs,
         )
     else:
-        summary = _lidarsim.run(path=os.fspath(campaign), **kwargs)
+        summary = _lidarsim.run(path=_path(campaign, "campaign"), **kwargs)
     r = Run(summary["out"])
     r.summary = summary
     return r
@@ -186,7 +208,7 @@ def run(
 def open_run(folder: PathLike) -> "Run":
     """An existing run folder (one ``lidarsim run`` or :func:`run` wrote), or a sweep's
     folder (its runs in :attr:`Run.sweep`)."""
-    r = Run(folder)
+    r = Run(_path(folder, "folder"))
     if not r.sweep:
         _lidarsim.read_run(os.fspath(r.folder), "manifest")  # checks that it is a run folder
     return r
@@ -197,13 +219,18 @@ def check(campaign: PathLike) -> Dict[str, Any]:
     and measured, the run's memory and time estimated. Keys include ``pulses``,
     ``instances``, ``triangles`` (instanced), ``distinct_triangles``, ``memory_bound_mib``,
     ``estimated_time_s`` and ``warnings``."""
-    return json.loads(_lidarsim.check(os.fspath(campaign)))
+    return json.loads(_lidarsim.check(_path(campaign, "campaign")))
 
 
 def compare(runs: Iterable[PathLike]) -> "pyarrow.Table":  # noqa: F821
     """The table of ``lidarsim compare`` (the columns of its ``--csv``), one row per run; a
     sweep's folder stands for its sub-runs."""
-    return _table(_lidarsim.compare([os.fspath(r) for r in runs]))
+    if isinstance(runs, (str, os.PathLike)):
+        # one run folder, not the characters of its name
+        runs = [runs]
+    if not isinstance(runs, Iterable):
+        raise _bad("runs", f"expected run folders (a list of paths), found {runs!r}")
+    return _table(_lidarsim.compare([_path(r, "runs") for r in runs]))
 
 
 class Run:
@@ -215,7 +242,7 @@ class Run:
 
     def __init__(self, folder: PathLike) -> None:
         #: The run folder.
-        self.folder: Path = Path(folder)
+        self.folder: Path = Path(_path(folder, "folder"))
         #: What :func:`run` returned for this run (None for :func:`open_run`): ``pulses``,
         #: ``rays``, ``seconds``, ``parts_done``, ``complete``.
         self.summary: Optional[Dict[str, Any]] = None
@@ -233,6 +260,12 @@ class Run:
         return [Run(self.folder / name) for name in json.loads(index.read_text())["sweep"]]
 
     def _read(self, what: str, pulse_ids: Optional[List[int]] = None) -> Any:
+        if (self.folder / "sweep.json").is_file() and not (self.folder / "manifest.json").exists():
+            raise _bad(
+                "folder",
+                f"{self.folder} is a sweep's folder, with no run of its own: its {what} are its "
+                f"runs' (Run.sweep, one per combination: run.sweep[0].{what} ...)",
+            )
         return _lidarsim.read_run(os.fspath(self.folder), what, pulse_ids)
 
     @property
@@ -257,6 +290,8 @@ class Run:
     def waveforms(self, pulse_ids: Optional[Iterable[int]] = None) -> "pyarrow.Table":  # noqa: F821
         """The waveform parts' rows, in pulse order: all of them, or those of ``pulse_ids``
         (one row per pulse and band)."""
+        if pulse_ids is not None and not isinstance(pulse_ids, Iterable):
+            raise _bad("pulse_ids", f"expected a list of pulse ids, found {pulse_ids!r}")
         ids = None if pulse_ids is None else [_whole(i, "pulse_ids") for i in pulse_ids]
         return _table(self._read("waveforms", ids))
 
@@ -373,10 +408,14 @@ class Scene:
         """
         bands = None
         if wavelength_nm is not None:
-            bands = [float(wavelength_nm)] if isinstance(wavelength_nm, (int, float)) else [
-                float(w) for w in wavelength_nm
-            ]
-        return cls(_lidarsim.Scene.load(os.fspath(path), bands))
+            several = not isinstance(wavelength_nm, (str, bytes)) and isinstance(wavelength_nm, Iterable)
+            try:
+                bands = [float(w) for w in wavelength_nm] if several else [float(wavelength_nm)]
+            except (TypeError, ValueError):
+                raise _bad(
+                    "wavelength_nm", f"expected a number or a list of numbers, found {wavelength_nm!r}"
+                ) from None
+        return cls(_lidarsim.Scene.load(_path(path, "path"), bands))
 
     @property
     def path(self) -> str:
@@ -435,14 +474,14 @@ class Scene:
             raise _bad("wavelength_nm", f"expected a number or a list of numbers, found {wavelength_nm!r}")
         several = not isinstance(wavelength_nm, numbers.Real)
         rows = self._native.simulate_pulse(
-            _json(dict(instrument), "instrument"),
+            _json(_mapping(instrument, "instrument"), "instrument"),
             _point(origin, "origin"),
             _point(direction, "direction"),
             _json(list(wavelength_nm) if several else wavelength_nm, "wavelength_nm"),
             _json(sim, "simulation"),
             _whole(seed, "seed"),
-            None if sun is None else _json(dict(sun), "sun"),
-            None if atmosphere is None else _json(dict(atmosphere), "atmosphere"),
+            None if sun is None else _json(_mapping(sun, "sun"), "sun"),
+            None if atmosphere is None else _json(_mapping(atmosphere, "atmosphere"), "atmosphere"),
             bool(record),
         )
         waveforms = [Waveform(r) for r in rows]

@@ -186,15 +186,28 @@ fn run<'py>(
         };
         lidarsim::plan::load_campaign(doc, &overrides)
     })?;
+    // an argument's error names the argument, as the package's own checks do
+    let named = |key: &'static str| move |e: lidarsim::Error| e.for_key(key);
     let opts = guarded(py, || {
+        if let Some(n) = threads.filter(|&n| n == 0 || n > pipeline::MAX_THREADS) {
+            return Err(lidarsim::Error::msg(format!(
+                "expected 1 to {} threads, found {n}",
+                pipeline::MAX_THREADS
+            ))
+            .for_key("threads"));
+        }
         Ok(RunOptions {
             out,
             threads,
             resume,
             stages: stages
                 .map(|v| v.iter().map(|s| Stage::from_name(s)).collect())
-                .transpose()?,
-            shard: shard.map(pipeline::check_shard).transpose()?,
+                .transpose()
+                .map_err(named("stages"))?,
+            shard: shard
+                .map(pipeline::check_shard)
+                .transpose()
+                .map_err(named("shard"))?,
         })
     })?;
     lidarsim::interrupt::clear();

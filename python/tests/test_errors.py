@@ -125,10 +125,33 @@ def test_arguments_of_the_wrong_kind_are_input_errors(tmp_path):
         (dict(shard=(-1, 2)), "shard"),
         (dict(shard=(0.5, 2)), "shard"),
         (dict(shard=3), "shard"),
+        (dict(threads=0), "threads"),
+        (dict(threads=10**9), "threads"),
+        (dict(shard=(3, 2)), "shard"),
+        (dict(stages=["bogus"]), "stages"),
+        (dict(stages=5), "stages"),
+        (dict(overrides=[1, 2]), "overrides"),
+        (dict(out=5), "out"),
+    ]:
+        args = dict(out=tmp_path / "x")
+        args.update(kwargs)
+        with pytest.raises(lidarsim.InputError) as e:
+            lidarsim.run(camp, **args)
+        assert e.value.key == key, (kwargs, e.value)
+    # a path of the wrong kind, wherever one is asked for
+    for call, key in [
+        (lambda: lidarsim.run(5), "campaign"),
+        (lambda: lidarsim.run(None), "campaign"),
+        (lambda: lidarsim.open_run(3), "folder"),
+        (lambda: lidarsim.check(7), "campaign"),
+        (lambda: lidarsim.compare([3]), "runs"),
+        (lambda: lidarsim.compare(None), "runs"),
+        (lambda: lidarsim.Scene.load(3), "path"),
+        (lambda: lidarsim.Scene.load(PLANE, wavelength_nm="x"), "wavelength_nm"),
     ]:
         with pytest.raises(lidarsim.InputError) as e:
-            lidarsim.run(camp, out=tmp_path / "x", **kwargs)
-        assert e.value.key == key, (kwargs, e.value)
+            call()
+        assert e.value.key == key, (key, e.value)
     bad = als_campaign()
     bad["platform"]["altitude_m"] = float("nan")
     with pytest.raises(lidarsim.InputError) as e:
@@ -157,8 +180,20 @@ def test_arguments_of_the_wrong_kind_are_input_errors(tmp_path):
         with pytest.raises(lidarsim.InputError) as e:
             plane.simulate_pulse(inst, **args)
         assert e.value.key == key, (kwargs, e.value)
+    for call, key in [
+        (lambda: plane.simulate_pulse(5, (50, 50, 10), (0, 0, -1)), "instrument"),
+        (lambda: plane.simulate_pulse(inst, (50, 50, 10), (0, 0, -1), sun=[1]), "sun"),
+    ]:
+        with pytest.raises(lidarsim.InputError) as e:
+            call()
+        assert e.value.key == key, (key, e.value)
     with pytest.raises(lidarsim.InputError):
         r.waveforms([-1])
+    with pytest.raises(lidarsim.InputError) as e:
+        r.waveforms(3)
+    assert e.value.key == "pulse_ids"
+    # one run folder given alone is that run, not the characters of its name
+    assert lidarsim.compare(r.folder).num_rows == 1
     # a gate no memory holds is refused, as a run of the same campaign is, not attempted
     with pytest.raises(lidarsim.InputError) as e:
         plane.simulate_pulse(dict(inst, bin_ns=1e-30), (50, 50, 10), (0, 0, -1), rays=20)

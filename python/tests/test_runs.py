@@ -116,6 +116,14 @@ def test_check_and_compare(runs, session_dir):
     assert c["pulses"] == runs["file"].pulses().num_rows
     assert c["triangles"] >= c["distinct_triangles"] > 0
     assert c["memory_bound_mib"] > 0
+    # the bound is of the process as it is, not of what the session held before the call
+    import numpy as np
+
+    held = np.ones(50_000_000)  # 400 MB, given back below
+    held[::4096] = 2.0
+    del held
+    again = lidarsim.check(write_campaign(session_dir, als_campaign(), "check.yaml"))
+    assert again["memory_bound_mib"] < c["memory_bound_mib"] + 100, (again, c)
     t = lidarsim.compare([runs["file"].folder, runs["laz"].folder])
     assert t.num_rows == 2
     assert t.column_names[:4] == ["run", "altitude_m", "prf_hz", "pulses"]
@@ -191,6 +199,11 @@ def test_a_sweep_returns_its_runs(session_dir):
     assert [r.campaign["platform"]["altitude_m"] for r in run.sweep] == [200, 400]
     assert lidarsim.open_run(run.folder).sweep[1].pulses().num_rows == 80
     assert lidarsim.compare([run.folder]).num_rows == 2
+    # the sweep's folder has no run of its own: asked for one, it says where its runs are
+    for ask in (lambda: run.campaign, lambda: run.points(), lambda: run.manifest):
+        with pytest.raises(lidarsim.InputError) as e:
+            ask()
+        assert "sweep" in str(e.value) and e.value.key == "folder", e.value
 
 
 def test_ctrl_c_ends_the_lidarsim_command_as_the_binary_does(session_dir):

@@ -4,7 +4,7 @@
 
 use crate::error::Result;
 use crate::plan::{self, Plan};
-use crate::progress::peak_rss_bytes;
+use crate::progress::{peak_rss_bytes, reset_peak_rss};
 use crate::scene::Scene;
 use serde::Serialize;
 use std::path::Path;
@@ -55,6 +55,9 @@ pub struct CheckReport {
 
 /// Long because it gathers every figure of the report in the order `check` prints them.
 pub fn check(path: &Path) -> Result<CheckReport> {
+    // the process as it is now, with the scene about to be loaded: not what a host process
+    // (Python) held and gave back before the call
+    reset_peak_rss();
     let loaded = plan::read_campaign(path)?;
     let c = &loaded.campaign;
     let plan = Plan::new(c)?;

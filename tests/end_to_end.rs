@@ -1086,7 +1086,30 @@ fn a_busy_folder_is_refused_and_a_stale_lock_taken_over() {
     first.kill().unwrap();
     first.wait().unwrap();
     assert!(lock.exists(), "SIGKILL leaves the lock behind");
+    // a lock whose process id a later process took (here a `sleep`, started after the lock's
+    // time) is stale, and taken over; the lock of the process that runs is not
+    let mut other = std::process::Command::new("sleep")
+        .arg("30")
+        .spawn()
+        .unwrap();
+    let stat = std::fs::read_to_string(format!("/proc/{}/stat", other.id())).unwrap();
+    let started: u64 = stat[stat.rfind(')').unwrap() + 1..]
+        .split_whitespace()
+        .nth(19)
+        .unwrap()
+        .parse()
+        .unwrap();
+    std::fs::write(&lock, format!("{} {started}", other.id())).unwrap();
+    let (code, _, err) = lidarsim(&["run", c, "--out", o, "--resume"]);
+    assert_eq!(code, 1, "the sleep's own lock is held: {err}");
+    std::fs::write(
+        &lock,
+        format!("{} {}", other.id(), started.saturating_sub(1)),
+    )
+    .unwrap();
     let log = run_ok(&camp, &out, &["--resume"]);
+    other.kill().unwrap();
+    other.wait().unwrap();
     assert!(log.contains("complete"), "{log}");
     assert!(!lock.exists(), "the lock goes when the run ends");
     // and the refused second run changed nothing: the folder equals a run never disturbed

@@ -212,8 +212,9 @@ struct RunFolder<'a> {
     _lock: Option<FolderLock>,
 }
 
-/// An exclusive claim on a run folder: `run.lock` holds the owner's process id and goes when
-/// the run ends. A lock whose process is gone (killed) is stale and taken over.
+/// An exclusive claim on a run folder: `run.lock` holds the owner's process id and start
+/// time, and goes when the run ends. A lock whose process is gone (killed) is stale and taken
+/// over, as is one whose id a later process took (a container reuses ids at once).
 struct FolderLock {
     path: PathBuf,
 }
@@ -224,7 +225,7 @@ impl FolderLock {
         // the lock appears with its content or not at all: written aside, then hard-linked
         // into place, which fails when a lock is there
         let mine = crate::fsutil::temp_name(&path);
-        std::fs::write(&mine, std::process::id().to_string()).map_err(|e| {
+        std::fs::write(&mine, lock_text()).map_err(|e| {
             Error::io(&mine, "cannot write the folder's lock", e)
                 .advise(crate::fsutil::WRITE_ADVICE)
         })?;
@@ -233,10 +234,8 @@ impl FolderLock {
                 match std::fs::hard_link(&mine, &path) {
                     Ok(()) => return Ok(FolderLock { path: path.clone() }),
                     Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {
-                        let holder = std::fs::read_to_string(&path)
-                            .ok()
-                            .and_then(|t| t.trim().parse::<u32>().ok());
-                        if let Some(pid) = holder.filter(|pid| process_alive(*pid)) {
+                        let holder = std::fs::read_to_string(&path).ok();
+                        if let Some(pid) = holder.as_deref().and_then(lock_holder) {
                             return Err(Error::file(
                                 out,
                                 format!(
@@ -261,7 +260,7 @@ impl FolderLock {
                                 Error::io(&path, "cannot take the folder's lock", e)
                                     .advise(crate::fsutil::WRITE_ADVICE)
                             })?;
-                        let _ = write!(f, "{}", std::process::id());
+                        let _ = write!(f, "{}", lock_text());
                         return Ok(FolderLock { path: path.clone() });
                     }
                 }
@@ -280,10 +279,33 @@ impl Drop for FolderLock {
     }
 }
 
-/// Whether a process with this id runs (Linux: /proc; elsewhere a lock is never held against
-/// another run).
-fn process_alive(pid: u32) -> bool {
-    pid != std::process::id() && Path::new(&format!("/proc/{pid}")).exists()
+/// What `run.lock` holds: this process's id and, where the system says, its start time.
+fn lock_text() -> String {
+    let pid = std::process::id();
+    match process_start(pid) {
+        Some(start) => format!("{pid} {start}"),
+        None => pid.to_string(),
+    }
+}
+
+/// The process holding a lock of text `text` when it still runs: its id, and its start time
+/// when the lock gives one (a lock of an id alone, or on a system without /proc, is held while
+/// a process of that id runs).
+fn lock_holder(text: &str) -> Option<u32> {
+    let mut words = text.split_whitespace();
+    let pid: u32 = words.next()?.parse().ok()?;
+    let start: Option<u64> = words.next().and_then(|w| w.parse().ok());
+    let alive = pid != std::process::id() && Path::new(&format!("/proc/{pid}")).exists();
+    let same = start.is_none_or(|s| process_start(pid).is_none_or(|now| now == s));
+    (alive && same).then_some(pid)
+}
+
+/// When process `pid` started, in clock ticks since boot (Linux: field 22 of
+/// /proc/PID/stat, counted after the command's name, which may hold spaces).
+fn process_start(pid: u32) -> Option<u64> {
+    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
+    let after_name = &stat[stat.rfind(')')? + 1..];
+    after_name.split_whitespace().nth(19)?.parse().ok()
 }
 
 impl<'a> RunFolder<'a> {

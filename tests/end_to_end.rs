@@ -683,6 +683,44 @@ fn photon_counting_writes_labelled_photons() {
     assert_eq!(ph["dark"].as_u64(), Some(dark as u64));
 }
 
+/// `campaign.resolved.yaml` writes out the defaults the run applied (the products, the GPS
+/// start, the receiver's offset, the false-alarm rate, a polygon's duty), and is itself a
+/// campaign: run again, it makes the same pulses and points, byte for byte.
+#[test]
+fn the_resolved_campaign_holds_its_defaults_and_runs_the_same() {
+    let dir = tmp("e2e_resolved");
+    plane_scene(&dir, 0.3, 30.0);
+    let camp = write(
+        &dir,
+        "campaign.yaml",
+        "name: defaults\nscene: plane.yaml\nseed: 6\nwavelength_nm: 1064\ninstrument: { kind: discrete_return, pulse_energy_j: 0.00001, pulse_fwhm_ns: 3, footprint_half_angle_mrad: 0.3, fov_half_angle_mrad: 0.5, receiver_area_m2: 0.01, bin_ns: 1 }\nplatform: { kind: als, altitude_m: 100, speed_m_s: 10, prf_hz: 20000, lines: [ { start: [-5, 0], end: [5, 0] } ], scanner: { pattern: rotating_polygon, facets: 4, scan_angle_deg: [-10, 10], scan_frequency_hz: 50 } }\nsimulation: { method: forward, rays_per_pulse: 8, max_order: 1 }\n",
+    );
+    let out = dir.join("run");
+    run_ok(&camp, &out, &[]);
+    let resolved_path = out.join("campaign.resolved.yaml");
+    let text = std::fs::read_to_string(&resolved_path).unwrap();
+    let r: serde_yaml::Value = serde_yaml::from_str(&text).unwrap();
+    assert_eq!(r["products"]["points"].as_bool(), Some(true), "{text}");
+    assert_eq!(r["products"]["dsm"]["resolution_m"].as_f64(), Some(2.0));
+    assert_eq!(r["products"]["points_format"].as_str(), Some("las"));
+    assert_eq!(r["platform"]["gps_start_s"].as_f64(), Some(0.0));
+    assert_eq!(r["platform"]["scanner"]["duty"].as_f64(), Some(1.0));
+    assert_eq!(r["instrument"]["false_alarm_rate"].as_f64(), Some(0.001));
+    assert_eq!(
+        r["instrument"]["receiver_offset_m"],
+        serde_yaml::from_str::<serde_yaml::Value>("[0.0, 0.0, 0.0]").unwrap()
+    );
+    let again = dir.join("again");
+    let copy = write(&dir, "resolved.yaml", &text);
+    run_ok(&copy, &again, &[]);
+    for file in ["pulses.parquet", "points.las", "dsm/dsm.tif"] {
+        assert!(
+            std::fs::read(out.join(file)).unwrap() == std::fs::read(again.join(file)).unwrap(),
+            "{file} differs"
+        );
+    }
+}
+
 /// A fixed `instrument.range_gate: { start_ns, bins }`: every waveform starts at start_ns
 /// with that many bins whatever its range; a return inside the gate lands at its time, one
 /// beyond it leaves the gate empty and all its energy in `outside_gate_energy_j`.

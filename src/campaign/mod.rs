@@ -710,6 +710,50 @@ pub enum PointsFormat {
 }
 
 impl Campaign {
+    /// The products the run makes: `products:` as given, else the kind's defaults (the
+    /// points and a 2 m DSM of a discrete-return instrument, the photons of a photon-counting
+    /// one; the waveforms always).
+    pub fn products(&self) -> Products {
+        self.products.clone().unwrap_or_else(|| {
+            let kind = self.instrument.kind;
+            let discrete = kind == InstrumentKind::DiscreteReturn;
+            Products {
+                waveforms: true,
+                points: discrete,
+                photons: kind == InstrumentKind::PhotonCounting,
+                dsm: discrete.then_some(Dsm {
+                    resolution_m: default_dsm_resolution(),
+                }),
+                points_format: PointsFormat::Las,
+            }
+        })
+    }
+
+    /// The campaign with the defaults the run applies written out, where leaving them out
+    /// would hide them from a reader of `campaign.resolved.yaml`: the products, the GPS start,
+    /// the receiver's offset, the false-alarm rate, and the scanner's duty (rotating polygon)
+    /// or prism phases (Risley). The run itself reads the same values either way.
+    pub fn with_defaults(&self) -> Campaign {
+        let mut c = self.clone();
+        c.products = Some(self.products());
+        c.platform.gps_start_s.get_or_insert(0.0);
+        let i = &mut c.instrument;
+        i.receiver_offset_m.get_or_insert([0.0; 3]);
+        i.false_alarm_rate_per_pulse = Some(self.instrument.false_alarm_rate());
+        if let Some(scan) = &mut c.platform.scanner {
+            match scan.pattern {
+                ScanPattern::RotatingPolygon => {
+                    scan.duty.get_or_insert(1.0);
+                }
+                ScanPattern::Risley => {
+                    scan.phase_deg.get_or_insert([0.0; 2]);
+                }
+                _ => {}
+            }
+        }
+        c
+    }
+
     /// The pulse energy of beam `line`, J: the instrument's, times the beam's
     /// `relative_energy`.
     pub fn pulse_energy_j(&self, line: u32) -> f64 {
@@ -822,7 +866,7 @@ impl Loaded {
     }
 
     pub fn resolved_yaml(&self) -> String {
-        let mut c = self.campaign.clone();
+        let mut c = self.campaign.with_defaults();
         c.scene = self.scene_path.display().to_string();
         if let Some(t) = &mut c.platform.trajectory {
             if let Some(r) = &t.resolved {

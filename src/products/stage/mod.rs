@@ -34,20 +34,12 @@ pub struct Wanted {
 
 pub fn wanted(loaded: &Loaded) -> Wanted {
     let c = &loaded.campaign;
-    let kind = c.instrument.kind;
-    match &c.products {
-        Some(p) => Wanted {
-            points: p.points,
-            photons: p.photons,
-            dsm: p.dsm.as_ref().map(|d| d.resolution_m),
-            l1b: kind == InstrumentKind::Waveform,
-        },
-        None => Wanted {
-            points: kind == InstrumentKind::DiscreteReturn,
-            photons: kind == InstrumentKind::PhotonCounting,
-            dsm: (kind == InstrumentKind::DiscreteReturn).then_some(2.0),
-            l1b: kind == InstrumentKind::Waveform,
-        },
+    let p = c.products();
+    Wanted {
+        points: p.points,
+        photons: p.photons,
+        dsm: p.dsm.as_ref().map(|d| d.resolution_m),
+        l1b: c.instrument.kind == InstrumentKind::Waveform,
     }
 }
 

@@ -493,3 +493,26 @@ fn shards_of_a_shorter_campaign_leave_no_part_of_the_longer() {
     }
     assert_eq!(products(&out), products(&reference));
 }
+
+/// The marker naming the simulation that made the parts, lost or damaged after the run, is
+/// put back by `--resume` (the parts are whole): the folder equals an untouched run's.
+#[test]
+fn a_lost_simulation_marker_is_put_back() {
+    let dir = tmp("pipe_marker");
+    let camp = track_campaign(&dir, 20);
+    let camp = camp.to_str().unwrap();
+    let out = dir.join("out");
+    let o = out.to_str().unwrap();
+    run_ok(&["run", camp, "--out", o]);
+    let marker = out.join("waveforms/fingerprint");
+    let want = std::fs::read_to_string(&marker).unwrap();
+    for damage in [None, Some("hello")] {
+        match damage {
+            None => std::fs::remove_file(&marker).unwrap(),
+            Some(text) => std::fs::write(&marker, text).unwrap(),
+        }
+        let log = run_ok(&["run", camp, "--out", o, "--resume"]);
+        assert!(log.contains("simulate: up to date"), "{log}");
+        assert_eq!(std::fs::read_to_string(&marker).unwrap(), want);
+    }
+}

@@ -502,6 +502,12 @@ fn run_single(
         summary.rays = rays;
         summary.parts_done = parts_done;
     } else if run.done(Stage::Simulate, &fp_sim) {
+        // the parts are whole and this simulation's: a marker lost or damaged since is put
+        // back, or the next change would take the parts for another campaign's
+        let marker = fingerprint_marker(out);
+        if std::fs::read_to_string(&marker).map_or(true, |t| t.trim() != fp_sim) {
+            write_text_atomic(&marker, &fp_sim)?;
+        }
         log("simulate: up to date");
     }
     if !run.done(Stage::Simulate, &fp_sim) {
@@ -642,6 +648,11 @@ fn simulate_fingerprint(
     Ok(fingerprint(&inputs))
 }
 
+/// The file that says which simulation made the parts in a run folder's `waveforms/`.
+fn fingerprint_marker(out: &Path) -> PathBuf {
+    out.join("waveforms").join("fingerprint")
+}
+
 /// Removes the files of parts `first` and later (`part-NNNNN.*`) from the waveforms folder.
 fn remove_parts_from(wf_dir: &Path, first: usize) {
     let Ok(entries) = std::fs::read_dir(wf_dir) else {
@@ -696,7 +707,7 @@ fn simulate_stage(
     let parts = cut.count();
     let part_files: Vec<String> = (0..parts).map(part_name).collect();
     let wf_dir = out.join("waveforms");
-    let marker = wf_dir.join("fingerprint");
+    let marker = fingerprint_marker(out);
     let stale = std::fs::read_to_string(&marker)
         .map(|s| s.trim() != fp)
         .unwrap_or(true);

@@ -483,17 +483,20 @@ impl Als {
     }
 
     /// The scan angle LAS records of pulse `p` (its `scan_angle_deg` is the scanner's look
-    /// angle): for a sweep across track under a trajectory or a mount, the recorded beam's
-    /// angle from the scene's nadir in the plane across the direction of travel, positive to
-    /// the right (counter-clockwise seen from behind), so a roll is in it, as LAS defines it
-    /// ("with respect to the vertical of the coordinate system of the data"). Straight level
-    /// lines and the other patterns keep the look angle.
+    /// angle): for a sweep across track under a trajectory or a mount, and for a multibeam
+    /// head (whose look angle is a channel's elevation, 0 at the horizon), the recorded
+    /// beam's angle from the scene's nadir in the plane across the direction of travel,
+    /// positive to the right (counter-clockwise seen from behind), so a roll is in it, as
+    /// LAS defines it ("with respect to the vertical of the coordinate system of the data";
+    /// ±180° is up). Straight level lines and the other patterns keep the look angle, which
+    /// is that angle there.
     pub(crate) fn las_angle(&self, p: &Pulse) -> f32 {
         let sweep = matches!(
             self.pattern,
             ScanPattern::Line | ScanPattern::Oscillating | ScanPattern::RotatingPolygon
         );
-        if self.plain || !sweep {
+        let multibeam = self.pattern == ScanPattern::Multibeam;
+        if !multibeam && (self.plain || !sweep) {
             return p.scan_angle_deg;
         }
         let (x, d) = (p.along, p.rec_direction());

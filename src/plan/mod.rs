@@ -332,11 +332,14 @@ impl Plan {
         }
     }
 
-    /// The scan angle LAS records for pulse `p`: its look angle, or for a sweep across track
-    /// under a trajectory or a mount, the angle from the scene's vertical (roll included).
+    /// The scan angle LAS records for pulse `p`: the beam's angle from the scene's nadir
+    /// ("down in the data coordinate system is the 0.0 position"). An airborne pulse's is its
+    /// look angle, or across track with the roll in it ([`als`]); a TLS station's, 180° less
+    /// its zenith angle (it has no direction of travel to sign it by: 0 to 180°).
     pub fn las_scan_angle(&self, p: &Pulse) -> f32 {
         match &self.platform {
             Source::Als(a) => a.las_angle(p),
+            Source::Tls(_) => (-p.rec_direction().z).clamp(-1.0, 1.0).acos().to_degrees() as f32,
             _ => p.scan_angle_deg,
         }
     }

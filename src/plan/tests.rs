@@ -312,6 +312,15 @@ fn tls_hand_computed() {
     let (s, c) = 130f64.to_radians().sin_cos();
     assert!(close(p[11].direction, DVec3::new(0.0, -s, c)));
     assert_eq!(p[11].scan_angle_deg, 130.0);
+    // LAS counts from nadir: a beam 40° below the horizon (zenith 130°) is 50° from it
+    let tls = Plan::new(&campaign(
+        "platform: { kind: tls, position: [50, 50, 1.5], azimuth_deg: [0, 360], azimuth_step_deg: 90,
+  zenith_deg: [30, 130], zenith_step_deg: 50, prf_hz: 4 }
+",
+    ))
+    .unwrap();
+    assert!((tls.las_scan_angle(&p[11]) - 50.0).abs() < 1e-4);
+    assert!((tls.las_scan_angle(&p[0]) - 150.0).abs() < 1e-4);
     assert!(p.iter().all(|q| q.origin == DVec3::new(50.0, 50.0, 1.5)));
     assert!(approx(p[11].gps_time_s, 11.0 / 4.0));
     // Spec example: 3600 azimuths · 1001 zeniths (100/0.1 = 1000.0000000000001 steps).
@@ -617,10 +626,12 @@ fn risley_prisms_add_their_deflections() {
 #[test]
 fn multibeam_head_fires_its_channels_around() {
     for tilt in [0.0f64, 20.0] {
-        let p = pulses(&format!(
+        let text = format!(
             "platform: {{ kind: als, altitude_m: 2, speed_m_s: 10, prf_hz: 1800, lines: [ {{ start: [0, 0], end: [1, 0] }} ],
                 scanner: {{ pattern: multibeam, channels_deg: [-15, -5, 5, 15], rotation_hz: 10, head_tilt_deg: {tilt} }} }}"
-        ));
+        );
+        let p = pulses(&text);
+        let plan = Plan::new(&campaign(&text)).unwrap();
         assert_ids_and_times(&p);
         // 1 m at 10 m/s: 180 firings of 4 channels
         assert_eq!(p.len(), 180 * 4);
@@ -647,6 +658,17 @@ fn multibeam_head_fires_its_channels_around() {
             );
             let want = DVec3::new(h.x, h.y * cr - h.z * sr, h.y * sr + h.z * cr);
             assert!(angle_between(q.direction, want) < 1e-9, "pulse {}", q.id);
+            // LAS's scan angle: from nadir across track (flying +x: right is -y), ±180° up;
+            // a channel at the horizon looking right is 90°, not the elevation's 0
+            let las = plan.las_scan_angle(q) as f64;
+            let want = (-q.direction.y).atan2(-q.direction.z).to_degrees();
+            // (+180° and −180° are both straight up)
+            let off = (las - want + 180.0).rem_euclid(360.0) - 180.0;
+            assert!(off.abs() < 1e-4, "pulse {}: {las} against {want}", q.id);
+            if tilt == 0.0 && k == 135 && c == 2 {
+                // azimuth 270°: to the right, 5° above the horizon
+                assert!((las - 95.0).abs() < 1e-3, "{las}");
+            }
         }
         // the azimuth step: 2 degrees between firings, about the head's axis
         let flat = |d: DVec3| d - axis * d.dot(axis);

@@ -74,6 +74,27 @@ fn a_straight_level_trajectory_gives_the_lines_points() {
             (xyz(p) - xyz(q)).length()
         );
     }
+    // the trajectory edited (flown 5 m further east): --resume plans and simulates again,
+    // and the points move with it
+    write(&dir, "straight.csv", &csv.replace(",20,", ",25,"));
+    let out = dir.join("traj");
+    let (code, _, log) = lidarsim(&[
+        "run",
+        traj.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--resume",
+    ]);
+    assert_eq!(code, 0, "{log}");
+    assert!(!log.contains("plan: up to date"), "{log}");
+    let c = points_by_return(&dir.join("traj"));
+    // the same pulse fired 5 m further north: its first return lies elsewhere
+    let moved = c
+        .iter()
+        .filter(|((_, n), _)| *n == 1)
+        .filter(|(k, p)| b.get(k).is_some_and(|q| (xyz(p) - xyz(q)).length() > 1.0))
+        .count();
+    assert!(moved > c.len() / 4, "{moved} of {} points moved", c.len());
     let _ = std::fs::remove_dir_all(&dir);
 }
 

@@ -736,7 +736,10 @@ impl Campaign {
     pub fn with_defaults(&self) -> Campaign {
         let mut c = self.clone();
         c.products = Some(self.products());
-        c.platform.gps_start_s.get_or_insert(0.0);
+        if c.platform.trajectory.is_none() {
+            // a trajectory's file gives the times, and refuses the key
+            c.platform.gps_start_s.get_or_insert(0.0);
+        }
         let i = &mut c.instrument;
         i.receiver_offset_m.get_or_insert([0.0; 3]);
         i.false_alarm_rate_per_pulse = Some(self.instrument.false_alarm_rate());
@@ -862,7 +865,7 @@ impl Loaded {
     /// The campaign with every default filled in and its scene as the campaign file names it
     /// (relative to that file): the same text from whatever folder the campaign is run.
     pub fn campaign_yaml(&self) -> String {
-        serde_yaml::to_string(&self.campaign).expect("a campaign always serialises")
+        serde_yaml::to_string(&self.campaign.with_defaults()).expect("a campaign always serialises")
     }
 
     pub fn resolved_yaml(&self) -> String {

@@ -431,7 +431,19 @@ fn run_single(
     // the same campaign run from elsewhere is the same run (the scene's bytes are in the
     // simulate stage's fingerprint)
     let as_written = loaded.campaign_yaml();
-    let fp_plan = fingerprint(&[as_written.as_bytes(), env!("CARGO_PKG_VERSION").as_bytes()]);
+    // a recorded trajectory's epochs are the plan's input as much as the campaign's keys
+    let trajectory = match loaded.campaign.platform.trajectory.as_ref() {
+        Some(t) => {
+            let path = t.resolved.clone().unwrap_or_else(|| PathBuf::from(&t.file));
+            std::fs::read(&path).map_err(|e| Error::io(&path, "cannot read", e))?
+        }
+        None => Vec::new(),
+    };
+    let fp_plan = fingerprint(&[
+        as_written.as_bytes(),
+        &trajectory,
+        env!("CARGO_PKG_VERSION").as_bytes(),
+    ]);
     let plan = plan_stage(&mut run, loaded, &fp_plan)?;
 
     let mut summary = RunSummary {

@@ -1051,19 +1051,6 @@ fn resume_over_damaged_or_foreign_part_files() {
     truncate_half(&timings.join("waveforms/part-00000.stats.csv"));
     let log = resume_redoes(&camp, &timings, &clean);
     assert!(log.contains("1 parts simulated"), "{log}");
-    // ... or one digit of them changed, the file still well formed: its checksum, kept in the
-    // part's record, tells
-    let stats = timings.join("waveforms/part-00000.stats.csv");
-    let text = std::fs::read_to_string(&stats).unwrap();
-    let at = text.find('\n').unwrap() + 1;
-    let digit = if text.as_bytes()[at] == b'9' {
-        "8"
-    } else {
-        "9"
-    };
-    std::fs::write(&stats, format!("{}{digit}{}", &text[..at], &text[at + 1..])).unwrap();
-    let log = resume_redoes(&camp, &timings, &clean);
-    assert!(log.contains("1 parts simulated"), "{log}");
 
     // simulated, then a foreign Parquet file beside the parts: only part-NNNNN files are read
     let foreign = dir.join("foreign");

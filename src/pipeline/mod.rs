@@ -695,9 +695,8 @@ fn first_broken_part(out: &Path, parts: Parts, bands: usize, fp: &str) -> Option
 fn part_done(out: &Path, parts: Parts, k: usize, bands: usize, fp: &str) -> bool {
     let range = parts.range(k);
     let pulses = range.len();
-    let part = out.join(part_name(k));
-    part_is_whole(&part, range, pulses * bands, fp)
-        && simulate::stats_are_whole(&out.join(simulate::stats_name(k)), &part, pulses)
+    part_is_whole(&out.join(part_name(k)), range, pulses * bands, fp)
+        && simulate::stats_are_whole(&out.join(simulate::stats_name(k)), pulses)
 }
 
 /// Bands the campaign traces: rows per pulse in its waveform parts.

@@ -54,17 +54,11 @@ pub(super) fn simulate_parts(
     // ... and synced and renamed into place on a thread of its own, which waits for the disk
     let committer = Committer::default();
     let write = |(n, k, waveforms, secs): (usize, usize, Vec<Waveform>, Vec<f64>)| -> Result<()> {
-        // the timings first: the part's record keeps their checksum
+        let [part, sidecar] = waveforms_pending(&out.join(part_name(k)), &waveforms, fingerprint)?;
         let stats = pulse_stats_pending(
             &out.join(stats_name(k)),
             waveforms.iter().step_by(bands),
             &secs,
-        )?;
-        let [part, sidecar] = waveforms_pending(
-            &out.join(part_name(k)),
-            &waveforms,
-            fingerprint,
-            Some(&stats),
         )?;
         drop(waveforms);
         committer.commit(vec![part, sidecar, stats])?;
@@ -150,14 +144,9 @@ pub(super) fn stats_name(k: usize) -> String {
     format!("waveforms/part-{k:05}.stats.csv")
 }
 
-/// Whether a part's timings file is the one written with part `part` (its checksum, kept in
-/// the part's record) and holds its header and one whole row per pulse: a damaged one is
-/// made again with its part, as `--resume` trusts no damaged file.
-pub(super) fn stats_are_whole(path: &Path, part: &Path, pulses: usize) -> bool {
-    let kept = crate::waveform::file::companion_checksum(part);
-    if kept.is_none() || kept != crate::fsutil::file_checksum(path) {
-        return false;
-    }
+/// Whether a part's timings file holds its header and one whole row per pulse: a damaged
+/// one is made again with its part, as `--resume` trusts no damaged file.
+pub(super) fn stats_are_whole(path: &Path, pulses: usize) -> bool {
     let Ok(text) = std::fs::read_to_string(path) else {
         return false;
     };

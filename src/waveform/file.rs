@@ -119,41 +119,22 @@ pub fn part_name(k: usize) -> String {
 
 /// Writes a waveform part.
 pub fn write_waveforms(path: &Path, w: &[Waveform], fingerprint: &str) -> Result<()> {
-    waveforms_pending(path, w, fingerprint, None)?
+    waveforms_pending(path, w, fingerprint)?
         .into_iter()
         .try_for_each(Pending::commit)
 }
 
 /// [`write_waveforms`] but for the commits, which are the caller's, in the order given: the
-/// part, then its checksum and the fingerprint of the simulation that made it, and the
-/// checksum of a file written with it (`companion`: the part's timings), if any. A part
-/// without them, whose bytes disagree, or made for other inputs (another campaign, scene or
-/// version in the same folder) is no part (`part_is_whole`).
-pub fn waveforms_pending(
-    path: &Path,
-    w: &[Waveform],
-    fingerprint: &str,
-    companion: Option<&Pending>,
-) -> Result<[Pending; 2]> {
+/// part, then its checksum and the fingerprint of the simulation that made it. A part without
+/// them, whose bytes disagree, or made for other inputs (another campaign, scene or version
+/// in the same folder) is no part (`part_is_whole`).
+pub fn waveforms_pending(path: &Path, w: &[Waveform], fingerprint: &str) -> Result<[Pending; 2]> {
     let part = waveform_table(w).write_pending(path)?;
-    let sum = |p: &Pending| {
-        crate::fsutil::file_checksum(p.tmp())
-            .ok_or_else(|| Error::data(path, "cannot read back the part just written"))
-    };
-    let mut record = format!("{} {fingerprint}", sum(&part)?);
-    if let Some(c) = companion {
-        record = format!("{record} {}", sum(c)?);
-    }
-    record.push('\n');
+    let sum = crate::fsutil::file_checksum(part.tmp())
+        .ok_or_else(|| Error::data(path, "cannot read back the part just written"))?;
+    let record = format!("{sum} {fingerprint}\n");
     let sidecar = crate::fsutil::text_pending(&checksum_path(path), &record)?;
     Ok([part, sidecar])
-}
-
-/// The checksum a part's record keeps of the file written with it (see
-/// [`waveforms_pending`]), when it keeps one.
-pub fn companion_checksum(part: &Path) -> Option<String> {
-    let record = std::fs::read_to_string(checksum_path(part)).ok()?;
-    record.split_whitespace().nth(2).map(str::to_string)
 }
 
 /// Where a part's checksum is kept: `part-NNNNN.parquet` → `part-NNNNN.fnv`.
@@ -545,9 +526,11 @@ pub fn part_is_whole(
     let Ok(record) = std::fs::read_to_string(checksum_path(path)) else {
         return false;
     };
-    let mut fields = record.split_whitespace();
-    let (sum, made_for) = (fields.next(), fields.next());
-    if made_for != Some(fingerprint) || sum != crate::fsutil::file_checksum(path).as_deref() {
+    let (sum, made_for) = record
+        .trim_end()
+        .split_once(' ')
+        .unwrap_or((record.as_str(), ""));
+    if made_for != fingerprint || Some(sum) != crate::fsutil::file_checksum(path).as_deref() {
         return false;
     }
     let Ok(file) = std::fs::File::open(path) else {

@@ -712,6 +712,16 @@ fn values_beyond_any_instrument_are_refused() {
             ),
             "sun.irradiance_w_m2_um",
         ),
+        (
+            "gps_before",
+            CAMPAIGN.replace("  kind: static\n", "  kind: static\n  gps_start_s: -5\n"),
+            "platform.gps_start_s",
+        ),
+        (
+            "gps_far",
+            CAMPAIGN.replace("  kind: static\n", "  kind: static\n  gps_start_s: 1e20\n"),
+            "platform.gps_start_s",
+        ),
     ];
     for (name, text, key) in cases {
         let (code, err, _) = check(name, &text, SCENE);
@@ -762,11 +772,26 @@ fn sweeps_that_cannot_run_are_refused() {
                 "in memory",
             ],
         ),
+        // two values that would name one folder; a mapping's value on the message's one line
+        (
+            "name: ['a b', 'a-b']",
+            &["sweep.name", "would name one folder (a-b)"],
+        ),
+        (
+            "instrument.range_gate: [{ start_ns: 0, bins: 20000000000 }]",
+            &["sweep.instrument.range_gate", "value {\"start_ns\":0,\"bins\":20000000000}: expected a whole number from 0 to 4294967295"],
+        ),
     ] {
         let text = format!("{CAMPAIGN}sweep:\n  {entry}\n");
         let (code, err, _) = check("sweep_key", &text, SCENE);
         assert_one_message(code, &err, words);
     }
+    // no key at all; a folder name past what a file system holds
+    let (code, err, _) = check("sweep_empty", &format!("{CAMPAIGN}sweep: {{}}\n"), SCENE);
+    assert_one_message(code, &err, &["campaign.yaml:", "sweep", "no key to sweep"]);
+    let long = format!("{CAMPAIGN}sweep:\n  name: ['{}', b]\n", "n".repeat(300));
+    let (code, err, _) = check("sweep_long", &long, SCENE);
+    assert_one_message(code, &err, &["campaign.yaml:", "more than 255"]);
 }
 
 /// A byte-order mark before the text is no part of it; a folder given as the campaign is

@@ -953,6 +953,21 @@ fn sweep_writes_subruns_and_summaries() {
         stdout.contains("| altitude_m=200 | – | – | – | – |"),
         "{stdout}"
     );
+    assert!(stdout
+        .lines()
+        .last()
+        .unwrap()
+        .ends_with("| – | – | – | – | – | – |"));
+    // an index naming folders outside the sweep's is no sweep's: said, not followed
+    let index = out.join("sweep.json");
+    let text = std::fs::read_to_string(&index).unwrap();
+    std::fs::write(&index, text.replace("altitude_m=100", "../altitude_m=100")).unwrap();
+    let (code, _, err) = lidarsim(&["compare", out.to_str().unwrap()]);
+    assert_eq!(code, 1, "{err}");
+    assert!(
+        err.contains("sweep.json") && err.contains("--resume"),
+        "{err}"
+    );
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -89,6 +89,14 @@ def _mapping(value: Any, key: str) -> Dict[str, Any]:
     raise _bad(key, f"expected a mapping of keys to values, found {value!r}")
 
 
+def _flag(value: Any, key: str) -> bool:
+    """``True`` or ``False`` (a numpy bool too), or an :class:`InputError` naming ``key``:
+    ``bool("no")`` is true."""
+    if isinstance(value, bool) or type(value).__name__ == "bool_":
+        return bool(value)
+    raise _bad(key, f"expected True or False, found {value!r}")
+
+
 def _point(value: Any, key: str) -> Tuple[float, float, float]:
     """Three finite numbers, or an :class:`InputError` naming ``key``."""
     try:
@@ -176,7 +184,7 @@ def run(
         stages = [s.strip() for s in stages.split(",") if s.strip()]
     if stages is not None:
         names = list(stages) if isinstance(stages, Iterable) else None
-        if names is None or not all(isinstance(s, str) for s in names):
+        if names is None or isinstance(stages, Mapping) or not all(isinstance(s, str) for s in names):
             raise _bad("stages", f"expected stage names (plan, simulate, products, report), found {stages!r}")
         stages = names
     if shard is not None:
@@ -186,7 +194,7 @@ def run(
     kwargs: Dict[str, Any] = dict(
         out=None if out is None else _path(out, "out"),
         threads=None if threads is None else _whole(threads, "threads", least=1),
-        resume=bool(resume),
+        resume=_flag(resume, "resume"),
         stages=None if stages is None else list(stages),
         shard=shard,
         overrides=None if overrides is None else _json(_mapping(overrides, "overrides"), "overrides"),
@@ -233,6 +241,34 @@ def compare(runs: Iterable[PathLike]) -> "pyarrow.Table":  # noqa: F821
     return _table(_lidarsim.compare([_path(r, "runs") for r in runs]))
 
 
+#: The keys of the one-pulse campaign ``Scene.simulate_pulse`` makes, by the argument that
+#: gives each.
+_PULSE_ARGUMENTS = {
+    "simulation.rays_per_pulse": "rays",
+    "simulation.method": "method",
+    "simulation.max_order": "max_order",
+    "platform.pulses[0].position": "origin",
+    "platform.pulses[0].direction": "direction",
+    "seed": "seed",
+}
+
+
+def _argument_error(e: InputError) -> InputError:
+    """An error in the one-pulse campaign ``simulate_pulse`` makes, said of its arguments: the
+    key as the argument that gave it, without the place in a text the caller never saw."""
+    key = e.key
+    text = str(e)
+    if key and f"{key}: " in text:
+        text = text.split(f"{key}: ", 1)[1]
+    if not key:
+        # no key: the place in the internal text is all there was to drop
+        err = InputError(text.split(": ", 1)[-1] if str(e).startswith("simulate_pulse") else text)
+    else:
+        err = _bad(_PULSE_ARGUMENTS.get(key, key), text)
+    err.advice = e.advice
+    return err
+
+
 class Run:
     """A run folder: its files as tables, dicts and text.
 
@@ -257,15 +293,34 @@ class Run:
         index = self.folder / "sweep.json"
         if not index.is_file():
             return []
-        return [Run(self.folder / name) for name in json.loads(index.read_text())["sweep"]]
+        try:
+            names = json.loads(index.read_text())["sweep"]
+            ok = isinstance(names, list) and all(
+                isinstance(n, str) and n not in ("", ".", "..") and not any(c in n for c in "/\\\0")
+                for n in names
+            )
+        except (ValueError, KeyError, TypeError):
+            ok = False
+        if not ok:
+            err = DataError(
+                f"{index}: not a sweep's index (cut short, edited, or naming folders outside "
+                "the sweep's); run the sweep's campaign again with resume=True"
+            )
+            err.file = str(index)
+            raise err
+        return [Run(self.folder / name) for name in names]
 
-    def _read(self, what: str, pulse_ids: Optional[List[int]] = None) -> Any:
+    def _not_a_sweep(self, what: str) -> None:
+        """An :class:`InputError` when this folder is a sweep's, which holds no run itself."""
         if (self.folder / "sweep.json").is_file() and not (self.folder / "manifest.json").exists():
             raise _bad(
                 "folder",
-                f"{self.folder} is a sweep's folder, with no run of its own: its {what} are its "
-                f"runs' (Run.sweep, one per combination: run.sweep[0].{what} ...)",
+                f"{self.folder} is a sweep's folder, with no run of its own: ask one of its runs "
+                f"for its {what} (Run.sweep, one per combination: run.sweep[0])",
             )
+
+    def _read(self, what: str, pulse_ids: Optional[List[int]] = None) -> Any:
+        self._not_a_sweep(what)
         return _lidarsim.read_run(os.fspath(self.folder), what, pulse_ids)
 
     @property
@@ -310,6 +365,7 @@ class Run:
         """The DSM rasters: ``dsm``, ``reference`` and ``difference`` (2-D float32 numpy
         arrays, north row first, NaN where there is no data), ``transform`` (GDAL's
         geotransform) and ``crs`` (``"EPSG:N"``, or None in local metres)."""
+        self._not_a_sweep("dsm")
         rasters = _lidarsim.read_dsm(os.fspath(self.folder))
         out: Dict[str, Any] = {}
         for name, (cells, height, width, transform, epsg) in rasters.items():
@@ -464,7 +520,7 @@ class Scene:
         Raises:
             InputError: a key or value is wrong (``err.key`` names it).
         """
-        sim = dict(simulation or {})
+        sim = {} if simulation is None else _mapping(simulation, "simulation")
         sim.update(
             method=method,
             rays_per_pulse=_whole(rays, "rays"),
@@ -473,7 +529,7 @@ class Scene:
         if isinstance(wavelength_nm, (str, bytes)):
             raise _bad("wavelength_nm", f"expected a number or a list of numbers, found {wavelength_nm!r}")
         several = not isinstance(wavelength_nm, numbers.Real)
-        rows = self._native.simulate_pulse(
+        args = (
             _json(_mapping(instrument, "instrument"), "instrument"),
             _point(origin, "origin"),
             _point(direction, "direction"),
@@ -482,8 +538,12 @@ class Scene:
             _whole(seed, "seed"),
             None if sun is None else _json(_mapping(sun, "sun"), "sun"),
             None if atmosphere is None else _json(_mapping(atmosphere, "atmosphere"), "atmosphere"),
-            bool(record),
+            _flag(record, "record"),
         )
+        try:
+            rows = self._native.simulate_pulse(*args)
+        except InputError as e:
+            raise _argument_error(e) from None
         waveforms = [Waveform(r) for r in rows]
         return waveforms if several else waveforms[0]
 

@@ -183,10 +183,19 @@ def test_arguments_of_the_wrong_kind_are_input_errors(tmp_path):
     for call, key in [
         (lambda: plane.simulate_pulse(5, (50, 50, 10), (0, 0, -1)), "instrument"),
         (lambda: plane.simulate_pulse(inst, (50, 50, 10), (0, 0, -1), sun=[1]), "sun"),
+        (lambda: plane.simulate_pulse(inst, (50, 50, 10), (0, 0, -1), simulation=5), "simulation"),
+        (lambda: plane.simulate_pulse(inst, (50, 50, 10), (0, 0, -1), record="yes"), "record"),
+        # the one-pulse campaign's keys, said as the arguments that gave them
+        (lambda: plane.simulate_pulse(inst, (50, 50, 10), (0, 0, 0)), "direction"),
+        (lambda: plane.simulate_pulse(inst, (50, 50, 10), (0, 0, -1), rays=0), "rays"),
+        (lambda: plane.simulate_pulse(inst, (50, 50, 10), (0, 0, -1), method=5), "method"),
+        (lambda: lidarsim.run(camp, out=tmp_path / "r", resume="no"), "resume"),
+        (lambda: lidarsim.run(camp, out=tmp_path / "r", stages={}), "stages"),
     ]:
         with pytest.raises(lidarsim.InputError) as e:
             call()
         assert e.value.key == key, (key, e.value)
+        assert "simulate_pulse:" not in str(e.value), e.value
     with pytest.raises(lidarsim.InputError):
         r.waveforms([-1])
     with pytest.raises(lidarsim.InputError) as e:

@@ -200,7 +200,7 @@ def test_a_sweep_returns_its_runs(session_dir):
     assert lidarsim.open_run(run.folder).sweep[1].pulses().num_rows == 80
     assert lidarsim.compare([run.folder]).num_rows == 2
     # the sweep's folder has no run of its own: asked for one, it says where its runs are
-    for ask in (lambda: run.campaign, lambda: run.points(), lambda: run.manifest):
+    for ask in (lambda: run.campaign, lambda: run.points(), lambda: run.manifest, lambda: run.dsm()):
         with pytest.raises(lidarsim.InputError) as e:
             ask()
         assert "sweep" in str(e.value) and e.value.key == "folder", e.value

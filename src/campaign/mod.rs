@@ -932,9 +932,6 @@ impl Check<'_> {
     pub(crate) fn opt_non_negative(&self, key: &str, v: Option<f64>) -> Result<()> {
         v.map_or(Ok(()), |v| self.non_negative(key, v))
     }
-    pub(crate) fn opt_finite(&self, key: &str, v: Option<f64>) -> Result<()> {
-        v.map_or(Ok(()), |v| self.finite(key, v))
-    }
     /// Strictly between `lo` and `hi` degrees.
     pub(crate) fn open_deg(&self, key: &str, v: f64, lo: f64, hi: f64) -> Result<()> {
         self.finite(key, v)?;

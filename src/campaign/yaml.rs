@@ -174,7 +174,10 @@ pub(crate) fn plain_words(message: &str) -> String {
     };
     let expected = match expected {
         "f64" | "f32" => "a number",
-        "u8" | "u16" | "u32" | "u64" | "u128" | "usize" => "a whole number ≥ 0",
+        "u8" => "a whole number from 0 to 255",
+        "u16" => "a whole number from 0 to 65535",
+        "u32" => "a whole number from 0 to 4294967295",
+        "u64" | "u128" | "usize" => "a whole number ≥ 0",
         "i8" | "i16" | "i32" | "i64" | "i128" | "isize" => "a whole number",
         "a boolean" | "bool" => "true or false",
         "a sequence" => "a list",
@@ -421,12 +424,17 @@ mod tests {
             (
                 "x: 1\nn: -3\nb: true\nl: []\n",
                 "n",
-                "expected a whole number ≥ 0, found -3",
+                "expected a whole number from 0 to 4294967295, found -3",
             ),
             (
                 "x: 1\nn: 2.5\nb: true\nl: []\n",
                 "n",
-                "expected a whole number ≥ 0, found 2.5",
+                "expected a whole number from 0 to 4294967295, found 2.5",
+            ),
+            (
+                "x: 1\nn: 20000000000\nb: true\nl: []\n",
+                "n",
+                "expected a whole number from 0 to 4294967295, found 20000000000",
             ),
             (
                 "x: 1\nn: 1\nb: 7\nl: []\n",

@@ -36,13 +36,22 @@ pub struct RunRow {
     pub strip_cells: Option<u64>,
     pub strip_rms_dz_m: Option<f64>,
     pub strip_max_mean_dz_m: Option<f64>,
-    pub run_time_s: f64,
+    /// The stages' wall times, summed; none for a sweep's run not yet begun.
+    pub run_time_s: Option<f64>,
 }
 
 /// The run folders a path stands for: itself, or a sweep's sub-runs in order.
 pub fn expand(dir: &Path) -> Result<Vec<PathBuf>> {
-    if let Some(sweep) = SweepIndex::read(&dir.join("sweep.json")) {
+    let index = dir.join("sweep.json");
+    if let Some(sweep) = SweepIndex::read(&index) {
         return Ok(sweep.sweep.iter().map(|r| dir.join(r)).collect());
+    }
+    if index.is_file() {
+        return Err(Error::data(
+            &index,
+            "not a sweep's index (cut short, edited, or naming folders outside the sweep's)",
+        )
+        .advise("run the sweep's campaign again with --resume: it writes the index"));
     }
     if dir.join("manifest.json").is_file() {
         return Ok(vec![dir.to_path_buf()]);
@@ -105,7 +114,7 @@ pub fn read_row(dir: &Path) -> Result<RunRow> {
         sampler: resolved["simulation"]["sampler"]
             .as_str()
             .map(str::to_owned),
-        run_time_s: manifest.stages.values().map(|s| s.wall_time_s).sum(),
+        run_time_s: Some(manifest.stages.values().map(|s| s.wall_time_s).sum()),
         ..RunRow::default()
     };
     // a file that is there but not ours (cut short, edited) is an error, not an empty row
@@ -127,9 +136,10 @@ pub fn read_row(dir: &Path) -> Result<RunRow> {
     };
     // before its products, a run's pulses are its plan's
     row.pulses = match present("pulses.parquet") {
-        Some(path) if products.is_none() => {
-            Some(planned_pulses(&path).ok_or_else(|| unreadable(&path))?)
-        }
+        Some(path) if products.is_none() => Some(planned_pulses(&path).ok_or_else(|| {
+            Error::data(&path, "not a lidarsim file (cut short or edited?)")
+                .advise("run its plan again with `lidarsim run CAMPAIGN --out RUN --resume`")
+        })?),
         _ => None,
     };
     if let Some(p) = products {
@@ -198,7 +208,7 @@ pub fn markdown(rows: &[RunRow]) -> String {
             cell(r.dsm_bias_m, 3),
             cell(r.dsm_rmse_m, 3),
             cell(r.dsm_coverage, 3),
-            cell(Some(r.run_time_s), 1),
+            cell(r.run_time_s, 1),
             count(r.rays_per_pulse),
             r.sampler.as_deref().unwrap_or("–"),
             percent(r.within_5cm),
@@ -260,7 +270,7 @@ pub fn table(rows: &[RunRow]) -> arrow_array::RecordBatch {
         f(|r| r.dsm_bias_m),
         f(|r| r.dsm_rmse_m),
         f(|r| r.dsm_coverage),
-        f(|r| Some(r.run_time_s)),
+        f(|r| r.run_time_s),
         u(|r| r.rays_per_pulse),
         t(|r| r.sampler.clone()),
         f(|r| r.within_5cm),
@@ -289,7 +299,7 @@ pub fn write_csv(path: &Path, rows: &[RunRow]) -> Result<()> {
             o(r.dsm_bias_m),
             o(r.dsm_rmse_m),
             o(r.dsm_coverage),
-            r.run_time_s.to_string(),
+            o(r.run_time_s),
             r.rays_per_pulse.map(|n| n.to_string()).unwrap_or_default(),
             r.sampler.clone().unwrap_or_default(),
             o(r.within_5cm),

@@ -295,9 +295,13 @@ fn lock_holder(text: &str) -> Option<u32> {
     let mut words = text.split_whitespace();
     let pid: u32 = words.next()?.parse().ok()?;
     let start: Option<u64> = words.next().and_then(|w| w.parse().ok());
-    let alive = pid != std::process::id() && Path::new(&format!("/proc/{pid}")).exists();
-    let same = start.is_none_or(|s| process_start(pid).is_none_or(|now| now == s));
-    (alive && same).then_some(pid)
+    let alive = Path::new(&format!("/proc/{pid}")).exists();
+    match start {
+        // this very process (another of its threads: a host running two runs) holds it too
+        Some(s) => (alive && process_start(pid).is_none_or(|now| now == s)).then_some(pid),
+        // an id alone: this process's own id is a killed process's that it now reuses
+        None => (alive && pid != std::process::id()).then_some(pid),
+    }
 }
 
 /// When process `pid` started, in clock ticks since boot (Linux: field 22 of
@@ -767,4 +771,23 @@ fn simulate_stage(
         ));
     }
     Ok((rays, done))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{lock_holder, lock_text, process_start};
+
+    /// A lock of this process's id and start time is held (another thread's run); one of its
+    /// id and another start time, or of its id alone (left by a killed process whose id it
+    /// now has), is stale; so is one of a process that is gone, or of no process at all.
+    #[test]
+    fn a_lock_is_held_by_its_process_as_it_started() {
+        let me = std::process::id();
+        assert_eq!(lock_holder(&lock_text()), Some(me));
+        let start = process_start(me).expect("Linux: /proc/self/stat");
+        assert_eq!(lock_holder(&format!("{me} {}", start + 1)), None);
+        assert_eq!(lock_holder(&me.to_string()), None);
+        assert_eq!(lock_holder(&format!("{} 1", u32::MAX)), None);
+        assert_eq!(lock_holder("garbage"), None);
+    }
 }

@@ -113,12 +113,9 @@ fn at_swept_key(
             .find(|(k, _)| ek == k.as_str() || ek.starts_with(&format!("{k}.")))
     });
     match swept {
-        Some((k, v)) => {
-            let value = serde_yaml::to_string(v).unwrap_or_default();
-            loaded
-                .doc
-                .sweep_error(k, format!("value {}: {}", value.trim(), e.message))
-        }
+        Some((k, v)) => loaded
+            .doc
+            .sweep_error(k, format!("value {}: {}", inline(v), e.message)),
         None => e.within(format!("in the sweep combination {name}")),
     }
 }
@@ -128,11 +125,28 @@ fn sub_campaigns(
     keys: &[&String],
     combos: &[Vec<&serde_yaml::Value>],
 ) -> Result<Vec<(Loaded, String)>> {
-    combos
+    let subs: Vec<(Loaded, String)> = combos
         .iter()
         .map(|combo| sub_campaign(loaded, keys, combo))
-        .collect()
+        .collect::<Result<_>>()?;
+    // a folder's name is at most 255 bytes on the usual file systems: a long list of values
+    // would end the sweep at its run, not here
+    if let Some((_, name)) = subs.iter().find(|(_, n)| n.len() > MAX_FOLDER_NAME) {
+        return Err(loaded.doc.error(
+            "sweep",
+            format!(
+                "a combination's folder name is {} bytes, more than {MAX_FOLDER_NAME}: sweep \
+                 shorter values, or fewer keys at once ({}...)",
+                name.len(),
+                name.chars().take(60).collect::<String>()
+            ),
+        ));
+    }
+    Ok(subs)
 }
+
+/// The longest name a sub-run's folder may take, bytes.
+const MAX_FOLDER_NAME: usize = 255;
 
 /// Most runs one sweep makes: each is a whole run with its own folder, and every
 /// combination is checked (and held) before the first starts.
@@ -181,11 +195,35 @@ fn combinations<'a>(
             .enumerate()
             .find_map(|(i, v)| values[..i].contains(v).then_some(v))
         {
-            let v = serde_yaml::to_string(v).unwrap_or_default();
             return Err(loaded
                 .doc
-                .sweep_error(k, format!("value {} is listed twice", v.trim())));
+                .sweep_error(k, format!("value {} is listed twice", inline(v))));
         }
+        // two values would name one sub-folder ('a b' and 'a-b' both make a-b)
+        if let Some((a, b)) = values.iter().enumerate().find_map(|(i, v)| {
+            values[..i]
+                .iter()
+                .find(|u| folder_value(u) == folder_value(v))
+                .map(|u| (u, v))
+        }) {
+            return Err(loaded.doc.sweep_error(
+                k,
+                format!(
+                    "values {} and {} would name one folder ({}): give values that differ \
+                     in more than spaces and slashes",
+                    inline(a),
+                    inline(b),
+                    folder_value(a)
+                ),
+            ));
+        }
+    }
+    if keys.is_empty() {
+        return Err(loaded.doc.error(
+            "sweep",
+            "no key to sweep: give keys and their values (platform.altitude_m: [250, 500]), or \
+             leave `sweep:` out",
+        ));
     }
     let runs = keys
         .iter()
@@ -248,12 +286,9 @@ fn sub_campaign(
                 || message.contains(&format!("`{}`", k.rsplit('.').next().unwrap_or(k)))
         });
         match swept {
-            Some((k, v)) => {
-                let value = serde_yaml::to_string(v).unwrap_or_default();
-                loaded
-                    .doc
-                    .sweep_error(k, format!("value {}: {message}", value.trim()))
-            }
+            Some((k, v)) => loaded
+                .doc
+                .sweep_error(k, format!("value {}: {message}", inline(v))),
             None => loaded.doc.error(
                 "sweep",
                 format!("a combination does not make a valid campaign: {at}: {message}"),
@@ -271,6 +306,21 @@ fn sub_campaign(
     };
     let name = names.join("_").replace(['/', '\\', ' '], "-");
     Ok((sub, name))
+}
+
+/// A swept value on one line, for messages and `sweep.csv`: a scalar as YAML writes it, a
+/// list or mapping in JSON's flow style (`{"start_ns":0,"bins":20}`).
+fn inline(v: &serde_yaml::Value) -> String {
+    use serde_yaml::Value;
+    match v {
+        Value::Sequence(_) | Value::Mapping(_) | Value::Tagged(_) => {
+            serde_json::to_string(v).unwrap_or_else(|_| folder_value(v))
+        }
+        v => serde_yaml::to_string(v)
+            .unwrap_or_default()
+            .trim()
+            .replace('\n', " "),
+    }
 }
 
 /// A swept value as it stands in a sub-folder's name: a scalar as YAML writes it, a list's
@@ -311,9 +361,14 @@ pub struct SweepIndex {
 }
 
 impl SweepIndex {
-    /// A sweep folder's `sweep.json`; None when it is absent or not ours.
+    /// A sweep folder's `sweep.json`; None when it is absent or not ours. Each run is a
+    /// sub-folder of the sweep's by a plain name (no separator, not `..`): an index naming
+    /// anything else is not one a sweep wrote.
     pub fn read(path: &Path) -> Option<SweepIndex> {
-        serde_json::from_str(&std::fs::read_to_string(path).ok()?).ok()
+        let index: SweepIndex = serde_json::from_str(&std::fs::read_to_string(path).ok()?).ok()?;
+        let plain =
+            |n: &str| !n.is_empty() && n != "." && n != ".." && !n.contains(['/', '\\', '\0']);
+        index.sweep.iter().all(|n| plain(n)).then_some(index)
     }
 }
 
@@ -393,15 +448,7 @@ pub(super) fn write_sweep_summary(
         }
     };
     let table = rows.iter().map(|(vals, t)| {
-        let mut row: Vec<String> = vals
-            .iter()
-            .map(|v| {
-                serde_yaml::to_string(v)
-                    .unwrap_or_default()
-                    .trim()
-                    .to_string()
-            })
-            .collect();
+        let mut row: Vec<String> = vals.iter().map(inline).collect();
         row.extend([
             t.pulses.to_string(),
             format!("{:.6e}", t.received_energy_j),

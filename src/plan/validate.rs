@@ -218,7 +218,16 @@ fn pattern_keys(c: &Check, s: &crate::campaign::Scanner) -> Result<()> {
 /// A flat list of located checks, one per key of each platform kind.
 pub fn numbers(doc: &Doc, p: &Platform) -> Result<()> {
     let c = Check { doc };
-    c.opt_finite("platform.gps_start_s", p.gps_start_s)?;
+    if let Some(t) = p.gps_start_s {
+        // GPS seconds since 1980-01-06: 10^10 is the year 2296
+        c.within(
+            "platform.gps_start_s",
+            t,
+            0.0,
+            1e10,
+            "GPS seconds since 1980-01-06, from 0 to 10^10",
+        )?;
+    }
     c.opt_positive("platform.altitude_m", p.altitude_m)?;
     c.opt_positive("platform.prf_hz", p.prf_hz)?;
     match p.kind {

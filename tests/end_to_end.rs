@@ -30,6 +30,8 @@ fn run_ok(campaign: &Path, out: &Path, extra: &[&str]) -> String {
     args.extend_from_slice(extra);
     let (code, stdout, stderr) = lidarsim(&args);
     assert_eq!(code, 0, "lidarsim {args:?} failed:\n{stderr}");
+    // a figure with no meaning for the run (a DSM group of no cells) is "–", never NaN
+    assert!(!stderr.contains("NaN"), "{stderr}");
     format!("{stdout}{stderr}")
 }
 
@@ -719,6 +721,24 @@ fn the_resolved_campaign_holds_its_defaults_and_runs_the_same() {
             "{file} differs"
         );
     }
+}
+
+/// One pulse's DSM has one cell and no swath edge: the log's figures of the edge's no cells
+/// are "–", not NaN (`run_ok` refuses a log with NaN).
+#[test]
+fn a_dsm_group_of_no_cells_reads_as_a_dash() {
+    let dir = tmp("e2e_dsm_dash");
+    plane_scene(&dir, 0.3, 30.0);
+    let camp = write(
+        &dir,
+        "campaign.yaml",
+        "name: one\nscene: plane.yaml\nseed: 1\nwavelength_nm: 1064\ninstrument: { kind: discrete_return, pulse_energy_j: 0.00001, pulse_fwhm_ns: 3, footprint_half_angle_mrad: 0.3, fov_half_angle_mrad: 0.5, receiver_area_m2: 0.01, bin_ns: 1 }\nplatform: { kind: static, pulses: [ { position: [0, 0, 100], direction: [0, 0, -1] } ] }\nsimulation: { method: forward, rays_per_pulse: 8, max_order: 1 }\nproducts: { points: true, dsm: { resolution_m: 2 } }\n",
+    );
+    let log = run_ok(&camp, &dir.join("run"), &[]);
+    assert!(
+        log.contains("the swath's edge: RMSE – m, coverage –% over 0 cells"),
+        "{log}"
+    );
 }
 
 /// A fixed `instrument.range_gate: { start_ns, bins }`: every waveform starts at start_ns

@@ -97,6 +97,15 @@ def _flag(value: Any, key: str) -> bool:
     raise _bad(key, f"expected True or False, found {value!r}")
 
 
+def _overrides(value: Any) -> Dict[str, Any]:
+    """``run``'s overrides: a mapping of dotted campaign keys (none empty) to values."""
+    items = _mapping(value, "overrides")
+    bad = [k for k in items if not isinstance(k, str) or not k.strip()]
+    if bad:
+        raise _bad("overrides", f"expected dotted campaign keys (platform.altitude_m), found {bad[0]!r}")
+    return items
+
+
 def _point(value: Any, key: str) -> Tuple[float, float, float]:
     """Three finite numbers, or an :class:`InputError` naming ``key``."""
     try:
@@ -197,7 +206,7 @@ def run(
         resume=_flag(resume, "resume"),
         stages=None if stages is None else list(stages),
         shard=shard,
-        overrides=None if overrides is None else _json(_mapping(overrides, "overrides"), "overrides"),
+        overrides=None if overrides is None else _json(_overrides(overrides), "overrides"),
     )
     if isinstance(campaign, Mapping):
         base = Path(_path(base_dir, "base_dir")) if base_dir is not None else Path.cwd()
@@ -236,7 +245,7 @@ def compare(runs: Iterable[PathLike]) -> "pyarrow.Table":  # noqa: F821
     if isinstance(runs, (str, os.PathLike)):
         # one run folder, not the characters of its name
         runs = [runs]
-    if not isinstance(runs, Iterable):
+    if not isinstance(runs, Iterable) or isinstance(runs, (bytes, Mapping)):
         raise _bad("runs", f"expected run folders (a list of paths), found {runs!r}")
     return _table(_lidarsim.compare([_path(r, "runs") for r in runs]))
 

@@ -131,6 +131,7 @@ def test_arguments_of_the_wrong_kind_are_input_errors(tmp_path):
         (dict(stages=["bogus"]), "stages"),
         (dict(stages=5), "stages"),
         (dict(overrides=[1, 2]), "overrides"),
+        (dict(overrides={"": 1}), "overrides"),
         (dict(out=5), "out"),
     ]:
         args = dict(out=tmp_path / "x")
@@ -146,6 +147,7 @@ def test_arguments_of_the_wrong_kind_are_input_errors(tmp_path):
         (lambda: lidarsim.check(7), "campaign"),
         (lambda: lidarsim.compare([3]), "runs"),
         (lambda: lidarsim.compare(None), "runs"),
+        (lambda: lidarsim.compare(b"runs"), "runs"),
         (lambda: lidarsim.Scene.load(3), "path"),
         (lambda: lidarsim.Scene.load(PLANE, wavelength_nm="x"), "wavelength_nm"),
     ]:

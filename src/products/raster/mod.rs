@@ -585,22 +585,34 @@ impl Dsm {
             frame,
             false,
         )?;
+        // a figure of no cells (no value, null in the report) reads as "–", not "NaN"
+        let fixed = |v: f64, digits: usize, scale: f64| {
+            if v.is_finite() {
+                format!("{:.digits$}", v * scale)
+            } else {
+                "–".to_string()
+            }
+        };
         crate::progress::log(&format!(
-            "dsm: bias {:+.3} m, RMSE {:.3} m, coverage {:.1}% over {} cells of {} m ({}); the swath's edge: RMSE {:.3} m, coverage {:.1}% over {} cells{}",
-            report.bias_m,
-            report.rmse_m,
-            100.0 * report.coverage,
+            "dsm: bias {} m, RMSE {} m, coverage {}% over {} cells of {} m ({}); the swath's edge: RMSE {} m, coverage {}% over {} cells{}",
+            if report.bias_m.is_finite() {
+                format!("{:+.3}", report.bias_m)
+            } else {
+                "–".to_string()
+            },
+            fixed(report.rmse_m, 3, 1.0),
+            fixed(report.coverage, 1, 100.0),
             report.cells,
             self.res,
             report.headline.split(':').next().unwrap_or_default(),
-            report.edge.rmse_m,
-            100.0 * report.edge.coverage,
+            fixed(report.edge.rmse_m, 3, 1.0),
+            fixed(report.edge.coverage, 1, 100.0),
             report.edge.cells,
             match report.outside.cells {
                 0 => String::new(),
                 n => format!(
-                    "; tops no pulse reaches: RMSE {:.3} m over {n} cells",
-                    report.outside.rmse_m
+                    "; tops no pulse reaches: RMSE {} m over {n} cells",
+                    fixed(report.outside.rmse_m, 3, 1.0)
                 ),
             },
         ));

@@ -7,7 +7,7 @@ use crate::fsutil::{Committer, Pending};
 use crate::plan::{Plan, Pulse};
 use crate::progress::{log, progress};
 use crate::scene::Scene;
-use crate::transport::{simulate_pulse, Scratch};
+use crate::transport::{simulate_pulse, PulseSetup, Scratch};
 use crate::waveform::file::{part_name, waveforms_pending, Parts};
 use crate::waveform::pulse::PulseSimulator;
 use crate::waveform::Waveform;
@@ -331,6 +331,20 @@ struct PilotSums {
     queries: u64,
 }
 
+/// The setup a pilot traces pulse `p` with: the run's, but for its random streams, which are
+/// the run's own with a seed of their own. A pilot that drew what the run then draws would
+/// choose by the run's own luck: of one pulse, the selection that came out high, kept (35 %
+/// above the closed form for a sun's background over 1000 seeds, against 0 with streams
+/// apart).
+fn pilot_setup<'a>(sim: &'a PulseSimulator, p: &Pulse, method: Method) -> PulseSetup<'a> {
+    let mut setup = sim.setup(p, method);
+    setup.seed = crate::rng::splitmix64(setup.seed ^ PILOT_STREAMS);
+    setup
+}
+
+/// Mixed into the seed of a pilot's streams ([`pilot_setup`]).
+const PILOT_STREAMS: u64 = 0x9117_07a1_5eed_5a17;
+
 /// Traces `pulses` with `method` as `loaded` asks and sums what they found.
 fn pilot_sums(
     loaded: &Loaded,
@@ -344,7 +358,7 @@ fn pilot_sums(
         .par_iter()
         .with_max_len(leaf_pulses(pulses.len(), true))
         .map(|p| {
-            let setup = sim.setup(p, method);
+            let setup = pilot_setup(&sim, p, method);
             let gate_s = setup.gate.dt * setup.gate.bins as f64;
             (simulate_pulse(&setup, rays), gate_s)
         })
@@ -393,7 +407,7 @@ pub fn choose_max_order(loaded: &Loaded, scene: &Scene, plan: &Plan) -> (u32, St
     let tallies: Vec<_> = pulses
         .par_iter()
         .with_max_len(leaf_pulses(n, true))
-        .map(|p| simulate_pulse(&sim.setup(p, method), rays))
+        .map(|p| simulate_pulse(&pilot_setup(&sim, p, method), rays))
         .collect();
     let k_max = cap as usize;
     // per order k (0 = the whole energy): the pulses' tails past k and their squared SE bounds

@@ -23,10 +23,9 @@ pub use rpv::Rpv;
 pub use table::{parse_instances, InstanceRow};
 
 use crate::error::Result;
-use bvh::{make_ray, Blas, WatertightRay, BACKOFF};
+use bvh::{make_ray, traverse_any, traverse_closest, Blas, WatertightRay, BACKOFF};
 use glam::{DVec2, DVec3, Vec3, Vec3A};
 use obvhs::cwbvh::CwBvh;
-use obvhs::ray::RayHit;
 use std::collections::BTreeMap;
 use std::path::Path;
 
@@ -540,10 +539,9 @@ impl Scene {
         let mut best_t = f32::INFINITY;
         let mut best_inst = 0usize;
         let mut best_tri = 0usize;
-        let mut top_hit = RayHit::none();
-        self.tlas.ray_traverse(
+        traverse_closest(
+            &self.tlas,
             make_ray(lr.origin, lr.dir, lr.tmax),
-            &mut top_hit,
             |ray, id| {
                 let inst = &self.instances[id];
                 let blas = &self.meshes[inst.mesh as usize];
@@ -568,25 +566,20 @@ impl Scene {
                 };
                 let mut found = usize::MAX;
                 let mut found_t = f32::INFINITY;
-                let mut hit = RayHit::none();
-                blas.bvh
-                    .ray_traverse(make_ray(o, d, ray.tmax), &mut hit, |r, k| {
-                        if skip_tri != u32::MAX && blas.bvh.primitive_indices[k] == skip_tri {
-                            return f32::INFINITY;
-                        }
-                        let t = wr.intersect(&blas.tris[k], BACKOFF, r.tmax);
-                        if t < r.tmax
-                            && on_surface
-                            && on_plane(&blas.tris[k], start, inv_len, lr.eps)
-                        {
-                            return f32::INFINITY;
-                        }
-                        if t < r.tmax {
-                            found = k;
-                            found_t = t;
-                        }
-                        t
-                    });
+                traverse_closest(&blas.bvh, make_ray(o, d, ray.tmax), |r, k| {
+                    if skip_tri != u32::MAX && blas.bvh.primitive_indices[k] == skip_tri {
+                        return f32::INFINITY;
+                    }
+                    let t = wr.intersect(&blas.tris[k], BACKOFF, r.tmax);
+                    if t < r.tmax && on_surface && on_plane(&blas.tris[k], start, inv_len, lr.eps) {
+                        return f32::INFINITY;
+                    }
+                    if t < r.tmax {
+                        found = k;
+                        found_t = t;
+                    }
+                    t
+                });
                 if found != usize::MAX {
                     best_t = found_t;
                     best_inst = id;
@@ -699,64 +692,57 @@ impl Scene {
         if tmax.is_nan() || tmax <= BACKOFF {
             return false;
         }
-        let miss = self
-            .tlas
-            .ray_traverse_miss(make_ray(lr.origin, lr.dir, tmax), |ray, id| {
-                let inst = &self.instances[id];
-                let blas = &self.meshes[inst.mesh as usize];
-                // a segment from or to a facet of a flat mesh meets its other facets only at
-                // that end, where the coplanar rule refuses them (see `intersect_copy`)
-                if blas.flat
-                    && ((start_on_surface && inst.id == skip_a.instance)
-                        || (end_on_surface && inst.id == skip_b.instance))
+        traverse_any(&self.tlas, make_ray(lr.origin, lr.dir, tmax), |ray, id| {
+            let inst = &self.instances[id];
+            let blas = &self.meshes[inst.mesh as usize];
+            // a segment from or to a facet of a flat mesh meets its other facets only at
+            // that end, where the coplanar rule refuses them (see `intersect_copy`)
+            if blas.flat
+                && ((start_on_surface && inst.id == skip_a.instance)
+                    || (end_on_surface && inst.id == skip_b.instance))
+            {
+                return f32::INFINITY;
+            }
+            let o = inst.point_to_local(ray.origin);
+            let d = inst.dir_to_local(ray.direction);
+            let wr = WatertightRay::new(Vec3::from(o), Vec3::from(d));
+            let start = o + d * BACKOFF;
+            let end = inst.point_to_local(b_local);
+            let inv_len = 1.0 / d.length();
+            let sa = if inst.id == skip_a.instance {
+                skip_a.triangle
+            } else {
+                u32::MAX
+            };
+            let sb = if inst.id == skip_b.instance {
+                skip_b.triangle
+            } else {
+                u32::MAX
+            };
+            let skipping = sa != u32::MAX || sb != u32::MAX;
+            let clear = !traverse_any(&blas.bvh, make_ray(o, d, ray.tmax), |r, k| {
+                if skipping {
+                    let orig = blas.bvh.primitive_indices[k];
+                    if orig == sa || orig == sb {
+                        return f32::INFINITY;
+                    }
+                }
+                let t = wr.intersect(&blas.tris[k], BACKOFF, r.tmax);
+                if t < r.tmax
+                    && ((start_on_surface && on_plane(&blas.tris[k], start, inv_len, lr.eps))
+                        || (end_on_surface && on_plane(&blas.tris[k], end, inv_len, end_eps)))
                 {
                     return f32::INFINITY;
                 }
-                let o = inst.point_to_local(ray.origin);
-                let d = inst.dir_to_local(ray.direction);
-                let wr = WatertightRay::new(Vec3::from(o), Vec3::from(d));
-                let start = o + d * BACKOFF;
-                let end = inst.point_to_local(b_local);
-                let inv_len = 1.0 / d.length();
-                let sa = if inst.id == skip_a.instance {
-                    skip_a.triangle
-                } else {
-                    u32::MAX
-                };
-                let sb = if inst.id == skip_b.instance {
-                    skip_b.triangle
-                } else {
-                    u32::MAX
-                };
-                let skipping = sa != u32::MAX || sb != u32::MAX;
-                let clear = blas
-                    .bvh
-                    .ray_traverse_miss(make_ray(o, d, ray.tmax), |r, k| {
-                        if skipping {
-                            let orig = blas.bvh.primitive_indices[k];
-                            if orig == sa || orig == sb {
-                                return f32::INFINITY;
-                            }
-                        }
-                        let t = wr.intersect(&blas.tris[k], BACKOFF, r.tmax);
-                        if t < r.tmax
-                            && ((start_on_surface
-                                && on_plane(&blas.tris[k], start, inv_len, lr.eps))
-                                || (end_on_surface
-                                    && on_plane(&blas.tris[k], end, inv_len, end_eps)))
-                        {
-                            return f32::INFINITY;
-                        }
-                        t
-                    });
-                if clear {
-                    f32::INFINITY
-                } else {
-                    // Any value below tmax stops the top-level traversal.
-                    f32::NEG_INFINITY
-                }
+                t
             });
-        !miss
+            if clear {
+                f32::INFINITY
+            } else {
+                // Any value below tmax stops the top-level traversal.
+                f32::NEG_INFINITY
+            }
+        })
     }
 
     /// Clears every mesh's `flat` mark, so that queries traverse flat meshes as any other;

@@ -261,7 +261,10 @@ impl Als {
                     .and_then(|t| t.scan.clone())
                     .unwrap_or_else(|| vec![span]);
                 for [t0, t1] in &intervals {
-                    let scan_lines = whole_steps(t1 - t0, 1.0 / lines_per_s);
+                    // GPS seconds near 1.3e9 resolve only 0.24 µs: a length short of whole
+                    // lines by its ends' rounding alone is those whole lines
+                    let slack = 2.0 * f64::EPSILON * t0.abs().max(t1.abs());
+                    let scan_lines = whole_steps(t1 - t0 + slack, 1.0 / lines_per_s);
                     flights.push(Flight {
                         path: None,
                         first_id,
@@ -483,20 +486,18 @@ impl Als {
     }
 
     /// The scan angle LAS records of pulse `p` (its `scan_angle_deg` is the scanner's look
-    /// angle): for a sweep across track under a trajectory or a mount, and for a multibeam
-    /// head (whose look angle is a channel's elevation, 0 at the horizon), the recorded
-    /// beam's angle from the scene's nadir in the plane across the direction of travel,
-    /// positive to the right (counter-clockwise seen from behind), so a roll is in it, as
-    /// LAS defines it ("with respect to the vertical of the coordinate system of the data";
-    /// ±180° is up). Straight level lines and the other patterns keep the look angle, which
-    /// is that angle there.
+    /// angle): the recorded beam's angle from the scene's nadir in the plane across the
+    /// direction of travel, positive to the right (counter-clockwise seen from behind), so a
+    /// roll is in it, as LAS defines it ("with respect to the vertical of the coordinate
+    /// system of the data"; ±180° is up). A cone's or a rosette's look angle is unsigned
+    /// and off nadir, a multibeam channel's an elevation: each is projected so. A sweep
+    /// across track on straight level lines keeps its look angle, which is that angle there.
     pub(crate) fn las_angle(&self, p: &Pulse) -> f32 {
         let sweep = matches!(
             self.pattern,
             ScanPattern::Line | ScanPattern::Oscillating | ScanPattern::RotatingPolygon
         );
-        let multibeam = self.pattern == ScanPattern::Multibeam;
-        if !multibeam && (self.plain || !sweep) {
+        if self.plain && sweep {
             return p.scan_angle_deg;
         }
         let (x, d) = (p.along, p.rec_direction());

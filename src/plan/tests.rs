@@ -620,6 +620,33 @@ fn risley_prisms_add_their_deflections() {
     assert!(offs.iter().cloned().fold(0.0, f32::max) > 37.0);
 }
 
+/// LAS's scan angle of a rosette's and a cone's beams is signed across track, as LAS defines
+/// it (from nadir, positive to the right of the direction of travel), not their unsigned
+/// look angle off nadir: a beam ahead is 0°, one to the left negative.
+#[test]
+fn las_scan_angles_of_cones_and_rosettes_are_across_track() {
+    for sc in [
+        "scanner: { pattern: risley, prism_rates_hz: [120.0, -87.0], deviation_deg: [19.0, 19.0], phase_deg: [0, 30] }",
+        "scanner: { pattern: conic, scan_angle_deg: [-12, 12], scan_frequency_hz: 20 }",
+    ] {
+        // flying +y: the right is +x
+        let text = format!(
+            "platform: {{ kind: als, altitude_m: 60, speed_m_s: 5, prf_hz: 2000, lines: [ {{ start: [0, 0], end: [0, 2] }} ], {sc} }}"
+        );
+        let plan = Plan::new(&campaign(&text)).unwrap();
+        let p = plan.pulses(0..plan.len());
+        let (mut left, mut right) = (0, 0);
+        for q in &p {
+            let las = plan.las_scan_angle(q) as f64;
+            let want = q.direction.x.atan2(-q.direction.z).to_degrees();
+            assert!((las - want).abs() < 1e-4, "{sc}: pulse {}: {las} against {want}", q.id);
+            left += (want < -1.0) as usize;
+            right += (want > 1.0) as usize;
+        }
+        assert!(left > p.len() / 5 && right > p.len() / 5, "{sc}: {left} left, {right} right");
+    }
+}
+
 /// A multi-beam head: every firing gives one pulse per channel at once, each at its
 /// elevation above the head's plane, the azimuth stepping 360 rotation / prf per firing
 /// (counter-clockwise from body x); a head tilt rolls it about body x, right side down.
@@ -925,6 +952,76 @@ fn roll_shifts_and_heading_turns_the_swath() {
     }
 }
 
+/// A scan interval of whole scan lines keeps its last line at GPS times near 1.3e9 s, where
+/// its ends' rounding makes its length a little short (1300000001.1 - 1300000001.0 is
+/// 0.0999999 in f64): the same pulses as the same interval near 0 s, for every pattern.
+#[test]
+fn scan_intervals_near_gps_times_keep_their_last_line() {
+    let dir = TempDir::new("plan-interval");
+    let scanners = [
+        "scanner: { pattern: oscillating, scan_angle_deg: [-20, 20], scan_frequency_hz: 20 }",
+        "scanner: { pattern: rotating_polygon, scan_angle_deg: [-20, 20], scan_frequency_hz: 40 }",
+        "scanner: { pattern: risley, prism_rates_hz: [120, -87], deviation_deg: [10, 10] }",
+        "scanner: { pattern: multibeam, channels_deg: [-5, 5], rotation_hz: 10 }",
+    ];
+    for (t0, name) in [(1.3e9, "late.csv"), (0.0, "early.csv")] {
+        trajectory_csv(
+            &dir,
+            name,
+            (t0, t0 + 4.0, 0.125),
+            [0.0, 50.0],
+            [200.0, 50.0],
+            300.0,
+            [0.0; 3],
+        );
+    }
+    for sc in scanners {
+        let count = |file: &str, a: f64, b: f64| {
+            let plat = format!(
+                "platform: {{ kind: als, prf_hz: 2000, trajectory: {{ file: {file}, scan: [[{a}, {b}]] }}, {sc} }}"
+            );
+            plan_in(&dir, &plat).unwrap().len()
+        };
+        let early = count("early.csv", 1.0, 1.1);
+        assert_eq!(count("late.csv", 1300000001.0, 1300000001.1), early, "{sc}");
+        let lines = if sc.contains("multibeam") { 2 } else { 1 };
+        assert_eq!(early, 200 * lines, "{sc}");
+    }
+}
+
+/// A polygon's sweep may end past the horizon where its duty leaves that part unfired: ±30° at
+/// duty 0.5 is [-30, 90]; a fired angle at 90° or beyond is refused, naming the key.
+#[test]
+fn a_polygon_fires_a_symmetric_swath_at_any_duty() {
+    let plan = |sc: &str| {
+        Plan::new(&campaign(&format!(
+            "platform: {{ kind: als, altitude_m: 100, speed_m_s: 10, prf_hz: 4000, lines: [{{ start: [0, 0], end: [10, 0] }}], {sc} }}"
+        )))
+    };
+    let p = plan("scanner: { pattern: rotating_polygon, scan_angle_deg: [-30, 90], scan_frequency_hz: 100, duty: 0.5 }").unwrap();
+    let angles: Vec<f32> = p
+        .pulses(0..p.len())
+        .iter()
+        .map(|q| q.scan_angle_deg)
+        .collect();
+    let (lo, hi) = angles
+        .iter()
+        .fold((f32::MAX, f32::MIN), |(a, b), &x| (a.min(x), b.max(x)));
+    // 40 pulses a period, 20 fired, 3° apart: -30° to one step short of 30°
+    assert!(lo == -30.0 && (hi - 27.0).abs() < 1e-4, "{lo} .. {hi}");
+    assert_eq!(angles.len() % 20, 0);
+    let doc = Doc {
+        path: "campaign.yaml".into(),
+        text: text("platform: { kind: als, altitude_m: 100, speed_m_s: 10, prf_hz: 4000, lines: [{ start: [0, 0], end: [10, 0] }], scanner: { pattern: rotating_polygon, scan_angle_deg: [-30, 150], scan_frequency_hz: 100, duty: 0.75 } }"),
+    };
+    let c: Campaign = doc.parse().unwrap();
+    let e = super::check_campaign(&doc, &c).unwrap_err().to_string();
+    assert!(
+        e.contains("platform.scanner.scan_angle_deg") && e.contains("105"),
+        "{e}"
+    );
+}
+
 /// A trajectory longer than a block, read on demand in any order, gives the same pulses as in
 /// order; and its errors name the CSV file, line and column.
 #[test]
@@ -1017,6 +1114,20 @@ fn trajectory_files_stream_and_their_errors_are_located() {
         "time_s,x,y,z,roll_deg,pitch_deg,heading_deg\n0,0,0,100,0,0,90\n1,1e300,0,100,0,0,90\n",
     );
     assert!(e.contains("g.csv:3:3: x:"), "{e}");
+    // a classic Mac OS export ends its lines in CR alone: said so, in one short line
+    let rows: String = (0..2000).map(|k| format!("{k},0,0,100,0,0,90\r")).collect();
+    let e = bad(
+        "cr.csv",
+        &format!("time_s,x,y,z,roll_deg,pitch_deg,heading_deg\r{rows}"),
+    );
+    assert!(
+        e.contains("cr.csv:1:44") && e.contains("carriage return") && e.len() < 300,
+        "{e}"
+    );
+    // a header that names no needed column lists a dozen of its names, not all
+    let many: Vec<String> = (0..500).map(|k| format!("c{k}")).collect();
+    let e = bad("w.csv", &format!("{}\n1,2\n", many.join(",")));
+    assert!(e.contains("and 488 more") && e.len() < 400, "{e}");
     // a scanner stepped along track has no speed to step by under a trajectory
     let e = plan_in(
         &dir,

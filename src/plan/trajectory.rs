@@ -102,6 +102,16 @@ impl Trajectory {
             let start = offset;
             offset += n as u64;
             let row = text.trim_end_matches(['\n', '\r']);
+            if let Some(at) = row.find('\r') {
+                // the whole file would otherwise read as one line, its header naming every row
+                return Err(Error::at(
+                    &path,
+                    Some((line, at + 1)),
+                    "",
+                    "its lines end in a carriage return alone (a classic Mac OS export): save \
+                     the file with LF or CRLF line endings",
+                ));
+            }
             if row.trim().is_empty() {
                 continue;
             }
@@ -288,7 +298,7 @@ fn read_header(path: &Path, row: &str) -> Result<([usize; 7], usize)> {
                         "the header row has no column {want}: a trajectory needs {} \
                          (found {})",
                         COLUMNS.join(", "),
-                        names.join(", ")
+                        shown(&names)
                     ),
                 ))
             }
@@ -303,6 +313,25 @@ fn read_header(path: &Path, row: &str) -> Result<([usize; 7], usize)> {
         }
     }
     Ok((columns, names.len()))
+}
+
+/// A header's names for a message: the first dozen, so that a wrong file (one whose rows
+/// are all on one line) cannot fill the terminal.
+fn shown(names: &[&str]) -> String {
+    const MOST: usize = 12;
+    let mut s: Vec<&str> = names.iter().take(MOST).copied().collect();
+    let more;
+    if names.len() > MOST {
+        more = format!("and {} more", names.len() - MOST);
+        s.push(&more);
+    }
+    s.iter()
+        .map(|n| match n.char_indices().nth(40) {
+            Some((i, _)) => format!("{}…", &n[..i]),
+            None => n.to_string(),
+        })
+        .collect::<Vec<_>>()
+        .join(", ")
 }
 
 /// One row: the named columns as numbers, the position moved into the scene's frame.

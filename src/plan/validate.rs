@@ -393,8 +393,27 @@ fn als(c: &Check, p: &Platform) -> Result<()> {
         _ => {
             let key = "platform.scanner.scan_angle_deg";
             [lo, hi] = s.scan_angle_deg.unwrap_or_default();
-            for a in [lo, hi] {
-                c.open_deg(key, a, -90.0, 90.0)?;
+            // a polygon fires only the first `duty` of its sweep: the angles fired must look
+            // below the horizon, the sweep's end may lie past it (±30° at duty 0.5 is
+            // [-30, 90])
+            let fired = match (pattern, s.duty) {
+                (ScanPattern::RotatingPolygon, Some(d)) if d > 0.0 && d < 1.0 => d,
+                _ => 1.0,
+            };
+            c.open_deg(key, lo, -90.0, 90.0)?;
+            if fired < 1.0 {
+                c.finite(key, hi)?;
+                let end = lo + fired * (hi - lo);
+                if end >= 90.0 {
+                    return Err(doc.error(
+                        key,
+                        format!(
+                            "the angles fired at duty {fired} reach {end} degrees: they must stay below 90"
+                        ),
+                    ));
+                }
+            } else {
+                c.open_deg(key, hi, -90.0, 90.0)?;
             }
             if lo >= hi {
                 return Err(doc.error(

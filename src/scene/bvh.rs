@@ -451,10 +451,17 @@ mod tests {
             offset: DVec3::ZERO,
         };
         let blas = Blas::build(&mesh);
-        assert!(blas.bvh.nodes.len() > 100, "too small a tree to show anything");
+        assert!(
+            blas.bvh.nodes.len() > 100,
+            "too small a tree to show anything"
+        );
         let (mut tested, mut entered) = (0u64, 0u64);
         for i in 0..400 {
-            let o = Vec3A::new(next() * 24.0 - 2.0, next() * 24.0 - 2.0, next() * 12.0 - 2.0);
+            let o = Vec3A::new(
+                next() * 24.0 - 2.0,
+                next() * 24.0 - 2.0,
+                next() * 12.0 - 2.0,
+            );
             let mut d = Vec3A::new(next() - 0.5, next() - 0.5, next() - 0.5);
             // axis-parallel and signed-zero components
             match i % 8 {
@@ -464,7 +471,11 @@ mod tests {
                 _ => {}
             }
             let d = d.normalize_or(Vec3A::Z);
-            let tmax = if i % 3 == 0 { next() * 5.0 } else { f32::INFINITY };
+            let tmax = if i % 3 == 0 {
+                next() * 5.0
+            } else {
+                f32::INFINITY
+            };
             let ray = make_ray(o, d, tmax);
             let oct = blas.bvh.new_traversal(ray.direction).oct_inv4;
             for node in &blas.bvh.nodes {
@@ -474,7 +485,10 @@ mod tests {
                 entered += (want != 0) as u64;
             }
         }
-        assert!(entered > 0 && entered < tested, "{entered} of {tested}: nothing compared");
+        assert!(
+            entered > 0 && entered < tested,
+            "{entered} of {tested}: nothing compared"
+        );
     }
 
     #[test]

@@ -91,3 +91,35 @@ fn two_stations_scan_one_scene() {
     let within = summary["surface_distance"]["within_5cm"].as_f64().unwrap();
     assert!(within >= 0.99, "{within}");
 }
+
+/// A station placed beside the scene (a position in other units or another frame): every
+/// beam misses it, and `check` and the run log say so, naming where the beams leave from and
+/// where the scene lies; a station over the scene is not warned of.
+#[test]
+fn a_scan_that_misses_the_scene_is_warned_of() {
+    let dir = tmp("tls_miss");
+    plane_scene(&dir, 0.3, 60.0);
+    let away = write(
+        &dir,
+        "away.yaml",
+        &tls_campaign("position: [5000, 0, 1.5]", 20.0),
+    );
+    let (code, out, err) = lidarsim(&["check", away.to_str().unwrap()]);
+    assert_eq!(code, 0, "{err}");
+    assert!(
+        out.contains("none of")
+            && out.contains("x 5000.0 to 5000.0")
+            && out.contains("meets the scene"),
+        "{out}"
+    );
+    let log = run_cli(&away, &dir.join("away"), None);
+    assert!(log.contains("none of"), "{log}");
+    let over = write(
+        &dir,
+        "over.yaml",
+        &tls_campaign("position: [0, 0, 1.5]", 20.0),
+    );
+    let (code, out, err) = lidarsim(&["check", over.to_str().unwrap()]);
+    assert_eq!(code, 0, "{err}");
+    assert!(!out.contains("none of"), "{out}");
+}

@@ -143,7 +143,7 @@ pub fn check(path: &Path) -> Result<CheckReport> {
         warnings: c
             .warnings()
             .into_iter()
-            .chain(overlap_warning(c, &scene, &plan))
+            .chain(aim_warnings(c, &scene, &plan))
             .collect(),
     })
 }
@@ -151,26 +151,41 @@ pub fn check(path: &Path) -> Result<CheckReport> {
 /// Pulses traced for the ranges at which the scene lies before the sensor.
 const OVERLAP_PULSES: u64 = 4096;
 
-/// The near-field overlap warning ([`crate::sensor::overlap`]) from the ranges at which up to
-/// 4,096 of the plan's pulses, evenly spread, first meet the scene.
-pub fn overlap_warning(
-    c: &crate::campaign::Campaign,
-    scene: &Scene,
-    plan: &Plan,
-) -> Option<String> {
+/// What the ranges at which up to 4,096 of the plan's pulses, evenly spread, first meet the
+/// scene say: the near-field overlap warning ([`crate::sensor::overlap`]), and a warning when
+/// none of them meets it (a trajectory in local metres under a `frame`, lines beside the
+/// scene), which would otherwise end in a run without a return.
+pub fn aim_warnings(c: &crate::campaign::Campaign, scene: &Scene, plan: &Plan) -> Vec<String> {
     let n = plan.len() as u64;
     let step = n.div_ceil(OVERLAP_PULSES).max(1) as usize;
+    let (mut lo, mut hi) = (
+        glam::DVec3::splat(f64::INFINITY),
+        glam::DVec3::splat(f64::NEG_INFINITY),
+    );
+    let mut tried = 0usize;
     let ranges: Vec<f64> = (0..n)
         .step_by(step)
         .filter_map(|id| {
             let p = plan.pulse(id);
+            (lo, hi, tried) = (lo.min(p.origin), hi.max(p.origin), tried + 1);
             let none = crate::scene::FacetId::NONE;
             scene
                 .intersect(p.origin, p.direction, f64::INFINITY, none)
                 .map(|h| h.t)
         })
         .collect();
-    crate::sensor::overlap::warning(&c.instrument, &ranges)
+    let mut out: Vec<String> = crate::sensor::overlap::warning(&c.instrument, &ranges)
+        .into_iter()
+        .collect();
+    if tried > 0 && ranges.is_empty() {
+        let (slo, shi) = scene.bounds();
+        out.push(format!(
+            "none of {tried} pulses sampled over the plan meets the scene along its beam's axis: they leave from x {:.1} to {:.1}, y {:.1} to {:.1}, z {:.1} to {:.1} m and the scene spans x {:.1} to {:.1}, y {:.1} to {:.1}, z {:.1} to {:.1} m{}; check the platform's positions and aim",
+            lo.x, hi.x, lo.y, hi.y, lo.z, hi.z, slo.x, shi.x, slo.y, shi.y, slo.z, shi.z,
+            if c.frame.is_some() { " (both less the frame's origin)" } else { "" }
+        ));
+    }
+    out
 }
 
 impl CheckReport {

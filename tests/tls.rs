@@ -122,4 +122,22 @@ fn a_scan_that_misses_the_scene_is_warned_of() {
     let (code, out, err) = lidarsim(&["check", over.to_str().unwrap()]);
     assert_eq!(code, 0, "{err}");
     assert!(!out.contains("none of"), "{out}");
+    // 4,096 scan lines of 100 pulses: every 100th pulse is the -30° edge, which misses the
+    // plane from 300 m; the sample must not see that edge alone (a third of the pulses hit)
+    let edge = write(
+        &dir,
+        "edge.yaml",
+        "name: edge
+scene: plane.yaml
+seed: 1
+wavelength_nm: 1064
+instrument: { kind: discrete_return, pulse_energy_j: 1.0e-4, pulse_fwhm_ns: 3, footprint_half_angle_mrad: 0.25, fov_half_angle_mrad: 0.375, receiver_area_m2: 0.01, bin_ns: 0.5 }
+platform: { kind: als, altitude_m: 300, speed_m_s: 1.46484375, prf_hz: 10000, lines: [ { start: [0, -30], end: [0, 30] } ], scanner: { pattern: line, scan_angle_deg: [-30, 30], scan_frequency_hz: 100 } }
+simulation: { method: forward, rays_per_pulse: 1, max_order: 1 }
+",
+    );
+    let (code, out, err) = lidarsim(&["check", edge.to_str().unwrap()]);
+    assert_eq!(code, 0, "{err}");
+    assert!(out.contains("pulses: 409600"), "{out}");
+    assert!(!out.contains("none of"), "{out}");
 }

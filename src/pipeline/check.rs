@@ -151,24 +151,27 @@ pub fn check(path: &Path) -> Result<CheckReport> {
 /// Pulses traced for the ranges at which the scene lies before the sensor.
 const OVERLAP_PULSES: u64 = 4096;
 
-/// What the ranges at which up to 4,096 of the plan's pulses, evenly spread, first meet the
+/// What the ranges at which up to 4,096 of the plan's pulses, spread over it, first meet the
 /// scene say: the near-field overlap warning ([`crate::sensor::overlap`]), and a warning when
 /// none of them meets it (a trajectory in local metres under a `frame`, lines beside the
 /// scene), which would otherwise end in a run without a return.
 pub fn aim_warnings(c: &crate::campaign::Campaign, scene: &Scene, plan: &Plan) -> Vec<String> {
-    let n = plan.len() as u64;
-    let step = n.div_ceil(OVERLAP_PULSES).max(1) as usize;
+    // one pulse drawn from each of 4,096 even strata of the ids, not every k-th: a stride
+    // that is a multiple of the pulses a scan line or the beams would see one look angle or
+    // one beam alone
+    let pulses = plan.spread(OVERLAP_PULSES as usize, c.seed);
     let (mut lo, mut hi) = (
         glam::DVec3::splat(f64::INFINITY),
         glam::DVec3::splat(f64::NEG_INFINITY),
     );
-    let mut tried = 0usize;
-    let ranges: Vec<f64> = (0..n)
-        .step_by(step)
-        .filter_map(|id| {
-            let p = plan.pulse(id);
-            (lo, hi, tried) = (lo.min(p.origin), hi.max(p.origin), tried + 1);
-            let none = crate::scene::FacetId::NONE;
+    for p in &pulses {
+        (lo, hi) = (lo.min(p.origin), hi.max(p.origin));
+    }
+    let tried = pulses.len();
+    let none = crate::scene::FacetId::NONE;
+    let ranges: Vec<f64> = pulses
+        .iter()
+        .filter_map(|p| {
             scene
                 .intersect(p.origin, p.direction, f64::INFINITY, none)
                 .map(|h| h.t)

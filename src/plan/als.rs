@@ -487,7 +487,7 @@ impl Als {
 
     /// The scan angle LAS records of pulse `p` (its `scan_angle_deg` is the scanner's look
     /// angle): the recorded beam's angle from the scene's nadir in the plane across the
-    /// direction of travel, positive to the right (counter-clockwise seen from behind), so a
+    /// body's heading, positive to the right (counter-clockwise seen from behind), so a
     /// roll is in it, as LAS defines it ("with respect to the vertical of the coordinate
     /// system of the data"; ±180° is up). A cone's or a rosette's look angle is unsigned
     /// and off nadir, a multibeam channel's an elevation: each is projected so. A sweep

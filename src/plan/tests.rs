@@ -1124,6 +1124,16 @@ fn trajectory_files_stream_and_their_errors_are_located() {
         e.contains("cr.csv:1:44") && e.contains("carriage return") && e.len() < 300,
         "{e}"
     );
+    // a stray CR inside a field of a file whose lines end in LF is blank space
+    let ok = "time_s,x,y,z,roll_deg,pitch_deg,heading_deg\n0,0,0,100,0,0,90\n1,5,0\r,100,0,0,90\n";
+    std::fs::write(dir.join("stray.csv"), ok).unwrap();
+    plan_in(
+        &dir,
+        &format!(
+            "platform: {{ kind: als, prf_hz: 2000, trajectory: {{ file: stray.csv }}, {OSC} }}"
+        ),
+    )
+    .unwrap();
     // a header that names no needed column lists a dozen of its names, not all
     let many: Vec<String> = (0..500).map(|k| format!("c{k}")).collect();
     let e = bad("w.csv", &format!("{}\n1,2\n", many.join(",")));

@@ -102,8 +102,10 @@ impl Trajectory {
             let start = offset;
             offset += n as u64;
             let row = text.trim_end_matches(['\n', '\r']);
-            if let Some(at) = row.find('\r') {
-                // the whole file would otherwise read as one line, its header naming every row
+            // a line with no LF to end it holding a CR: the file's lines end in CR alone, and
+            // it would otherwise read as one line, its header naming every row (a stray CR in
+            // a field of an LF line is blank space, as before)
+            if let Some(at) = row.find('\r').filter(|_| !text.ends_with('\n')) {
                 return Err(Error::at(
                     &path,
                     Some((line, at + 1)),

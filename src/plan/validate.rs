@@ -396,6 +396,15 @@ fn als(c: &Check, p: &Platform) -> Result<()> {
             // a polygon fires only the first `duty` of its sweep: the angles fired must look
             // below the horizon, the sweep's end may lie past it (±30° at duty 0.5 is
             // [-30, 90])
+            // the duty first: the angles' range depends on it
+            if let Some(d) = s.duty {
+                if !(d > 0.0 && d <= 1.0) {
+                    return Err(doc.error(
+                        "platform.scanner.duty",
+                        format!("must be in (0, 1], found {d}"),
+                    ));
+                }
+            }
             let fired = match (pattern, s.duty) {
                 (ScanPattern::RotatingPolygon, Some(d)) if d > 0.0 && d < 1.0 => d,
                 _ => 1.0,
@@ -408,7 +417,8 @@ fn als(c: &Check, p: &Platform) -> Result<()> {
                     return Err(doc.error(
                         key,
                         format!(
-                            "the angles fired at duty {fired} reach {end} degrees: they must stay below 90"
+                            "the angles fired at duty {fired} reach {} degrees: they must stay below 90",
+                            if end < 1e6 { format!("{end:.2}") } else { format!("{end:.3e}") }
                         ),
                     ));
                 }
@@ -427,14 +437,6 @@ fn als(c: &Check, p: &Platform) -> Result<()> {
                 s.look_angle_step_deg,
             )?;
             c.opt_positive("platform.scanner.along_track_step_m", s.along_track_step_m)?;
-            if let Some(d) = s.duty {
-                if !(d > 0.0 && d <= 1.0) {
-                    return Err(doc.error(
-                        "platform.scanner.duty",
-                        format!("must be in (0, 1], found {d}"),
-                    ));
-                }
-            }
             if let Some(0) = s.facets {
                 return Err(doc.error("platform.scanner.facets", "must be at least 1"));
             }

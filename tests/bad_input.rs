@@ -673,6 +673,11 @@ fn values_beyond_any_instrument_are_refused() {
             "name",
         ),
         (
+            "name_long",
+            CAMPAIGN.replace("name: bad", &format!("name: {}", "n".repeat(256))),
+            "name",
+        ),
+        (
             "dark",
             CAMPAIGN.replace(
                 "  receiver_area_m2: 0.1\n",

@@ -712,6 +712,21 @@ fn the_resolved_campaign_holds_its_defaults_and_runs_the_same() {
         r["instrument"]["receiver_offset_m"],
         serde_yaml::from_str::<serde_yaml::Value>("[0.0, 0.0, 0.0]").unwrap()
     );
+    // its files are named absolutely: a run started from the campaign's folder with a
+    // relative path leaves a resolved campaign that checks where it lies
+    let rel = std::process::Command::new(env!("CARGO_BIN_EXE_lidarsim"))
+        .args(["run", "campaign.yaml", "--out", "rel", "--stages", "plan"])
+        .current_dir(&dir)
+        .output()
+        .unwrap();
+    assert!(
+        rel.status.success(),
+        "{}",
+        String::from_utf8_lossy(&rel.stderr)
+    );
+    let resolved_rel = dir.join("rel/campaign.resolved.yaml");
+    let (code, _, err) = lidarsim(&["check", resolved_rel.to_str().unwrap()]);
+    assert_eq!(code, 0, "{err}");
     let again = dir.join("again");
     let copy = write(&dir, "resolved.yaml", &text);
     run_ok(&copy, &again, &[]);
@@ -960,6 +975,13 @@ fn sweep_writes_subruns_and_summaries() {
 
     let svg = std::fs::read_to_string(out.join("sweep_energy.svg")).unwrap();
     assert!(svg.contains("<svg"));
+
+    // runs planned but not simulated: their planned pulses and empty cells, not zeros
+    let planned = dir.join("planned");
+    run_ok(&camp, &planned, &["--stages", "plan"]);
+    let text = std::fs::read_to_string(planned.join("sweep.csv")).unwrap();
+    let rows: Vec<&str> = text.lines().skip(1).collect();
+    assert_eq!(rows, ["100,10,,,,", "200,10,,,,"], "{text}");
 
     // a sweep stopped before its last run: compared as far as it went, that run's row empty
     std::fs::remove_dir_all(out.join(names[1])).unwrap();

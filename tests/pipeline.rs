@@ -516,3 +516,69 @@ fn a_lost_simulation_marker_is_put_back() {
         assert_eq!(std::fs::read_to_string(&marker).unwrap(), want);
     }
 }
+
+/// `--stages` asks for stages whose inputs are there: a later stage without its earlier one
+/// done is an error naming the stage to include, never "nothing to do" or "complete".
+#[test]
+fn stages_without_their_inputs_are_refused() {
+    let dir = tmp("pipe_stage_inputs");
+    let camp = track_campaign(&dir, 10);
+    let camp = camp.to_str().unwrap();
+    let out = dir.join("run");
+    let out = out.to_str().unwrap();
+    let (code, _, err) = lidarsim(&["run", camp, "--out", out, "--stages", "plan"]);
+    assert_eq!(code, 0, "{err}");
+    for (stages, missing) in [
+        ("products", "stage simulate has not run"),
+        ("report", "stage simulate has not run"),
+        ("report,plan", "stage simulate has not run"),
+    ] {
+        let (code, _, err) = lidarsim(&["run", camp, "--out", out, "--stages", stages]);
+        assert_eq!(code, 1, "--stages {stages}: {err}");
+        assert!(
+            err.contains(missing) && err.contains("include it in --stages"),
+            "--stages {stages}: {err}"
+        );
+    }
+    let (code, _, err) = lidarsim(&["run", camp, "--out", out, "--stages", "simulate"]);
+    assert_eq!(code, 0, "{err}");
+    let (code, _, err) = lidarsim(&["run", camp, "--out", out, "--stages", "report"]);
+    assert_eq!(code, 1, "{err}");
+    assert!(err.contains("stage products has not run"), "{err}");
+    let (code, _, err) = lidarsim(&["run", camp, "--out", out, "--stages", "products,report"]);
+    assert_eq!(code, 0, "{err}");
+    assert!(Path::new(out).join("report.md").is_file());
+}
+
+/// A new campaign run into a used folder removes what the last run's products wrote (its
+/// points and DSM), so that `compare` and Python never read them as this run's; a products
+/// stage made stale by an edited campaign takes its files with it.
+#[test]
+fn a_new_run_in_a_used_folder_leaves_no_old_products() {
+    let dir = tmp("pipe_old_products");
+    let camp = track_campaign(&dir, 10);
+    let text = std::fs::read_to_string(&camp).unwrap().replace(
+        "instrument: { ",
+        "products: { points: true, dsm: { resolution_m: 5 } }\ninstrument: { kind: discrete_return, ",
+    );
+    let points = write(&dir, "points.yaml", &text);
+    let out = dir.join("run");
+    let run = |c: &Path, extra: &[&str]| {
+        let mut a = vec!["run", c.to_str().unwrap(), "--out", out.to_str().unwrap()];
+        a.extend(extra);
+        let (code, _, err) = lidarsim(&a);
+        assert_eq!(code, 0, "{err}");
+    };
+    run(&points, &[]);
+    assert!(out.join("points.las").is_file() && out.join("dsm/dsm.tif").is_file());
+    run(&camp, &[]);
+    assert!(!out.join("points.las").exists(), "the old points stayed");
+    assert!(!out.join("dsm").exists(), "the old DSM stayed");
+    assert!(out.join("report.md").is_file());
+    // an edit that makes the products stale, resumed only as far as the plan
+    run(&points, &[]);
+    assert!(out.join("points.las").is_file());
+    let edited = write(&dir, "edited.yaml", &text.replace("seed: 9", "seed: 10"));
+    run(&edited, &["--resume", "--stages", "plan"]);
+    assert!(!out.join("points.las").exists(), "stale points stayed");
+}

@@ -869,11 +869,19 @@ impl Loaded {
     }
 
     pub fn resolved_yaml(&self) -> String {
+        // absolute: the file is read from the run folder, where a path relative to the
+        // working folder the run started in would name nothing
+        let absolute = |p: &std::path::Path| {
+            std::path::absolute(p)
+                .unwrap_or_else(|_| p.to_path_buf())
+                .display()
+                .to_string()
+        };
         let mut c = self.campaign.with_defaults();
-        c.scene = self.scene_path.display().to_string();
+        c.scene = absolute(&self.scene_path);
         if let Some(t) = &mut c.platform.trajectory {
             if let Some(r) = &t.resolved {
-                t.file = r.display().to_string();
+                t.file = absolute(r);
             }
         }
         let yaml = serde_yaml::to_string(&c).expect("a campaign always serialises");
@@ -959,6 +967,16 @@ impl Campaign {
             return Err(doc.error(
                 "name",
                 "must be a non-empty name without slashes, other than . and .. (it names the run folder)",
+            ));
+        }
+        // a folder's name: file systems hold 255 bytes in one
+        if self.name.len() > 255 {
+            return Err(doc.error(
+                "name",
+                format!(
+                    "is {} bytes long: it names the run folder, which holds 255 at most",
+                    self.name.len()
+                ),
             ));
         }
         for (k, &w) in self.wavelength_nm.all().iter().enumerate() {

@@ -328,6 +328,32 @@ fn bench(args: BenchArgs) -> Result<()> {
             "--fov-mrad {fov}: expected a half angle in mrad with 0 < x < 1500, e.g. 0.3"
         )));
     }
+    // what would fail only at the bench's end, minutes later, fails now
+    if !args.no_campaigns && !args.campaigns.is_dir() {
+        return Err(Error::msg(format!(
+            "--campaigns {}: no such folder (the campaign rows' files, pipelines/bench in the \
+             repository: run the bench from its root, or name the folder)",
+            args.campaigns.display()
+        )));
+    }
+    if args.report.is_dir() {
+        return Err(Error::msg(format!(
+            "--report {}: is a folder; name the report's file, e.g. docs/benchmarks.md",
+            args.report.display()
+        )));
+    }
+    let parent = args
+        .report
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(std::path::Path::new("."));
+    if !parent.is_dir() {
+        return Err(Error::msg(format!(
+            "--report {}: its folder {} does not exist",
+            args.report.display(),
+            parent.display()
+        )));
+    }
     opts.rami_scene = args.rami;
     opts.campaigns = !args.no_campaigns;
     // each campaign row in a process of its own, as a user runs it (in this one where the

@@ -100,17 +100,44 @@ pub(super) fn forget_damaged(m: &mut Manifest, out: &Path) -> Vec<(Stage, String
             .find(|(f, sum)| file_checksum(&out.join(f)).as_deref() != Some(sum.as_str()));
         if let Some((f, _)) = bad {
             damaged.push((stage, f.clone()));
-            m.stages.remove(stage.name());
-            invalidate_after(m, stage);
+            if let Some(r) = m.stages.remove(stage.name()) {
+                remove_products(out, stage, &r);
+            }
+            invalidate_after(m, out, stage);
         }
     }
     damaged
 }
 
-/// A stage redone makes every later stage stale.
-pub(super) fn invalidate_after(m: &mut Manifest, stage: Stage) {
+/// A stage redone makes every later stage stale; the files the products and report stages
+/// wrote go with their records, so that no reader (`compare`, Python's `Run`) takes an older
+/// run's points or DSM for this one's.
+pub(super) fn invalidate_after(m: &mut Manifest, out: &Path, stage: Stage) {
     for s in Stage::ALL.into_iter().filter(|s| *s > stage) {
-        m.stages.remove(s.name());
+        if let Some(r) = m.stages.remove(s.name()) {
+            remove_products(out, s, &r);
+        }
+    }
+}
+
+/// Removes the files a products or report stage's record lists (the waveform parts and the
+/// plan stay: a resume checks those one by one). Only names inside the run folder.
+pub(super) fn remove_products(out: &Path, stage: Stage, r: &StageRecord) {
+    if stage < Stage::Products {
+        return;
+    }
+    for o in &r.outputs {
+        let rel = Path::new(o);
+        let inside = rel
+            .components()
+            .all(|c| matches!(c, std::path::Component::Normal(_)));
+        if inside {
+            let _ = std::fs::remove_file(out.join(rel));
+            // a sub-folder it leaves empty (dsm/) goes too; one holding anything else stays
+            if let Some(dir) = rel.parent().filter(|d| !d.as_os_str().is_empty()) {
+                let _ = std::fs::remove_dir(out.join(dir));
+            }
+        }
     }
 }
 

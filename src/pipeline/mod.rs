@@ -16,7 +16,9 @@ pub mod simulate;
 pub mod sweep;
 
 pub use manifest::StageRecord;
-use manifest::{fingerprint, forget_damaged, invalidate_after, record, save, Manifest};
+use manifest::{
+    fingerprint, forget_damaged, invalidate_after, record, remove_products, save, Manifest,
+};
 use simulate::simulate_parts;
 pub use simulate::{probe_rays_per_second, simulate, simulate_in_memory, with_method_chosen};
 use sweep::run_sweep;
@@ -355,7 +357,23 @@ impl<'a> RunFolder<'a> {
                 clean_temp_files(out);
             }
         } else {
-            for name in ["waveforms", "pulses.parquet", "manifest.json", "report.md"] {
+            // a new run in a used folder: what the last run's products wrote goes too, or a
+            // reader would take its points and DSM for this run's until products are redone
+            if let Some(old) = Manifest::read(&manifest_path) {
+                for (name, r) in &old.stages {
+                    if let Some(stage) = Stage::ALL.into_iter().find(|s| s.name() == name) {
+                        remove_products(out, stage, r);
+                    }
+                }
+            }
+            for name in [
+                "waveforms",
+                "pulses.parquet",
+                "manifest.json",
+                "report.md",
+                "sweep.json",
+                "sweep.csv",
+            ] {
                 let p = out.join(name);
                 let _ = if p.is_dir() {
                     std::fs::remove_dir_all(&p)
@@ -373,6 +391,21 @@ impl<'a> RunFolder<'a> {
             manifest,
             _lock: lock,
         })
+    }
+
+    /// The error of a stage left out of `--stages` whose output a later stage asked for is
+    /// missing or stale.
+    fn missing(&self, stage: Stage) -> Error {
+        let why = if self.manifest.stages.contains_key(stage.name()) {
+            "is out of date (the campaign, its scene or lidarsim changed since it ran)"
+        } else {
+            "has not run"
+        };
+        Error::msg(format!(
+            "{}: stage {} {why}: include it in --stages",
+            self.out.display(),
+            stage.name()
+        ))
     }
 
     fn wanted(&self, stage: Stage) -> bool {
@@ -409,7 +442,7 @@ impl<'a> RunFolder<'a> {
         if let Some(r) = self.manifest.stages.get_mut(stage.name()) {
             r.status = status.into();
         }
-        invalidate_after(&mut self.manifest, stage);
+        invalidate_after(&mut self.manifest, self.out, stage);
         save(&self.manifest_path, &self.manifest)
     }
 }
@@ -510,7 +543,7 @@ fn run_single(
                 "simulate: a part file is missing or damaged ({bad}): it is simulated again"
             ));
             run.manifest.stages.remove(Stage::Simulate.name());
-            invalidate_after(&mut run.manifest, Stage::Simulate);
+            invalidate_after(&mut run.manifest, out, Stage::Simulate);
         }
     }
     if run.wanted(Stage::Simulate) && !run.done(Stage::Simulate, &fp_sim) {
@@ -527,12 +560,21 @@ fn run_single(
         log("simulate: up to date");
     }
     if !run.done(Stage::Simulate, &fp_sim) {
+        if !run.wanted(Stage::Simulate) {
+            return Err(run.missing(Stage::Simulate));
+        }
         summary.complete = false;
         summary.seconds = start.elapsed().as_secs_f64();
         return Ok(summary);
     }
 
     let fp_products = fingerprint(&[fp_sim.as_bytes(), b"products"]);
+    if run.wanted(Stage::Report)
+        && !run.wanted(Stage::Products)
+        && !run.done(Stage::Products, &fp_products)
+    {
+        return Err(run.missing(Stage::Products));
+    }
     if run.wanted(Stage::Products) && !run.done(Stage::Products, &fp_products) {
         products_stage(&mut run, loaded, scene, &plan, parts, &fp_products)?;
     }
@@ -546,7 +588,14 @@ fn run_single(
     if run.manifest == before {
         log("nothing to do: every stage is up to date");
     }
-    summary.complete = opts.stages.is_some() || run.done(Stage::Report, &fp_report);
+    // with --stages, complete when the stages asked for are
+    summary.complete = match &opts.stages {
+        Some(_) => {
+            (!run.wanted(Stage::Products) || run.done(Stage::Products, &fp_products))
+                && (!run.wanted(Stage::Report) || run.done(Stage::Report, &fp_report))
+        }
+        None => run.done(Stage::Report, &fp_report),
+    };
     summary.seconds = start.elapsed().as_secs_f64();
     Ok(summary)
 }
@@ -628,15 +677,7 @@ fn plan_stage(run: &mut RunFolder, loaded: &Loaded, fp: &str) -> Result<Plan> {
             clock.wall_s()
         ));
     } else if !run.done(Stage::Plan, fp) {
-        let why = if run.manifest.stages.contains_key(Stage::Plan.name()) {
-            "is out of date (the campaign, its scene or lidarsim changed since it ran)"
-        } else {
-            "has not run"
-        };
-        return Err(Error::msg(format!(
-            "{}: stage plan {why}: include it in --stages",
-            run.out.display()
-        )));
+        return Err(run.missing(Stage::Plan));
     } else {
         log("plan: up to date");
     }

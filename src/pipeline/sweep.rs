@@ -45,12 +45,23 @@ pub(super) fn run_sweep(
         total.seconds += s.seconds;
         total.parts_done += s.parts_done;
         total.complete &= s.complete;
-        if s.complete {
-            rows.push((
-                combo.iter().map(|v| (*v).clone()).collect(),
-                RunTotals::read(&out.join(&name))?,
-            ));
-        }
+        // a run whose simulation is not whole (a plan alone, a shard's share) is a row of its
+        // planned pulses and empty cells, as `compare` gives it, not of zeros
+        let simulated = super::Manifest::read(&out.join(&name).join("manifest.json"))
+            .and_then(|m| m.stages.get(super::Stage::Simulate.name()).cloned())
+            .is_some_and(|r| r.status == "done");
+        let totals = if simulated {
+            RunTotals::read(&out.join(&name))?
+        } else {
+            RunTotals {
+                pulses: s.pulses,
+                received_energy_j: f64::NAN,
+                solar_photons_per_bin: f64::NAN,
+                brf_fov_solar: f64::NAN,
+                brf_footprint_laser: f64::NAN,
+            }
+        };
+        rows.push((combo.iter().map(|v| (*v).clone()).collect(), totals));
         runs.push(name);
     }
     write_sweep_summary(out, &keys, &rows)?;
@@ -440,21 +451,19 @@ pub(super) fn write_sweep_summary(
         "brf_footprint_laser",
     ]);
     // a value with no meaning for the run is an empty cell, not "NaN"
-    let cell = |v: f64| {
-        if v.is_finite() {
-            format!("{v:.6}")
-        } else {
-            String::new()
-        }
+    let cell = |v: f64, e: bool| match (v.is_finite(), e) {
+        (false, _) => String::new(),
+        (true, true) => format!("{v:.6e}"),
+        (true, false) => format!("{v:.6}"),
     };
     let table = rows.iter().map(|(vals, t)| {
         let mut row: Vec<String> = vals.iter().map(inline).collect();
         row.extend([
             t.pulses.to_string(),
-            format!("{:.6e}", t.received_energy_j),
-            format!("{:.6e}", t.solar_photons_per_bin),
-            cell(t.brf_fov_solar),
-            cell(t.brf_footprint_laser),
+            cell(t.received_energy_j, true),
+            cell(t.solar_photons_per_bin, true),
+            cell(t.brf_fov_solar, false),
+            cell(t.brf_footprint_laser, false),
         ]);
         row
     });

@@ -850,6 +850,18 @@ fn compare_writes_csv_and_plots() {
         "{stdout}"
     );
     assert!(md_header[5].contains("points") && md_header[19].contains("strip max mean"));
+    // a run's own file is no place for the table: refused, the run left whole
+    let manifest = runs[0].join("manifest.json");
+    let before = std::fs::read(&manifest).unwrap();
+    let (code, _, err) = lidarsim(&[
+        "compare",
+        runs[0].to_str().unwrap(),
+        "--csv",
+        manifest.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 1, "{err}");
+    assert!(err.contains("--csv") && err.contains("elsewhere"), "{err}");
+    assert_eq!(std::fs::read(&manifest).unwrap(), before);
 
     let text = std::fs::read_to_string(&csv_path).unwrap();
     let lines: Vec<&str> = text.lines().collect();

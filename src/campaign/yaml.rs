@@ -159,8 +159,9 @@ pub(crate) fn plain_words(message: &str) -> String {
         s.to_string()
     } else if let Some((kind, v)) = found.split_once(" `") {
         match kind {
+            // "integer `18446744073709551616` as u128": the value alone
             "integer" | "floating point" | "boolean" | "character" => {
-                v.trim_end_matches('`').to_string()
+                v.split('`').next().unwrap_or(v).to_string()
             }
             _ => found.to_string(),
         }
@@ -440,6 +441,12 @@ mod tests {
                 "x: 1\nn: 1\nb: 7\nl: []\n",
                 "b",
                 "expected true or false, found 7",
+            ),
+            // past u64: serde names the integer "as u128", which is no part of the value
+            (
+                "x: 1\nn: 18446744073709551616\nb: true\nl: []\n",
+                "n",
+                "expected a whole number from 0 to 4294967295, found 18446744073709551616",
             ),
             (
                 "x: 1\nn: 1\nb: true\nl: { a: 1 }\n",

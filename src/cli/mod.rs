@@ -267,14 +267,63 @@ fn run(args: RunArgs) -> Result<()> {
 
 fn compare(args: CompareArgs) -> Result<()> {
     use crate::compare;
+    // a file a run compared wrote (its manifest) is no place for the table
+    const RUN_FILES: [&str; 10] = [
+        "manifest.json",
+        "sweep.json",
+        "sweep.csv",
+        "report.md",
+        "products.json",
+        "campaign.resolved.yaml",
+        "pulses.parquet",
+        "points.las",
+        "points.laz",
+        "photons.parquet",
+    ];
+    let inside_runs = |flag: &str, out: &std::path::Path| -> Result<()> {
+        let name = out.file_name().and_then(|n| n.to_str()).unwrap_or_default();
+        let listed = RUN_FILES.contains(&name)
+            || out
+                .components()
+                .any(|c| c.as_os_str() == "waveforms" || c.as_os_str() == "dsm");
+        if !out.exists() || !listed {
+            return Ok(());
+        }
+        let parent = out.parent().filter(|p| !p.as_os_str().is_empty());
+        let dir = std::fs::canonicalize(parent.unwrap_or(std::path::Path::new(".")));
+        let Ok(dir) = dir else { return Ok(()) };
+        let whole = dir.join(out.file_name().unwrap_or_default());
+        for run in &args.runs {
+            if let Ok(run) = std::fs::canonicalize(run) {
+                if whole.starts_with(&run) {
+                    return Err(Error::msg(format!(
+                        "{flag} {}: is a file of the run folder {} compared: write the table elsewhere",
+                        out.display(),
+                        run.display()
+                    )));
+                }
+            }
+        }
+        Ok(())
+    };
+    if let Some(path) = &args.csv {
+        inside_runs("--csv", path)?;
+    }
     let rows = compare::rows(&args.runs)?;
     print!("{}", compare::markdown(&rows));
     if let Some(path) = args.csv {
         compare::write_csv(&path, &rows)?;
     }
     if let Some(dir) = args.plots {
-        for p in compare::plots(&rows, &dir)? {
+        let written = compare::plots(&rows, &dir)?;
+        for p in &written {
             eprintln!("wrote {}", p.display());
+        }
+        if written.is_empty() {
+            eprintln!(
+                "no plot written to {}: a plot needs two runs or more with a DSM error and their altitudes or pulse rates",
+                dir.display()
+            );
         }
     }
     Ok(())

@@ -8,6 +8,14 @@ use std::fmt;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
+/// What to do when the system refuses a write (nothing half-written is left under a final
+/// name).
+pub const WRITE_ADVICE: &str = "check the free space and the permissions of its folder";
+
+/// [`WRITE_ADVICE`] for a run's own files: a run stopped by it continues where it stopped.
+pub const RUN_WRITE_ADVICE: &str =
+    "check the free space and the permissions of that folder (a run resumes with --resume)";
+
 /// Whose move an error is.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Kind {
@@ -127,6 +135,15 @@ impl Error {
     /// The same error with what to do about it.
     pub fn advise(mut self, advice: impl Into<String>) -> Self {
         self.0.advice = Some(advice.into());
+        self
+    }
+
+    /// The same error met within a run: a write's advice says the run resumes where it
+    /// stopped (see [`RUN_WRITE_ADVICE`]).
+    pub fn in_run(mut self) -> Self {
+        if self.0.advice.as_deref() == Some(WRITE_ADVICE) {
+            self.0.advice = Some(crate::fsutil::RUN_WRITE_ADVICE.into());
+        }
         self
     }
 

@@ -5,10 +5,7 @@ use std::fs::File;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
-/// What to do when the system refuses a write: nothing half-written is left under a final
-/// name, so a run can be resumed once the cause is gone.
-pub const WRITE_ADVICE: &str =
-    "check the free space and the permissions of that folder (a run resumes with --resume)";
+pub use crate::error::{RUN_WRITE_ADVICE, WRITE_ADVICE};
 
 /// The temporary name a file is written under before it is renamed into place.
 pub fn temp_name(path: &Path) -> PathBuf {
@@ -69,7 +66,7 @@ impl Pending {
     pub fn create(path: &Path) -> Result<(Pending, File)> {
         let pending = Pending::new(path, "")?;
         let file = File::create(&pending.tmp)
-            .map_err(|e| Error::io(&pending.tmp, "cannot create file", e).advise(WRITE_ADVICE))?;
+            .map_err(|e| Error::io(path, "cannot create file", e).advise(WRITE_ADVICE))?;
         Ok((pending, file))
     }
 

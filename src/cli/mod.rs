@@ -70,7 +70,7 @@ pub struct CompareArgs {
     /// Also write the table as CSV.
     #[arg(long)]
     csv: Option<PathBuf>,
-    /// Write plots of DSM error against altitude and pulse rate into this folder.
+    /// Write plots of the DSM's RMSE against altitude and pulse rate into this folder.
     #[arg(long)]
     plots: Option<PathBuf>,
 }
@@ -352,7 +352,8 @@ fn generate(args: GenerateArgs) -> Result<()> {
         s.templates.len(),
         s.facets,
         s.distinct_facets,
-        s.lai,
+        // a scene without leaves: 0, not -0
+        s.lai + 0.0,
         s.bytes as f64 / 1e6
     );
     Ok(())

@@ -118,6 +118,7 @@ pub fn run_loaded(loaded: &Loaded, opts: &RunOptions) -> Result<RunSummary> {
         Some(sweep) => run_sweep(loaded, sweep, &out, opts),
         None => run_single(loaded, &out, opts, &mut SceneCache::default()),
     })
+    .map_err(Error::in_run)
 }
 
 /// Most threads a run may ask for: these still start, if slowly, while far more fail to
@@ -229,7 +230,7 @@ impl FolderLock {
         let mine = crate::fsutil::temp_name(&path);
         std::fs::write(&mine, lock_text()).map_err(|e| {
             Error::io(&mine, "cannot write the folder's lock", e)
-                .advise(crate::fsutil::WRITE_ADVICE)
+                .advise(crate::fsutil::RUN_WRITE_ADVICE)
         })?;
         let taken = (|| {
             for _ in 0..3 {
@@ -260,7 +261,7 @@ impl FolderLock {
                             .open(&path)
                             .map_err(|e| {
                                 Error::io(&path, "cannot take the folder's lock", e)
-                                    .advise(crate::fsutil::WRITE_ADVICE)
+                                    .advise(crate::fsutil::RUN_WRITE_ADVICE)
                             })?;
                         let _ = write!(f, "{}", lock_text());
                         return Ok(FolderLock { path: path.clone() });
@@ -318,7 +319,7 @@ impl<'a> RunFolder<'a> {
     /// Creates the folder, or takes it over with its manifest when resuming or sharding.
     fn open(loaded: &Loaded, out: &'a Path, opts: &'a RunOptions) -> Result<RunFolder<'a>> {
         std::fs::create_dir_all(out).map_err(|e| {
-            Error::io(out, "cannot create run folder", e).advise(crate::fsutil::WRITE_ADVICE)
+            Error::io(out, "cannot create run folder", e).advise(crate::fsutil::RUN_WRITE_ADVICE)
         })?;
         let lock = match opts.shard {
             None => Some(FolderLock::take(out)?),

@@ -142,7 +142,7 @@ impl Error {
     /// stopped (see [`RUN_WRITE_ADVICE`]).
     pub fn in_run(mut self) -> Self {
         if self.0.advice.as_deref() == Some(WRITE_ADVICE) {
-            self.0.advice = Some(crate::fsutil::RUN_WRITE_ADVICE.into());
+            self.0.advice = Some(RUN_WRITE_ADVICE.into());
         }
         self
     }

@@ -1376,3 +1376,35 @@ fn a_trajectory_in_a_frame_is_moved_into_the_scene() {
         );
     }
 }
+
+/// LAS numbers a point's flight line or station in 16 bits: a campaign of more lines (from
+/// 1) or stations (from 0) than that holds is refused at its key, not written with ids that
+/// saturate and repeat.
+#[test]
+fn more_sources_than_las_numbers_are_refused() {
+    let refused = |platform: String, key: &str| {
+        let doc = Doc {
+            path: "campaign.yaml".into(),
+            text: text(&platform),
+        };
+        let c: Campaign = doc.parse().unwrap();
+        let e = super::check_campaign(&doc, &c).unwrap_err().to_string();
+        assert!(e.contains(key) && e.contains("16 bits"), "{e}");
+    };
+    let stations = |n: usize| {
+        let list: Vec<String> = (0..n).map(|i| format!("[{i}, 0, 1.5]")).collect();
+        format!(
+            "platform: {{ kind: tls, positions: [{}], azimuth_deg: [0, 360], azimuth_step_deg: 90, zenith_deg: [100, 110], zenith_step_deg: 10 }}",
+            list.join(", ")
+        )
+    };
+    refused(stations(65_537), "platform.positions");
+    let lines = (0..65_536)
+        .map(|i| format!("{{ start: [0, {i}], end: [10, {i}] }}"))
+        .collect::<Vec<_>>()
+        .join(", ");
+    refused(
+        format!("platform: {{ kind: als, altitude_m: 100, speed_m_s: 10, prf_hz: 1000, lines: [{lines}], {OSC} }}"),
+        "platform.lines",
+    );
+}

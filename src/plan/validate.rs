@@ -8,6 +8,10 @@ use super::{als::Als, kind_phrase, ScanPattern, MAX_PULSES};
 use crate::campaign::{Check, Doc, Platform, PlatformKind, Segment};
 use crate::error::Result;
 
+/// Flight lines, scan intervals or stations past this would share LAS's last point source id
+/// (16 bits: lines and intervals from 1, stations from 0).
+const MAX_SOURCES: usize = 65535;
+
 /// Checks a campaign's `platform:` block: the keys its kind takes, the static pulses, the
 /// numbers and the size of the plan.
 pub fn platform(doc: &Doc, p: &Platform) -> Result<()> {
@@ -280,6 +284,15 @@ pub fn numbers(doc: &Doc, p: &Platform) -> Result<()> {
         PlatformKind::Tls => {
             match (&p.position, &p.positions) {
                 (Some(pos), None) => c.vec_finite("platform.position", pos)?,
+                (None, Some(list)) if list.len() > MAX_SOURCES + 1 => {
+                    return Err(doc.error(
+                        "platform.positions",
+                        format!(
+                            "{} positions: LAS numbers a point's station in 16 bits, 65536 at most (0 to 65535)",
+                            list.len()
+                        ),
+                    ))
+                }
                 (None, Some(list)) if !list.is_empty() => {
                     for (k, pos) in list.iter().enumerate() {
                         c.vec_finite(&format!("platform.positions[{k}]"), pos)?;
@@ -462,6 +475,15 @@ fn als(c: &Check, p: &Platform) -> Result<()> {
     if lines.is_empty() {
         return Err(doc.error("platform.lines", "the list of flight lines is empty"));
     }
+    if lines.len() > MAX_SOURCES {
+        return Err(doc.error(
+            "platform.lines",
+            format!(
+                "{} flight lines: LAS numbers a point's line in 16 bits, 65535 at most (1 to 65535)",
+                lines.len()
+            ),
+        ));
+    }
     for (i, l) in lines.iter().enumerate() {
         segment(c, &format!("platform.lines[{i}]"), l)?;
     }
@@ -582,6 +604,15 @@ fn trajectory(c: &Check, p: &Platform, t: &crate::campaign::Trajectory) -> Resul
     if let Some(intervals) = &t.scan {
         if intervals.is_empty() {
             return Err(doc.error(key, "the list of scan intervals is empty (leave `scan` out to scan the whole trajectory)"));
+        }
+        if intervals.len() > MAX_SOURCES {
+            return Err(doc.error(
+                key,
+                format!(
+                    "{} scan intervals: LAS numbers a point's interval in 16 bits, 65535 at most (1 to 65535)",
+                    intervals.len()
+                ),
+            ));
         }
         let mut previous = f64::NEG_INFINITY;
         for (k, &[t0, t1]) in intervals.iter().enumerate() {

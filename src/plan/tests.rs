@@ -1377,9 +1377,9 @@ fn a_trajectory_in_a_frame_is_moved_into_the_scene() {
     }
 }
 
-/// LAS numbers a point's flight line or station in 16 bits: a campaign of more lines (from
-/// 1) or stations (from 0) than that holds is refused at its key, not written with ids that
-/// saturate and repeat.
+/// LAS numbers a point's flight line or station in 16 bits: a campaign of more lines
+/// (counted from 1) or stations (from 0) than that holds is refused at its key, not written
+/// with ids that saturate and repeat.
 #[test]
 fn more_sources_than_las_numbers_are_refused() {
     let refused = |platform: String, key: &str| {

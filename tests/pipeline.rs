@@ -266,6 +266,9 @@ fn bad_shard_and_stage_arguments() {
             vec!["--stages", "plan,simulat"],
             "possible values: plan, simulate, products, report",
         ),
+        // a negative number is a value of its flag, refused as one, not a flag of its own
+        (vec!["--threads", "-1"], "'--threads <THREADS>'"),
+        (vec!["--shard", "-1/2"], "--shard -1/2"),
     ] {
         let mut a = vec!["run", camp];
         a.extend(args);

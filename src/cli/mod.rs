@@ -49,7 +49,7 @@ pub struct RunArgs {
     #[arg(long)]
     out: Option<PathBuf>,
     /// Worker threads (default: all cores). The output does not depend on it.
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     threads: Option<usize>,
     /// Keep completed stages and simulation parts whose inputs are unchanged.
     #[arg(long)]
@@ -58,7 +58,7 @@ pub struct RunArgs {
     #[arg(long, value_delimiter = ',', value_enum)]
     stages: Option<Vec<pipeline::Stage>>,
     /// Simulate only the parts whose index is K modulo N (for N machines sharing a run).
-    #[arg(long, value_name = "K/N")]
+    #[arg(long, value_name = "K/N", allow_hyphen_values = true)]
     shard: Option<String>,
 }
 
@@ -87,10 +87,10 @@ pub struct BenchArgs {
     #[arg(long)]
     full: bool,
     /// Rays of the reference waveform [quick 10^6, full 10^7].
-    #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
+    #[arg(long, allow_negative_numbers = true, value_parser = clap::value_parser!(u64).range(1..))]
     reference_rays: Option<u64>,
     /// Seeds per ray count (median rRMSE) [quick 3, full 5].
-    #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
+    #[arg(long, allow_negative_numbers = true, value_parser = clap::value_parser!(u64).range(1..))]
     seeds: Option<u64>,
     /// Scene file of the RAMI orchard (skipped when its data is absent).
     #[arg(long, default_value = "scenes/rami_wco.yaml")]
@@ -102,14 +102,14 @@ pub struct BenchArgs {
     #[arg(long, default_value = "pipelines/bench")]
     campaigns: PathBuf,
     /// Worker threads (default: all cores).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     threads: Option<usize>,
     /// Field-of-view half angle, mrad, 0 < x < 1500.
-    #[arg(long, default_value_t = 0.3)]
+    #[arg(long, allow_negative_numbers = true, default_value_t = 0.3)]
     fov_mrad: f64,
     /// Crowns in the generated canopy (100 m × 100 m), at most 10^7 as `scene generate`
     /// allows (far more would exhaust memory).
-    #[arg(long, default_value_t = 700, value_parser = clap::value_parser!(u64).range(1..=10_000_000))]
+    #[arg(long, allow_negative_numbers = true, default_value_t = 700, value_parser = clap::value_parser!(u64).range(1..=10_000_000))]
     trees: u64,
 }
 
@@ -125,25 +125,25 @@ pub struct GenerateArgs {
     #[arg(value_enum, ignore_case = true)]
     kind: SceneKind,
     /// Seed of every random draw: the same seed, the same files.
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, allow_negative_numbers = true, default_value_t = 1)]
     seed: u64,
     /// Output folder (the scene file is OUT/scene.yaml or similar, printed at the end).
     #[arg(long)]
     out: PathBuf,
     /// Trees (forest, orchard, town).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     trees: Option<usize>,
     /// Leaf area index to aim for (forest, orchard, town).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     lai: Option<f64>,
     /// Scene size in metres, `X` or `X,Y`.
-    #[arg(long, value_delimiter = ',')]
+    #[arg(long, allow_negative_numbers = true, value_delimiter = ',')]
     size: Option<Vec<f64>>,
     /// Distinct tree templates.
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     templates: Option<usize>,
     /// Leaves per template.
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     leaves: Option<usize>,
 }
 

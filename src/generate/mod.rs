@@ -133,8 +133,18 @@ impl GenerateOptions {
     /// Fills defaults and checks ranges, with messages naming the option.
     fn resolve(&self, kind: SceneKind) -> Result<stand::StandOptions> {
         let d = GenerateOptions::defaults(kind);
-        let bad =
-            |what: &str, why: String| Err(Error::msg(format!("generate {kind}: {what}: {why}")));
+        // named by the command line's flag where it has one
+        let bad = |what: &str, why: String| {
+            let flag = match what {
+                "size_m" => "--size",
+                "trees" => "--trees",
+                "templates" => "--templates",
+                "leaves" => "--leaves",
+                "lai" => "--lai",
+                other => other,
+            };
+            Err(Error::msg(format!("generate {kind}: {flag}: {why}")))
+        };
         let fields: [(&str, bool, bool); 6] = [
             ("trees", self.trees.is_some(), d.trees.is_some()),
             ("templates", self.templates.is_some(), d.templates.is_some()),

@@ -280,6 +280,28 @@ fn bad_yaml_syntax() {
     assert_one_message(code, &err, &["campaign.yaml:"]);
 }
 
+/// Brackets nested 100,000 deep (in the campaign and in its scene) are refused at the bracket
+/// past the limit, under the key of their line, before the YAML parser's slow descent.
+#[test]
+fn deeply_nested_brackets() {
+    let deep = "[".repeat(100_000);
+    let c = CAMPAIGN.replace("kind: static", &format!("kind: {deep}"));
+    let (code, err, _) = check("deep", &c, SCENE);
+    assert_one_message(
+        code,
+        &err,
+        &["campaign.yaml:11:1009", "kind", "nested more than 1000"],
+    );
+    let s = SCENE.replace("z: 0,", &format!("z: 0, tag: {deep}"));
+    let (code, err, _) = check("deep_scene", CAMPAIGN, &s);
+    assert_one_message(code, &err, &["scene.yaml:5:", "nested more than 1000"]);
+    // quoted and commented brackets are not nesting
+    let c = format!("{CAMPAIGN}# {deep}\n");
+    let s = SCENE.replace("name: s", &format!("name: \"{deep}\" # {deep}"));
+    let (code, err, _) = check("deep_quoted", &c, &s);
+    assert_eq!(code, 0, "{err}");
+}
+
 #[test]
 fn sun_selection_probability_without_fixed_selection() {
     let c = CAMPAIGN.replace("  receiver_area_m2: 0.1\n", "  receiver_area_m2: 0.1\n  bandwidth_nm: 1\n")

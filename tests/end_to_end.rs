@@ -1076,6 +1076,11 @@ fn staged_run_equals_one_shot_run() {
     let m = manifest(&staged);
     for stage in ["plan", "simulate", "products", "report"] {
         assert_eq!(m["stages"][stage]["status"], "done", "{stage}: {m}");
+        assert_eq!(
+            m["stages"][stage]["tool_version"],
+            env!("CARGO_PKG_VERSION"),
+            "{stage}: {m}"
+        );
     }
 
     let oneshot = dir.join("oneshot");

@@ -68,6 +68,7 @@ impl Doc {
 
 /// Parses `text` (read from `path`) into `T`, with a located message on failure.
 pub fn parse<T: DeserializeOwned>(path: &Path, text: &str) -> Result<T> {
+    too_deep(path, text)?;
     // A mapping's repeated key (two `bark:` under `materials:`) would keep the last value
     // without a word where the type is a map; serde_yaml's own Value refuses it.
     if let Err(e) = serde_yaml::from_str::<serde_yaml::Value>(text) {
@@ -119,6 +120,51 @@ pub fn parse<T: DeserializeOwned>(path: &Path, text: &str) -> Result<T> {
             Err(Error::at(path, location, &key, message))
         }
     }
+}
+
+/// Deeper flow nesting than any campaign or scene has: serde_yaml refuses past 128 levels
+/// anyway, but its scanner takes time quadratic in the depth to get there (100,000 brackets
+/// were 20 s of one core).
+const MAX_FLOW_DEPTH: usize = 1000;
+
+/// Refuses brackets (`[`, `{`) nested deeper than [`MAX_FLOW_DEPTH`] before the YAML parser
+/// sees them, at the bracket past the limit and under the key of its line. Quoted text and
+/// comments are skipped roughly (a bracket counted in a plain scalar only makes the count
+/// higher, and nothing near the limit is a campaign).
+fn too_deep(path: &Path, text: &str) -> Result<()> {
+    let (mut depth, mut quote) = (0usize, None);
+    for (line_k, line) in text.split('\n').enumerate() {
+        let (mut comment, mut prev) = (false, ' ');
+        for (col, c) in line.chars().enumerate() {
+            match (quote, c) {
+                (Some(q), _) if c == q => quote = None,
+                (Some(_), _) => {}
+                _ if comment => {}
+                (None, '#') if prev.is_whitespace() => comment = true,
+                (None, '"' | '\'') => quote = Some(c),
+                (None, '[' | '{') => {
+                    depth += 1;
+                    if depth > MAX_FLOW_DEPTH {
+                        let key = line
+                            .split_once(':')
+                            .map_or("", |(k, _)| k.trim().trim_start_matches("- "));
+                        return Err(Error::at(
+                            path,
+                            Some((line_k + 1, col + 1)),
+                            key,
+                            format!(
+                                "brackets nested more than {MAX_FLOW_DEPTH} deep: no campaign or scene needs more than a few"
+                            ),
+                        ));
+                    }
+                }
+                (None, ']' | '}') => depth = depth.saturating_sub(1),
+                _ => {}
+            }
+            prev = c;
+        }
+    }
+    Ok(())
 }
 
 /// serde_yaml's display adds its own path prefix and an " at line L column C" suffix: the

@@ -15,6 +15,10 @@ pub struct StageRecord {
     pub fingerprint: String,
     pub outputs: Vec<String>,
     pub wall_time_s: f64,
+    /// The version of lidarsim that ran the stage: a resumed run's stages may be of several
+    /// (empty in manifests written before it was recorded).
+    #[serde(default)]
+    pub tool_version: String,
     /// Process CPU time over the stage, all threads, s: over `wall_time_s` and the threads,
     /// the share of the cores it kept busy (absent where the OS does not tell, and in
     /// manifests written before it was recorded).
@@ -77,6 +81,7 @@ pub(super) fn record(
             fingerprint: fp.into(),
             outputs,
             wall_time_s: (clock.wall_s() * 1000.0).round() / 1000.0,
+            tool_version: env!("CARGO_PKG_VERSION").into(),
             cpu_time_s: clock.cpu_s().map(|c| (c * 1000.0).round() / 1000.0),
             peak_memory_mib: crate::progress::peak_rss_bytes()
                 .map(|b| (b as f64 / (1024.0 * 102.4)).round() / 10.0),

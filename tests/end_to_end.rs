@@ -1214,6 +1214,13 @@ fn a_busy_folder_is_refused_and_a_stale_lock_taken_over() {
     std::fs::write(&lock, format!("{} {started}", other.id())).unwrap();
     let (code, _, err) = lidarsim(&["run", c, "--out", o, "--resume"]);
     assert_eq!(code, 1, "the sleep's own lock is held: {err}");
+    // a shard takes no lock (shards share the folder) but does not work beside a whole run
+    let (code, _, err) = lidarsim(&["run", c, "--out", o, "--shard", "1/2"]);
+    assert_eq!(code, 1, "{err}");
+    assert!(
+        err.contains(&format!("(PID {}) is working in this folder", other.id())),
+        "{err}"
+    );
     std::fs::write(
         &lock,
         format!("{} {}", other.id(), started.saturating_sub(1)),

@@ -222,7 +222,26 @@ struct FolderLock {
     path: PathBuf,
 }
 
+/// What a run says when another holds the folder.
+fn busy(out: &Path, pid: u32) -> Error {
+    Error::file(
+        out,
+        format!("another lidarsim run (PID {pid}) is working in this folder"),
+    )
+    .advise("wait for it to end or stop it, then run again with --resume")
+}
+
 impl FolderLock {
+    /// For a shard, which shares the folder with other shards and so takes no lock: refuses
+    /// when a whole run holds it (on this host: a lock of another host's run looks stale).
+    fn check_free(out: &Path) -> Result<()> {
+        let held = std::fs::read_to_string(out.join("run.lock")).ok();
+        match held.as_deref().and_then(lock_holder) {
+            Some(pid) => Err(busy(out, pid)),
+            None => Ok(()),
+        }
+    }
+
     fn take(out: &Path) -> Result<FolderLock> {
         let path = out.join("run.lock");
         // the lock appears with its content or not at all: written aside, then hard-linked
@@ -239,15 +258,7 @@ impl FolderLock {
                     Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {
                         let holder = std::fs::read_to_string(&path).ok();
                         if let Some(pid) = holder.as_deref().and_then(lock_holder) {
-                            return Err(Error::file(
-                                out,
-                                format!(
-                                    "another lidarsim run (PID {pid}) is working in this folder"
-                                ),
-                            )
-                            .advise(
-                                "wait for it to end or stop it, then run again with --resume",
-                            ));
+                            return Err(busy(out, pid));
                         }
                         // stale: left by a run that was killed
                         let _ = std::fs::remove_file(&path);
@@ -323,7 +334,10 @@ impl<'a> RunFolder<'a> {
         })?;
         let lock = match opts.shard {
             None => Some(FolderLock::take(out)?),
-            Some(_) => None,
+            Some(_) => {
+                FolderLock::check_free(out)?;
+                None
+            }
         };
         let manifest_path = out.join("manifest.json");
         // shards share the folder with each other, and `--stages` picks up where earlier

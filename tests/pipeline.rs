@@ -155,6 +155,42 @@ fn resume_redoes_what_changed_and_nothing_else() {
         std::fs::read(out.join("waveforms/part-00000.parquet")).unwrap(),
         part
     );
+
+    // the products alone change (points and a DSM, then the DSM's cells): the plan and the
+    // waveforms are kept, the products and the report redone
+    let part = std::fs::read(out.join("waveforms/part-00000.parquet")).unwrap();
+    let with_products = |resolution: f64| {
+        let text = std::fs::read_to_string(camp).unwrap();
+        let text = text.split("products:").next().unwrap().to_string();
+        let text =
+            format!("{text}products: {{ points: true, dsm: {{ resolution_m: {resolution} }} }}\n");
+        std::fs::write(camp, text).unwrap();
+    };
+    let mut last = m1;
+    for resolution in [2.0, 4.0] {
+        with_products(resolution);
+        let log = run_ok(&["run", camp, "--out", out_s, "--resume"]);
+        assert!(log.contains("plan: up to date"), "{log}");
+        assert!(log.contains("simulate: up to date"), "{log}");
+        assert!(log.contains("0 parts simulated"), "{log}");
+        let m = manifest(&out);
+        for stage in ["plan", "simulate"] {
+            assert_eq!(m["stages"][stage], last["stages"][stage], "{stage}");
+        }
+        for stage in ["products", "report"] {
+            assert_ne!(
+                m["stages"][stage]["fingerprint"], last["stages"][stage]["fingerprint"],
+                "{stage}"
+            );
+            assert_eq!(m["stages"][stage]["status"], "done");
+        }
+        assert!(out.join("points.las").is_file() && out.join("dsm/report.json").is_file());
+        last = m;
+    }
+    assert_eq!(
+        std::fs::read(out.join("waveforms/part-00000.parquet")).unwrap(),
+        part
+    );
 }
 
 #[test]

@@ -861,11 +861,19 @@ impl Loaded {
         })
     }
 
-    /// The campaign with every default filled in, as YAML.
     /// The campaign with every default filled in and its scene as the campaign file names it
-    /// (relative to that file): the same text from whatever folder the campaign is run.
-    pub fn campaign_yaml(&self) -> String {
-        serde_yaml::to_string(&self.campaign.with_defaults()).expect("a campaign always serialises")
+    /// (relative to that file): the same text from whatever folder the campaign is run. Less
+    /// its `products:`, which neither the plan nor the simulation reads: a campaign edited
+    /// there alone keeps its waveforms on `--resume`.
+    pub fn campaign_yaml_but_products(&self) -> String {
+        let mut c = self.campaign.with_defaults();
+        c.products = None;
+        serde_yaml::to_string(&c).expect("a campaign always serialises")
+    }
+
+    /// The products the run makes ([`Campaign::products`]), as YAML.
+    pub fn products_yaml(&self) -> String {
+        serde_yaml::to_string(&self.campaign.products()).expect("products always serialise")
     }
 
     pub fn resolved_yaml(&self) -> String {

@@ -482,7 +482,7 @@ fn run_single(
     // the campaign with its scene as the file names it, not as found from the working folder:
     // the same campaign run from elsewhere is the same run (the scene's bytes are in the
     // simulate stage's fingerprint)
-    let as_written = loaded.campaign_yaml();
+    let as_written = loaded.campaign_yaml_but_products();
     // a recorded trajectory's epochs are the plan's input as much as the campaign's keys
     let trajectory = match loaded.campaign.platform.trajectory.as_ref() {
         Some(t) => {
@@ -583,7 +583,11 @@ fn run_single(
         return Ok(summary);
     }
 
-    let fp_products = fingerprint(&[fp_sim.as_bytes(), b"products"]);
+    let fp_products = fingerprint(&[
+        fp_sim.as_bytes(),
+        b"products",
+        loaded.products_yaml().as_bytes(),
+    ]);
     if run.wanted(Stage::Report)
         && !run.wanted(Stage::Products)
         && !run.done(Stage::Products, &fp_products)

@@ -27,7 +27,7 @@ pub enum Kind {
     /// not its own: redo it (`run --resume` redoes what it cannot trust).
     Data,
     /// A signal (SIGINT, SIGTERM) stopped the work at a boundary, everything written kept:
-    /// the CLI exits with 128 + the signal's number.
+    /// a failed run for the exit code (1), its message naming the signal.
     Interrupted(i32),
 }
 

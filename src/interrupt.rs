@@ -37,11 +37,12 @@ pub fn install() {
                 Arc::new(AtomicBool::new(false)),
             );
             for sig in [SIGINT, SIGTERM] {
-                // the second signal ends the process (128 + signal, the shell's convention);
-                // registered first, so it sees the flag as the first signal left it
+                // the second signal ends the process at once, with the exit code of every
+                // failed run (1); registered first, so it sees the flag as the first signal
+                // left it
                 let _ = signal_hook::flag::register_conditional_shutdown(
                     sig,
-                    128 + sig,
+                    1,
                     Arc::clone(&flags.seen),
                 );
                 let _ = signal_hook::flag::register(sig, Arc::clone(&flags.seen));

@@ -363,7 +363,7 @@ fn a_signal_stops_a_run_cleanly_and_resume_finishes_it() {
     let reference = dir.join("reference");
     run_ok(&["run", camp, "--out", reference.to_str().unwrap()]);
     let mut checked = 0;
-    for (signal, code) in [("-TERM", 143), ("-INT", 130)] {
+    for signal in ["-TERM", "-INT"] {
         let out = dir.join(format!("stopped{signal}"));
         let child = Command::new(env!("CARGO_BIN_EXE_lidarsim"))
             .args(["run", camp, "--out", out.to_str().unwrap()])
@@ -388,7 +388,8 @@ fn a_signal_stops_a_run_cleanly_and_resume_finishes_it() {
             eprintln!("{signal}: the run ended before the signal; not checked");
             continue;
         }
-        assert_eq!(o.status.code(), Some(code), "{err}");
+        // a stopped run is a failed run: exit code 1, as every failure
+        assert_eq!(o.status.code(), Some(1), "{err}");
         assert!(
             err.contains("stopped by SIG") && err.contains("run again with --resume"),
             "{err}"

@@ -7,14 +7,14 @@ import sys
 from . import _lidarsim
 
 
-def _leave(signum: int, _frame: object) -> None:
-    # The command has said what it kept; end as the Rust binary does (128 + signal), without
-    # a traceback on top.
-    raise SystemExit(128 + signum)
+def _leave(_signum: int, _frame: object) -> None:
+    # The command has said what it kept; end as the Rust binary does (1, a run that did not
+    # finish), without a traceback on top.
+    raise SystemExit(1)
 
 
 def main() -> None:
-    # `run` stops at its next part on Ctrl-C and returns 130 itself; the interpreter, which
+    # `run` stops at its next part on Ctrl-C and returns 1 itself; the interpreter, which
     # sees the signal too, must then leave quietly rather than raise KeyboardInterrupt
     signal.signal(signal.SIGINT, _leave)
     sys.exit(_lidarsim.cli_main(["lidarsim", *sys.argv[1:]]))

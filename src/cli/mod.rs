@@ -215,10 +215,7 @@ where
         Ok(()) => 0,
         Err(e) => {
             eprintln!("error: {e}");
-            match e.kind {
-                crate::error::Kind::Interrupted(signal) => 128 + signal,
-                _ => 1,
-            }
+            1
         }
     }
 }

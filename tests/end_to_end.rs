@@ -850,6 +850,18 @@ fn compare_writes_csv_and_plots() {
         "{stdout}"
     );
     assert!(md_header[5].contains("points") && md_header[19].contains("strip max mean"));
+    // two runs whose folders share a name are told apart by their paths
+    let twin = dir.join("elsewhere").join("h100,a");
+    copy_tree(&runs[0], &twin);
+    let (code, stdout, err) =
+        lidarsim(&["compare", runs[0].to_str().unwrap(), twin.to_str().unwrap()]);
+    assert_eq!(code, 0, "{err}");
+    for path in [&runs[0], &twin] {
+        assert!(
+            stdout.contains(&format!("| {} | 100 |", path.display())),
+            "{stdout}"
+        );
+    }
     // a run's own file is no place for the table: refused, the run left whole
     let manifest = runs[0].join("manifest.json");
     let before = std::fs::read(&manifest).unwrap();
@@ -1086,6 +1098,18 @@ fn staged_run_equals_one_shot_run() {
     let oneshot = dir.join("oneshot");
     run_ok(&camp, &oneshot, &[]);
     assert_same_files(&staged, &oneshot);
+}
+
+fn copy_tree(from: &Path, to: &Path) {
+    std::fs::create_dir_all(to).unwrap();
+    for e in std::fs::read_dir(from).unwrap().flatten() {
+        let target = to.join(e.file_name());
+        if e.path().is_dir() {
+            copy_tree(&e.path(), &target);
+        } else {
+            std::fs::copy(e.path(), target).unwrap();
+        }
+    }
 }
 
 fn truncate_half(part: &Path) {

@@ -62,12 +62,22 @@ pub fn expand(dir: &Path) -> Result<Vec<PathBuf>> {
     ))
 }
 
-/// The rows of the runs and sweeps `runs` names, in order (see [`expand`]).
+/// The rows of the runs and sweeps `runs` names, in order (see [`expand`]). A run is named
+/// by its folder's name, or by its path as given where two runs' folders share a name
+/// (`a/run` and `b/run`).
 pub fn rows(runs: &[PathBuf]) -> Result<Vec<RunRow>> {
     let mut rows = Vec::new();
+    let mut dirs = Vec::new();
     for r in runs {
         for dir in expand(r)? {
             rows.push(read_row(&dir)?);
+            dirs.push(dir);
+        }
+    }
+    let names: Vec<String> = rows.iter().map(|r| r.run.clone()).collect();
+    for (row, dir) in rows.iter_mut().zip(&dirs) {
+        if names.iter().filter(|n| **n == row.run).count() > 1 {
+            row.run = dir.display().to_string();
         }
     }
     Ok(rows)

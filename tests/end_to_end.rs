@@ -1220,8 +1220,19 @@ fn a_busy_folder_is_refused_and_a_stale_lock_taken_over() {
         "{err}"
     );
     first.kill().unwrap();
-    first.wait().unwrap();
+    // killed but not yet waited for (a zombie): its lock is stale already
+    let t = std::time::Instant::now();
+    while !std::fs::read_to_string(format!("/proc/{}/stat", first.id()))
+        .is_ok_and(|s| s.contains(") Z"))
+        && t.elapsed().as_secs() < 30
+    {
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
     assert!(lock.exists(), "SIGKILL leaves the lock behind");
+    let (code, _, err) = lidarsim(&["run", c, "--out", o, "--resume", "--stages", "plan"]);
+    assert_eq!(code, 0, "a zombie's lock is taken over: {err}");
+    first.wait().unwrap();
+    std::fs::write(&lock, format!("{}", first.id())).unwrap();
     // a lock whose process id a later process took (here a `sleep`, started after the lock's
     // time) is stale, and taken over; the lock of the process that runs is not
     let mut other = std::process::Command::new("sleep")

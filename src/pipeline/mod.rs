@@ -309,13 +309,25 @@ fn lock_holder(text: &str) -> Option<u32> {
     let mut words = text.split_whitespace();
     let pid: u32 = words.next()?.parse().ok()?;
     let start: Option<u64> = words.next().and_then(|w| w.parse().ok());
-    let alive = Path::new(&format!("/proc/{pid}")).exists();
+    let alive = Path::new(&format!("/proc/{pid}")).exists() && !process_ended(pid);
     match start {
         // this very process (another of its threads: a host running two runs) holds it too
         Some(s) => (alive && process_start(pid).is_none_or(|now| now == s)).then_some(pid),
         // an id alone: this process's own id is a killed process's that it now reuses
         None => (alive && pid != std::process::id()).then_some(pid),
     }
+}
+
+/// Whether process `pid` has ended and only waits for its parent to collect it (a zombie,
+/// state Z, or X): a run killed a moment ago whose parent has not waited yet holds nothing.
+fn process_ended(pid: u32) -> bool {
+    std::fs::read_to_string(format!("/proc/{pid}/stat"))
+        .ok()
+        .and_then(|stat| {
+            let after_name = stat[stat.rfind(')')? + 1..].trim_start().chars().next()?;
+            Some(matches!(after_name, 'Z' | 'X'))
+        })
+        .unwrap_or(false)
 }
 
 /// When process `pid` started, in clock ticks since boot (Linux: field 22 of

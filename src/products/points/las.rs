@@ -497,44 +497,84 @@ pub fn read_las(path: &Path) -> Result<Vec<Point>> {
             }
         }
     };
-    let data = reader.read_all().map_err(err)?;
-    let mut out = Vec::with_capacity(data.len());
-    for p in data.points() {
-        let p = p.map_err(err)?;
-        let e = &p.extra_bytes;
-        if e.len() < offsets.0 + 4 || e.len() < offsets.1 + 8 {
-            return Err(Error::data(path, "point too short for its extra bytes"));
+    // a chunk at a time, not `read_all`: that reserves what the header claims, and a damaged
+    // count (10^9 points) aborted the process on a failed allocation
+    const CHUNK: u64 = 1 << 16;
+    let claimed = reader.header().number_of_points();
+    let mut data = las::PointDataBuilder::new()
+        .for_header(reader.header())
+        .build();
+    let mut out = Vec::new();
+    let short = |held: usize| {
+        move |e: las::Error| {
+            Error::data(
+                path,
+                format!(
+                    "cannot read LAS: the header gives {claimed} points, {held} read before: {e}"
+                ),
+            )
         }
-        let rho = f32::from_le_bytes(e[offsets.0..offsets.0 + 4].try_into().expect("4 bytes"));
-        let id = u64::from_le_bytes(e[offsets.1..offsets.1 + 8].try_into().expect("8 bytes"));
-        let wavelength_nm = match offsets.2 {
-            Some(at) => {
-                let b = e
-                    .get(at..at + 4)
-                    .ok_or_else(|| Error::data(path, "point too short for its wavelength_nm"))?;
-                Some(f32::from_le_bytes(b.try_into().expect("4 bytes")))
-            }
-            None => None,
-        };
-        out.push(Point {
-            x: p.x,
-            y: p.y,
-            z: p.z,
-            gps_time: p.gps_time.unwrap_or(0.0) + gps_offset_s,
-            intensity: p.intensity,
-            return_number: p.return_number,
-            number_of_returns: p.number_of_returns,
-            scan_angle_deg: p.scan_angle,
-            point_source_id: p.point_source_id,
-            classification: u8::from(p.classification),
-            apparent_reflectance: rho,
-            pulse_id: id,
-            wavelength_nm,
-            left_to_right: p.scan_direction == las::point::ScanDirection::LeftToRight,
-            edge_of_line: p.is_edge_of_flight_line,
-        });
+    };
+    while reader
+        .fill_points(CHUNK, &mut data)
+        .map_err(short(out.len()))?
+        > 0
+    {
+        for p in data.points() {
+            out.push(las_point(path, p.map_err(err)?, offsets, gps_offset_s)?);
+        }
+    }
+    if out.len() as u64 != claimed {
+        return Err(Error::data(
+            path,
+            format!(
+                "the header gives {claimed} points, the file holds {}",
+                out.len()
+            ),
+        ));
     }
     Ok(out)
+}
+
+/// One point of [`read_las`], its extra bytes at `offsets` (reflectance, pulse id, band).
+fn las_point(
+    path: &Path,
+    p: las::Point,
+    offsets: (usize, usize, Option<usize>),
+    gps_offset_s: f64,
+) -> Result<Point> {
+    let e = &p.extra_bytes;
+    if e.len() < offsets.0 + 4 || e.len() < offsets.1 + 8 {
+        return Err(Error::data(path, "point too short for its extra bytes"));
+    }
+    let rho = f32::from_le_bytes(e[offsets.0..offsets.0 + 4].try_into().expect("4 bytes"));
+    let id = u64::from_le_bytes(e[offsets.1..offsets.1 + 8].try_into().expect("8 bytes"));
+    let wavelength_nm = match offsets.2 {
+        Some(at) => {
+            let b = e
+                .get(at..at + 4)
+                .ok_or_else(|| Error::data(path, "point too short for its wavelength_nm"))?;
+            Some(f32::from_le_bytes(b.try_into().expect("4 bytes")))
+        }
+        None => None,
+    };
+    Ok(Point {
+        x: p.x,
+        y: p.y,
+        z: p.z,
+        gps_time: p.gps_time.unwrap_or(0.0) + gps_offset_s,
+        intensity: p.intensity,
+        return_number: p.return_number,
+        number_of_returns: p.number_of_returns,
+        scan_angle_deg: p.scan_angle,
+        point_source_id: p.point_source_id,
+        classification: u8::from(p.classification),
+        apparent_reflectance: rho,
+        pulse_id: id,
+        wavelength_nm,
+        left_to_right: p.scan_direction == las::point::ScanDirection::LeftToRight,
+        edge_of_line: p.is_edge_of_flight_line,
+    })
 }
 
 #[cfg(test)]
@@ -724,6 +764,24 @@ mod tests {
         assert!(!bad.exists());
         let (_missing_dir, missing) = tmp("missing.las");
         assert!(read_las(&missing).is_err());
+    }
+
+    /// A header whose point count is damaged (10^9 for 3 points) is a data error naming the
+    /// count: the reader reserves nothing the file does not hold.
+    #[test]
+    fn a_damaged_point_count_is_a_data_error() {
+        let (_dir, path) = tmp("count.las");
+        write_las(&path, &sample(3)).unwrap();
+        let whole = std::fs::read(&path).unwrap();
+        for claimed in [1_000_000_000u64, 4] {
+            let mut bytes = whole.clone();
+            // LAS 1.4's number of point records (u64 at 247)
+            bytes[247..255].copy_from_slice(&claimed.to_le_bytes());
+            std::fs::write(&path, &bytes).unwrap();
+            let e = read_las(&path).unwrap_err();
+            assert_eq!(e.kind, crate::error::Kind::Data, "{e}");
+            assert!(e.to_string().contains(&format!("{claimed} points")), "{e}");
+        }
     }
 
     #[test]

@@ -608,6 +608,36 @@ fn generated_forest_passes_check_and_runs() {
 /// 2·10⁸ Hz dark counts, no sun): photons.parquet has the contract's columns, laser photons
 /// on the ground at the shot's x and along-track distance, dark photons, no solar ones, and
 /// products.json counts the same.
+/// Photon events asked of pulses that return millions of photons each (an airborne discrete
+/// return instrument) end the products stage with one message at `products.photons`, not an
+/// exhausted memory; the waveforms are kept.
+#[test]
+fn photons_of_bright_returns_are_refused_at_their_key() {
+    let dir = tmp("e2e_photon_flood");
+    plane_scene(&dir, 0.3, 30.0);
+    let camp = write(
+        &dir,
+        "campaign.yaml",
+        "name: flood\nscene: plane.yaml\nseed: 5\nwavelength_nm: 1064\ninstrument: { kind: discrete_return, pulse_energy_j: 0.0001, pulse_fwhm_ns: 3, footprint_half_angle_mrad: 0.25, fov_half_angle_mrad: 0.4, receiver_area_m2: 0.01, bin_ns: 0.5 }\nplatform: { kind: track, altitude_m: 250, track: { start: [0, 0], end: [1, 0] }, along_track_step_m: 1 }\nsimulation: { method: forward, rays_per_pulse: 4, max_order: 1 }\nproducts: { points: true, photons: true }\n",
+    );
+    let out = dir.join("run");
+    let (code, _, err) = lidarsim(&[
+        "run",
+        camp.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 1, "{err}");
+    let last = err.trim().lines().last().unwrap_or_default();
+    assert!(
+        last.contains("campaign.yaml:8:")
+            && last.contains("products.photons: ")
+            && last.contains("photon events"),
+        "{err}"
+    );
+    assert!(!out.join("photons.parquet").exists() && out.join("waveforms").is_dir());
+}
+
 #[test]
 fn photon_counting_writes_labelled_photons() {
     let dir = tmp("e2e_photons");

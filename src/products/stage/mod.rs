@@ -133,7 +133,54 @@ fn make(loaded: &Loaded, plan: &Plan, out: &Path, rows: &[Waveform], want: Wante
             out.display()
         )));
     }
+    if want.photons {
+        photons_fit(loaded, rows)?;
+    }
     Ok(Made::new(loaded, plan, rows, want.points, want.photons))
+}
+
+/// Most photon events a part's pulses may be expected to record together: a part's events
+/// are held in memory while its files are written (about 100 bytes each, twice over).
+/// Photon-counting instruments record a few events a shot (ATLAS, MABEL); a million-photon
+/// return asked for as photons is a mistake worth a message, not an exhausted memory.
+pub const MAX_PHOTON_EVENTS_PER_PART: f64 = 5e6;
+
+/// Refuses a part whose pulses would record more than [`MAX_PHOTON_EVENTS_PER_PART`] photon
+/// events on average: the mean of each pulse's events (laser, solar and dark), no more than
+/// its gate holds dead times.
+fn photons_fit(loaded: &Loaded, rows: &[Waveform]) -> Result<()> {
+    let inst = &loaded.campaign.instrument;
+    let qe = inst.quantum_efficiency.unwrap_or(1.0);
+    let dark_hz = inst.dark_count_hz.unwrap_or(0.0);
+    let dead_s = inst.dead_time_ns.unwrap_or(0.0) * 1e-9;
+    let mut total = 0.0;
+    let mut most: f64 = 0.0;
+    for w in rows {
+        let bins = w.laser_photons.len() as f64;
+        let gate_s = bins * w.bin_ns as f64 * 1e-9;
+        let laser: f64 = w.laser_photons.iter().map(|&v| v.max(0.0) as f64).sum();
+        let mut mean =
+            qe * (laser + w.solar_photons_per_bin.max(0.0) as f64 * bins) + dark_hz * gate_s;
+        if dead_s > 0.0 {
+            mean = mean.min(gate_s / dead_s + 1.0);
+        }
+        total += mean;
+        most = most.max(mean);
+    }
+    if total <= MAX_PHOTON_EVENTS_PER_PART {
+        return Ok(());
+    }
+    Err(loaded.doc.error(
+        "products.photons",
+        format!(
+            "the pulses would record about {:.1e} photon events a pulse (up to {:.1e}), {:.1e} in a part of {} pulses, more than the {:.0e} a part may hold: photon events are for photon-counting instruments, which record a few a shot; lower instrument.pulse_energy_j or receiver_area_m2, set dead_time_ns, or leave photons out",
+            total / rows.len().max(1) as f64,
+            most,
+            total,
+            rows.len(),
+            MAX_PHOTON_EVENTS_PER_PART
+        ),
+    ))
 }
 
 /// Runs the products stage; returns the files written (relative to `out`) and a note.

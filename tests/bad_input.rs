@@ -280,6 +280,17 @@ fn bad_yaml_syntax() {
     assert_one_message(code, &err, &["campaign.yaml:"]);
 }
 
+/// A repeated scene's period far smaller than its geometry (down to 1e-300 m, whose count of
+/// periods no integer holds) is refused at `period`.
+#[test]
+fn a_period_too_small_for_its_geometry() {
+    for side in ["1e-6", "1e-300"] {
+        let s = format!("{SCENE}repeat: true\nperiod: [[0, 0], [{side}, {side}]]\n");
+        let (code, err, _) = check("tiny_period", CAMPAIGN, &s);
+        assert_one_message(code, &err, &["scene.yaml:7:", "period", "1024 periods"]);
+    }
+}
+
 /// Brackets nested 100,000 deep (in the campaign and in its scene) are refused at the bracket
 /// past the limit, under the key of their line, before the YAML parser's slow descent.
 #[test]

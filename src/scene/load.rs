@@ -807,18 +807,18 @@ fn wrap_into_period(
     let mut added = Vec::new();
     for p in placed.iter() {
         // the whole periods k for which p moved by k overlaps [lo, hi) with area
-        let range = |plo: f64, phi: f64, lo: f64, hi: f64, w: f64| -> (i64, i64) {
+        // in f64 until the count is known to be small: a period of 1e-300 m makes counts no
+        // integer holds
+        let range = |plo: f64, phi: f64, lo: f64, hi: f64, w: f64| -> (f64, f64) {
             if w <= 0.0 {
-                return (0, 0);
+                return (0.0, 0.0);
             }
-            (
-                ((lo - phi) / w).floor() as i64 + 1,
-                ((hi - plo) / w).ceil() as i64 - 1,
-            )
+            (((lo - phi) / w).floor() + 1.0, ((hi - plo) / w).ceil() - 1.0)
         };
         let (x0, x1) = range(p.lo.x, p.hi.x, lo.x, hi.x, w.x);
         let (y0, y1) = range(p.lo.y, p.hi.y, lo.y, hi.y, w.y);
-        if (x1 - x0 + 1).max(0) * (y1 - y0 + 1).max(0) > MAX_WRAPS {
+        let copies = (x1 - x0 + 1.0).max(0.0) * (y1 - y0 + 1.0).max(0.0);
+        if copies.is_nan() || copies > MAX_WRAPS as f64 {
             return Err(doc.error(
                 "period",
                 format!(
@@ -830,6 +830,7 @@ fn wrap_into_period(
                 ),
             ));
         }
+        let (x0, x1, y0, y1) = (x0 as i64, x1 as i64, y0 as i64, y1 as i64);
         for kx in x0..=x1 {
             for ky in y0..=y1 {
                 if kx == 0 && ky == 0 {

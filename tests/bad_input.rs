@@ -259,6 +259,17 @@ fn out_of_range_numbers() {
             "rays_per_pulse: 0",
             "simulation.rays_per_pulse",
         ),
+        // past these, ranges and times were infinite, or a kernel asked for gigabytes
+        (
+            "position: [5, 5, 100]",
+            "position: [5, 5, 1e300]",
+            "platform.pulses[0].position: must be a coordinate in metres within 100,000 km, found 1e300",
+        ),
+        (
+            "receiver_area_m2: 0.1",
+            "receiver_area_m2: 0.1\n  detector_response_fwhm_ns: 1e300",
+            "instrument.detector_response_fwhm_ns",
+        ),
     ] {
         let c = if from == "edge_energy_fraction" {
             CAMPAIGN.replace(

@@ -906,6 +906,15 @@ pub(crate) struct Check<'a> {
     pub doc: &'a Doc,
 }
 
+/// A number as a message shows it: 1e300 as 1e300, not as its 301 digits.
+pub(crate) fn shown(v: f64) -> String {
+    if v != 0.0 && v.is_finite() && !(1e-4..1e7).contains(&v.abs()) {
+        format!("{v:e}")
+    } else {
+        format!("{v}")
+    }
+}
+
 impl Check<'_> {
     pub(crate) fn finite(&self, key: &str, v: f64) -> Result<()> {
         if v.is_finite() {
@@ -913,7 +922,7 @@ impl Check<'_> {
         } else {
             Err(self
                 .doc
-                .error(key, format!("must be a finite number, found {v}")))
+                .error(key, format!("must be a finite number, found {}", shown(v))))
         }
     }
     pub(crate) fn positive(&self, key: &str, v: f64) -> Result<()> {
@@ -921,7 +930,9 @@ impl Check<'_> {
         if v > 0.0 {
             Ok(())
         } else {
-            Err(self.doc.error(key, format!("must be positive, found {v}")))
+            Err(self
+                .doc
+                .error(key, format!("must be positive, found {}", shown(v))))
         }
     }
     pub(crate) fn non_negative(&self, key: &str, v: f64) -> Result<()> {
@@ -931,7 +942,7 @@ impl Check<'_> {
         } else {
             Err(self
                 .doc
-                .error(key, format!("must not be negative, found {v}")))
+                .error(key, format!("must not be negative, found {}", shown(v))))
         }
     }
     pub(crate) fn within(&self, key: &str, v: f64, lo: f64, hi: f64, what: &str) -> Result<()> {
@@ -939,7 +950,9 @@ impl Check<'_> {
         if v >= lo && v <= hi {
             Ok(())
         } else {
-            Err(self.doc.error(key, format!("must be {what}, found {v}")))
+            Err(self
+                .doc
+                .error(key, format!("must be {what}, found {}", shown(v))))
         }
     }
     pub(crate) fn opt_positive(&self, key: &str, v: Option<f64>) -> Result<()> {
@@ -956,14 +969,34 @@ impl Check<'_> {
         } else {
             Err(self.doc.error(
                 key,
-                format!("must lie strictly between {lo} and {hi} degrees, found {v}"),
+                format!(
+                    "must lie strictly between {lo} and {hi} degrees, found {}",
+                    shown(v)
+                ),
             ))
         }
     }
     pub(crate) fn vec_finite(&self, key: &str, v: &[f64]) -> Result<()> {
         v.iter().try_for_each(|x| self.finite(key, *x))
     }
+    /// Coordinates in metres within ±[`MAX_PLATFORM_COORDINATE_M`] (a position past it
+    /// made ranges and times of infinity).
+    pub(crate) fn coordinates(&self, key: &str, v: &[f64]) -> Result<()> {
+        v.iter().try_for_each(|x| {
+            self.within(
+                key,
+                *x,
+                -MAX_PLATFORM_COORDINATE_M,
+                MAX_PLATFORM_COORDINATE_M,
+                "a coordinate in metres within 100,000 km",
+            )
+        })
+    }
 }
+
+/// How far a platform's positions may lie from the scene's origin, m: 100,000 km, past the
+/// geostationary orbit, as `frame.origin`.
+pub const MAX_PLATFORM_COORDINATE_M: f64 = 1e8;
 
 impl Campaign {
     /// Checks every campaign key a value can make wrong, in the file's order. A flat list of
@@ -1093,10 +1126,17 @@ impl Campaign {
                 n.electronic_sd_photons,
             )?;
         }
-        c.opt_non_negative(
-            "instrument.detector_response_fwhm_ns",
-            i.detector_response_fwhm_ns,
-        )?;
+        if let Some(v) = i.detector_response_fwhm_ns {
+            // its kernel and the matched filter span it in bins: a response of 10^9 ns asked
+            // for 20 GB; a detector's is nanoseconds
+            c.within(
+                "instrument.detector_response_fwhm_ns",
+                v,
+                0.0,
+                1e4,
+                "nanoseconds from 0 to 10^4 (a detector responds within nanoseconds)",
+            )?;
+        }
         if let Some(o) = i.receiver_offset_m {
             for (k, v) in o.iter().enumerate() {
                 c.within(
@@ -1209,6 +1249,13 @@ impl Campaign {
         if let Some(p) = &self.products {
             if let Some(d) = &p.dsm {
                 c.positive("products.dsm.resolution_m", d.resolution_m)?;
+                c.within(
+                    "products.dsm.resolution_m",
+                    d.resolution_m,
+                    0.0,
+                    1e5,
+                    "a cell size in metres up to 100 km",
+                )?;
             }
         }
         if let Some(f) = &self.frame {

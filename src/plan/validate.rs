@@ -28,7 +28,7 @@ pub fn platform(doc: &Doc, p: &Platform) -> Result<()> {
             return Err(doc.error("platform.pulses", "the list of pulses is empty"));
         }
         for (k, pulse) in pulses.iter().enumerate() {
-            c.vec_finite(&format!("platform.pulses[{k}].position"), &pulse.position)?;
+            c.coordinates(&format!("platform.pulses[{k}].position"), &pulse.position)?;
             match (&pulse.direction, pulse.zenith_deg, pulse.azimuth_deg) {
                 (Some(d), None, None) => {
                     let key = format!("platform.pulses[{k}].direction");
@@ -233,6 +233,15 @@ pub fn numbers(doc: &Doc, p: &Platform) -> Result<()> {
         )?;
     }
     c.opt_positive("platform.altitude_m", p.altitude_m)?;
+    if let Some(h) = p.altitude_m {
+        c.within(
+            "platform.altitude_m",
+            h,
+            0.0,
+            crate::campaign::MAX_PLATFORM_COORDINATE_M,
+            "metres up to 10^8 (100,000 km)",
+        )?;
+    }
     c.opt_positive("platform.prf_hz", p.prf_hz)?;
     match p.kind {
         PlatformKind::Static => Ok(()),
@@ -250,9 +259,12 @@ pub fn numbers(doc: &Doc, p: &Platform) -> Result<()> {
                     ));
                 }
                 for (b, beam) in beams.iter().enumerate() {
-                    c.finite(
+                    c.within(
                         &format!("platform.beams[{b}].cross_track_m"),
                         beam.cross_track_m,
+                        -1e6,
+                        1e6,
+                        "metres within ±1000 km",
                     )?;
                     c.opt_positive(
                         &format!("platform.beams[{b}].relative_energy"),
@@ -283,7 +295,7 @@ pub fn numbers(doc: &Doc, p: &Platform) -> Result<()> {
         }
         PlatformKind::Tls => {
             match (&p.position, &p.positions) {
-                (Some(pos), None) => c.vec_finite("platform.position", pos)?,
+                (Some(pos), None) => c.coordinates("platform.position", pos)?,
                 (None, Some(list)) if list.len() > MAX_SOURCES + 1 => {
                     return Err(doc.error(
                         "platform.positions",
@@ -295,7 +307,7 @@ pub fn numbers(doc: &Doc, p: &Platform) -> Result<()> {
                 }
                 (None, Some(list)) if !list.is_empty() => {
                     for (k, pos) in list.iter().enumerate() {
-                        c.vec_finite(&format!("platform.positions[{k}]"), pos)?;
+                        c.coordinates(&format!("platform.positions[{k}]"), pos)?;
                     }
                 }
                 (None, Some(_)) => {
@@ -539,7 +551,15 @@ fn mount_and_errors(c: &Check, p: &Platform) -> Result<()> {
     };
     if let Some(m) = &p.mount {
         if let Some(o) = &m.offset_m {
-            c.vec_finite("platform.mount.offset_m", o)?;
+            for v in o {
+                c.within(
+                    "platform.mount.offset_m",
+                    *v,
+                    -1000.0,
+                    1000.0,
+                    "metres between -1000 and 1000",
+                )?;
+            }
         }
         if let Some(b) = m.boresight_deg {
             angles("platform.mount.boresight_deg", b)?;
@@ -551,7 +571,7 @@ fn mount_and_errors(c: &Check, p: &Platform) -> Result<()> {
             ("platform.errors.attitude_sd_deg", e.attitude_sd_deg),
         ] {
             for v in sd.unwrap_or_default() {
-                c.non_negative(key, v)?;
+                c.within(key, v, 0.0, 1e4, "from 0 to 10^4")?;
             }
         }
         for (key, tau) in [
@@ -680,8 +700,8 @@ pub fn size(doc: &Doc, p: &Platform) -> Result<()> {
 
 /// A segment's ends are finite and distinct.
 fn segment(c: &Check, key: &str, s: &Segment) -> Result<()> {
-    c.vec_finite(&format!("{key}.start"), &s.start)?;
-    c.vec_finite(&format!("{key}.end"), &s.end)?;
+    c.coordinates(&format!("{key}.start"), &s.start)?;
+    c.coordinates(&format!("{key}.end"), &s.end)?;
     if s.start == s.end {
         return Err(c.doc.error(
             &format!("{key}.end"),

@@ -772,6 +772,15 @@ fn period_of(
                 ),
             ));
         }
+        if a.iter().chain(&b).any(|v| v.abs() > MAX_COORDINATE_M) {
+            return Err(doc.error(
+                "period",
+                format!(
+                    "coordinates in metres within {} km (the scene's own), found {a:?}, {b:?}",
+                    MAX_COORDINATE_M / 1e3
+                ),
+            ));
+        }
         if !file.repeat {
             return Err(doc.error(
                 "period",
@@ -813,7 +822,10 @@ fn wrap_into_period(
             if w <= 0.0 {
                 return (0.0, 0.0);
             }
-            (((lo - phi) / w).floor() + 1.0, ((hi - plo) / w).ceil() - 1.0)
+            (
+                ((lo - phi) / w).floor() + 1.0,
+                ((hi - plo) / w).ceil() - 1.0,
+            )
         };
         let (x0, x1) = range(p.lo.x, p.hi.x, lo.x, hi.x, w.x);
         let (y0, y1) = range(p.lo.y, p.hi.y, lo.y, hi.y, w.y);

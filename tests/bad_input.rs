@@ -291,6 +291,21 @@ fn bad_yaml_syntax() {
     assert_one_message(code, &err, &["campaign.yaml:"]);
 }
 
+/// A campaign name that cannot name a run folder (YAML's null, a line break, a slash) is
+/// refused at `name`.
+#[test]
+fn names_that_cannot_name_a_folder() {
+    for name in ["~", "\"a\\nb\"", "a/b", "\"\\ttab\""] {
+        let c = CAMPAIGN.replace("name: bad", &format!("name: {name}"));
+        let (code, err, _) = check("bad_name", &c, SCENE);
+        assert_one_message(
+            code,
+            &err,
+            &["campaign.yaml:1:", "name: must be a non-empty name"],
+        );
+    }
+}
+
 /// A repeated scene's period far smaller than its geometry (down to 1e-300 m, whose count of
 /// periods no integer holds) is refused at `period`.
 #[test]
@@ -824,6 +839,21 @@ fn sweeps_that_cannot_run_are_refused() {
         // two values that would name one folder; a mapping's value on the message's one line
         (
             "name: ['a b', 'a-b']",
+            &["sweep.name", "would name one folder (a-b)"],
+        ),
+        // a band the scene's materials do not give, before any run
+        (
+            "wavelength_nm: [1064, 1550]",
+            &[
+                "campaign.yaml:",
+                "sweep.wavelength_nm",
+                "value 1550",
+                "no value for 1550 nm",
+            ][..],
+        ),
+        // a path's separator too (two trajectory files, dir/t.csv and dir-t.csv)
+        (
+            "name: ['a/b', 'a-b']",
             &["sweep.name", "would name one folder (a-b)"],
         ),
         (

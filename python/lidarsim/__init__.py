@@ -58,17 +58,18 @@ def _bad(key: str, message: str) -> InputError:
     return err
 
 
-def _whole(value: Any, key: str, least: int = 0) -> int:
+def _whole(value: Any, key: str, least: int = 0, most: int = 2**64 - 1) -> int:
     """A whole number (a Python or numpy integer, not a bool or a float) from ``least`` to
-    2^64 - 1, or an :class:`InputError` naming ``key``."""
+    ``most``, or an :class:`InputError` naming ``key``."""
+    top = "2^64 - 1" if most == 2**64 - 1 else str(most)
     try:
         if isinstance(value, bool):
             raise TypeError
         n = operator.index(value)
     except TypeError:
-        raise _bad(key, f"expected a whole number of at least {least}, found {value!r}") from None
-    if not least <= n < 2**64:
-        raise _bad(key, f"expected a whole number from {least} to 2^64 - 1, found {n}")
+        raise _bad(key, f"expected a whole number from {least} to {top}, found {value!r}") from None
+    if not least <= n <= most:
+        raise _bad(key, f"expected a whole number from {least} to {top}, found {n}")
     return n
 
 
@@ -82,6 +83,14 @@ def _path(value: Any, key: str) -> str:
     raise _bad(key, f"expected a path (a str or a pathlib.Path), found {value!r}")
 
 
+def _folder(value: Any, key: str) -> str:
+    """A folder path, not empty (an empty one would be the current folder, unasked)."""
+    p = _path(value, key)
+    if not p.strip():
+        raise _bad(key, "expected a folder path, found an empty one")
+    return p
+
+
 def _mapping(value: Any, key: str) -> Dict[str, Any]:
     """A mapping's items as a dict, or an :class:`InputError` naming ``key``."""
     if isinstance(value, Mapping):
@@ -92,7 +101,10 @@ def _mapping(value: Any, key: str) -> Dict[str, Any]:
 def _flag(value: Any, key: str) -> bool:
     """``True`` or ``False`` (a numpy bool too), or an :class:`InputError` naming ``key``:
     ``bool("no")`` is true."""
-    if isinstance(value, bool) or type(value).__name__ == "bool_":
+    # numpy's bool is `bool_` in numpy 1 and `bool` in numpy 2
+    if isinstance(value, bool) or (
+        type(value).__module__ == "numpy" and type(value).__name__ in ("bool_", "bool")
+    ):
         return bool(value)
     raise _bad(key, f"expected True or False, found {value!r}")
 
@@ -129,8 +141,32 @@ def _plain(value: Any) -> Any:
     raise TypeError(f"{type(value).__name__} is not a number, a string, a list or a mapping")
 
 
+def _too_large(value: Any, path: str) -> Optional[Tuple[str, int]]:
+    """The first whole number in ``value`` (mappings and lists walked) that no 64-bit integer
+    holds, with its dotted path below ``path``; None if there is none."""
+    if isinstance(value, int) and not isinstance(value, bool):
+        return None if -(2**63) <= value < 2**64 else (path, value)
+    if isinstance(value, Mapping):
+        for k, v in value.items():
+            found = _too_large(v, f"{path}.{k}" if path else str(k))
+            if found:
+                return found
+    elif isinstance(value, (list, tuple)):
+        for i, v in enumerate(value):
+            found = _too_large(v, f"{path}[{i}]")
+            if found:
+                return found
+    return None
+
+
 def _json(value: Any, key: str, indent: Optional[int] = None) -> str:
-    """``value`` as the JSON the core reads, or an :class:`InputError` naming ``key``."""
+    """``value`` as the JSON the core reads, or an :class:`InputError` naming ``key`` (or,
+    for a number too large, the key that holds it: ``instrument.max_returns``)."""
+    # a campaign's or an override's keys are campaign keys themselves; the other mappings
+    # are sections (instrument, sun) whose keys are named below them
+    found = _too_large(value, "" if key in ("campaign", "overrides") else key)
+    if found:
+        raise _bad(found[0] or key, f"expected a whole number from -2^63 to 2^64 - 1, found {found[1]}")
     try:
         return json.dumps(value, default=_plain, allow_nan=False, indent=indent)
     except ValueError:
@@ -201,7 +237,7 @@ def run(
             raise _bad("shard", f"expected (k, n), two whole numbers, found {shard!r}")
         shard = (_whole(shard[0], "shard"), _whole(shard[1], "shard"))
     kwargs: Dict[str, Any] = dict(
-        out=None if out is None else _path(out, "out"),
+        out=None if out is None else _folder(out, "out"),
         threads=None if threads is None else _whole(threads, "threads", least=1),
         resume=_flag(resume, "resume"),
         stages=None if stages is None else list(stages),
@@ -264,7 +300,10 @@ _PULSE_ARGUMENTS = {
 
 def _argument_error(e: InputError) -> InputError:
     """An error in the one-pulse campaign ``simulate_pulse`` makes, said of its arguments: the
-    key as the argument that gave it, without the place in a text the caller never saw."""
+    key as the argument that gave it, without the place in a text the caller never saw. An
+    error in a file of the caller's (the scene's materials) is theirs as it stands."""
+    if e.file is not None and e.file != "simulate_pulse":
+        return e
     key = e.key
     text = str(e)
     if key and f"{key}: " in text:
@@ -474,12 +513,18 @@ class Scene:
         bands = None
         if wavelength_nm is not None:
             several = not isinstance(wavelength_nm, (str, bytes)) and isinstance(wavelength_nm, Iterable)
+            values = list(wavelength_nm) if several else [wavelength_nm]
             try:
-                bands = [float(w) for w in wavelength_nm] if several else [float(wavelength_nm)]
+                if any(isinstance(w, (bool, str, bytes)) for w in values):
+                    raise TypeError
+                bands = [float(w) for w in values]
             except (TypeError, ValueError):
+                bands = []
+            if not bands or not all(math.isfinite(w) and w > 0 for w in bands):
                 raise _bad(
-                    "wavelength_nm", f"expected a number or a list of numbers, found {wavelength_nm!r}"
-                ) from None
+                    "wavelength_nm",
+                    f"expected a wavelength in nm above 0, or a list of them, found {wavelength_nm!r}",
+                )
         return cls(_lidarsim.Scene.load(_path(path, "path"), bands))
 
     @property
@@ -530,12 +575,22 @@ class Scene:
             InputError: a key or value is wrong (``err.key`` names it).
         """
         sim = {} if simulation is None else _mapping(simulation, "simulation")
+        given = [k for k in ("method", "rays_per_pulse", "max_order") if k in sim]
+        if given:
+            raise _bad(
+                "simulation",
+                f"{given[0]} is an argument of simulate_pulse of its own (method=, rays=, max_order=): give it there",
+            )
         sim.update(
             method=method,
-            rays_per_pulse=_whole(rays, "rays"),
-            max_order=_whole(max_order, "max_order"),
+            rays_per_pulse=_whole(rays, "rays", least=1, most=2**32 - 1),
+            max_order=_whole(max_order, "max_order", least=1),
         )
-        if isinstance(wavelength_nm, (str, bytes)):
+        if (
+            wavelength_nm is None
+            or isinstance(wavelength_nm, (str, bytes, bool))
+            or not isinstance(wavelength_nm, (numbers.Real, Iterable))
+        ):
             raise _bad("wavelength_nm", f"expected a number or a list of numbers, found {wavelength_nm!r}")
         several = not isinstance(wavelength_nm, numbers.Real)
         args = (

@@ -48,6 +48,54 @@ fn to_py(py: Python<'_>, e: &lidarsim::Error) -> PyErr {
     made.unwrap_or_else(|why| why)
 }
 
+/// An exception raised for an error in the text `label` names (a mapping's campaign, made
+/// JSON by the package) without its file, line and column: the caller has no such file.
+fn unplaced(py: Python<'_>, e: PyErr, label: Option<&std::path::Path>) -> PyErr {
+    let Some(label) = label else {
+        return e;
+    };
+    let v = e.value(py);
+    let named = v
+        .getattr("file")
+        .ok()
+        .and_then(|f| f.extract::<Option<String>>().ok())
+        .flatten()
+        .is_some_and(|f| std::path::Path::new(&f) == label);
+    if !named {
+        return e;
+    }
+    let text = v.str().map(|s| s.to_string()).unwrap_or_default();
+    let prefix = label.display().to_string();
+    // `label:line:col: key: message` less its place
+    let rest = text
+        .strip_prefix(&prefix)
+        .map(|r| {
+            r.trim_start_matches(|c: char| c.is_ascii_digit() || c == ':')
+                .trim_start()
+        })
+        .unwrap_or(&text)
+        .to_string();
+    let made = (|| -> PyResult<PyErr> {
+        let err = v.get_type().call1((rest,))?;
+        for (name, keep) in [
+            ("file", false),
+            ("line", false),
+            ("column", false),
+            ("key", true),
+            ("advice", true),
+        ] {
+            let value = if keep {
+                v.getattr(name)?
+            } else {
+                py.None().into_bound(py)
+            };
+            err.setattr(name, value)?;
+        }
+        Ok(PyErr::from_value(err))
+    })();
+    made.unwrap_or(e)
+}
+
 /// Runs `f`, turning its error into the package's exception and a panic into a
 /// `LidarsimError` (never a Rust panic across into Python).
 fn guarded<T>(py: Python<'_>, f: impl FnOnce() -> lidarsim::Result<T>) -> PyResult<T> {
@@ -84,9 +132,12 @@ fn settle<T>(py: Python<'_>, r: std::thread::Result<lidarsim::Result<T>>) -> PyR
     }
 }
 
-/// A YAML value from JSON text the package wrote.
+/// A YAML value from JSON text the package wrote (which checks its numbers first: what is
+/// left to fail here is an argument's, an InputError).
 fn value(json: &str) -> PyResult<serde_yaml::Value> {
-    serde_yaml::from_str(json).map_err(|e| PyRuntimeError::new_err(format!("bad JSON: {e}")))
+    serde_yaml::from_str(json).map_err(|e| {
+        Python::attach(|py| to_py(py, &lidarsim::Error::msg(format!("not a value: {e}"))))
+    })
 }
 
 /// A table handed over once through the Arrow C stream interface (the PyCapsule protocol:
@@ -170,11 +221,16 @@ fn run<'py>(
         },
         None => Vec::new(),
     };
+    // a mapping's campaign has no file: its errors name the key alone, not a place in the
+    // JSON text the package made of it
+    let text_label = text
+        .as_ref()
+        .map(|_| label.clone().unwrap_or_else(|| PathBuf::from("campaign")));
     let loaded = guarded(py, || {
         let doc = match (&path, text) {
             (Some(p), _) => {
                 if !p.is_file() {
-                    return Err(lidarsim::Error::file(p, "campaign file does not exist"));
+                    return Err(lidarsim::campaign::missing_campaign(p));
                 }
                 Doc::read(p)?
             }
@@ -185,7 +241,8 @@ fn run<'py>(
             (None, None) => return Err(lidarsim::Error::msg("no campaign given")),
         };
         lidarsim::plan::load_campaign(doc, &overrides)
-    })?;
+    })
+    .map_err(|e| unplaced(py, e, text_label.as_deref()))?;
     // an argument's error names the argument, as the package's own checks do
     let named = |key: &'static str| move |e: lidarsim::Error| e.for_key(key);
     let opts = guarded(py, || {
@@ -245,9 +302,10 @@ fn run<'py>(
     if let Some(e) = stopped {
         return Err(e);
     }
-    let s = settle(py, result)?;
+    let s = settle(py, result).map_err(|e| unplaced(py, e, text_label.as_deref()))?;
     let d = PyDict::new(py);
-    d.set_item("out", s.out.display().to_string())?;
+    // as a path, not as text: a folder whose name is not UTF-8 comes back as itself
+    d.set_item("out", &s.out)?;
     d.set_item("pulses", s.pulses)?;
     d.set_item("rays", s.rays)?;
     d.set_item("seconds", s.seconds)?;

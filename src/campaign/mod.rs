@@ -1004,10 +1004,18 @@ impl Campaign {
     pub fn validate(&self, doc: &Doc) -> Result<()> {
         let c = Check { doc };
         let name = self.name.trim();
-        if name.is_empty() || name == "." || name == ".." || self.name.contains(['/', '\\', '\0']) {
+        // `~` is YAML's null, which serde reads as that text
+        if name.is_empty()
+            || name == "."
+            || name == ".."
+            || name == "~"
+            || self.name.contains(['/', '\\'])
+            || self.name.chars().any(char::is_control)
+        {
             return Err(doc.error(
                 "name",
-                "must be a non-empty name without slashes, other than . and .. (it names the run folder)",
+                "must be a non-empty name without slashes or control characters (line breaks, \
+                 tabs), other than . and .. (it names the run folder)",
             ));
         }
         // a folder's name: file systems hold 255 bytes in one
@@ -1240,8 +1248,12 @@ impl Campaign {
             )?;
         }
         let s = &self.simulation;
-        if s.rays_per_pulse == 0 {
-            return Err(doc.error("simulation.rays_per_pulse", "must be at least 1"));
+        if s.rays_per_pulse == 0 || s.rays_per_pulse > u64::from(u32::MAX) {
+            // the waveforms' `rays` column is a u32
+            return Err(doc.error(
+                "simulation.rays_per_pulse",
+                format!("must be from 1 to {}, found {}", u32::MAX, s.rays_per_pulse),
+            ));
         }
         if s.max_order.cap() == 0 || s.max_order.cap() > 100_000 {
             return Err(doc.error("simulation.max_order", "must be between 1 and 100000"));

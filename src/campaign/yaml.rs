@@ -426,6 +426,24 @@ pub fn set_path(
     Err("empty key".into())
 }
 
+/// A value on one line, for messages and `sweep.csv`: a scalar as YAML writes it, a list or
+/// mapping in JSON's flow style (`{"start_ns":0,"bins":20}`).
+pub fn inline(v: &serde_yaml::Value) -> String {
+    use serde_yaml::Value;
+    let yaml = |v: &Value| {
+        serde_yaml::to_string(v)
+            .unwrap_or_default()
+            .trim()
+            .replace('\n', " ")
+    };
+    match v {
+        Value::Sequence(_) | Value::Mapping(_) | Value::Tagged(_) => {
+            serde_json::to_string(v).unwrap_or_else(|_| yaml(v))
+        }
+        v => yaml(v),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

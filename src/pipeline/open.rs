@@ -57,17 +57,16 @@ impl RunFolder {
         crate::error::read_text(&self.file(name, stage)?)
     }
 
-    /// `manifest.json`, checked to be a JSON object (a damaged one is a data error, as
-    /// `--resume` takes it).
+    /// `manifest.json`, checked to be a run's manifest (a damaged one is a data error, as
+    /// `--resume` and `compare` take it).
     pub fn manifest_json(&self) -> Result<String> {
         let path = self.file("manifest.json", "plan")?;
         let text = crate::error::read_text(&path)?;
+        let manifest = serde_json::from_str::<super::manifest::Manifest>(&text);
         match serde_json::from_str::<serde_json::Value>(&text) {
-            Ok(v) if v.is_object() => Ok(text),
-            Ok(_) => Err(
-                Error::data(&path, "not a run's manifest (not a JSON object)")
-                    .advise("run the campaign again (--resume redoes what it cannot trust)"),
-            ),
+            Ok(v) if v.is_object() && manifest.is_ok() => Ok(text),
+            Ok(_) => Err(Error::data(&path, "not a lidarsim manifest")
+                .advise("run the campaign again (--resume redoes what it cannot trust)")),
             Err(e) => Err(Error::data(&path, format!("damaged: {e}"))
                 .advise("run the campaign again (--resume redoes what it cannot trust)")),
         }
@@ -93,8 +92,12 @@ impl RunFolder {
         let dir = self.folder.join("waveforms");
         let mut parts: Vec<PathBuf> = std::fs::read_dir(&dir)
             .map_err(|e| {
-                Error::io(&dir, "cannot list the waveform parts", e)
-                    .advise("the simulate stage writes them: run the campaign")
+                if dir.exists() {
+                    Error::io(&dir, "cannot list the waveform parts", e)
+                } else {
+                    Error::file(&dir, "does not exist")
+                }
+                .advise("the simulate stage writes them: run the campaign")
             })?
             .flatten()
             .map(|e| e.path())
@@ -119,6 +122,19 @@ impl RunFolder {
         let mut schema = None;
         let mut batches = Vec::new();
         for p in &parts {
+            if !crate::waveform::file::part_matches_checksum(p) {
+                return Err(Error::data(
+                    p,
+                    format!(
+                        "damaged or unfinished: its bytes are not those {} records",
+                        crate::waveform::file::checksum_path(p)
+                            .file_name()
+                            .unwrap_or_default()
+                            .to_string_lossy()
+                    ),
+                )
+                .advise("run the campaign again with --resume: it simulates such parts again"));
+            }
             let (s, b) = crate::parquet_io::read_batches(p, Some(&keep))?;
             if schema.as_ref().is_some_and(|known: &SchemaRef| known != &s) {
                 return Err(Error::data(p, "its columns differ from the other parts'")

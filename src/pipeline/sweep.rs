@@ -2,6 +2,7 @@
 //! one scene load; `sweep.csv`, `sweep.json` and plots against a single swept key.
 
 use super::{run_single, RunOptions, RunSummary, SceneCache};
+use crate::campaign::yaml::inline;
 use crate::campaign::{Campaign, Loaded};
 use crate::error::{Error, Result};
 use crate::fsutil::write_text_atomic;
@@ -91,9 +92,9 @@ pub fn sweep_runs(
     Ok(subs)
 }
 
-/// Each combination's memory bound against the machine's ([`super::memory::fits`]); one
-/// that cannot fit is refused at the swept value that sizes it (the scene is the same for
-/// every combination: a sweep cannot sweep it).
+/// Each combination's bands against the scene's materials, and its memory bound against the
+/// machine's ([`super::memory::fits`]); one that cannot run is refused at the swept value
+/// (the scene is the same for every combination: a sweep cannot sweep it).
 fn fits_each(
     loaded: &Loaded,
     keys: &[&String],
@@ -102,6 +103,22 @@ fn fits_each(
     scene: &Scene,
 ) -> Result<()> {
     for (combo, (sub, name)) in combos.iter().zip(subs) {
+        // a swept band the scene's materials do not give
+        let bands = sub.campaign.wavelength_nm.all();
+        if bands != loaded.campaign.wavelength_nm.all() {
+            Scene::check_bands(&sub.scene_path, bands).map_err(|e| {
+                match keys
+                    .iter()
+                    .zip(combo)
+                    .find(|(k, _)| k.as_str() == "wavelength_nm")
+                {
+                    Some((k, v)) => loaded
+                        .doc
+                        .sweep_error(k, format!("value {}: the scene: {e}", inline(v))),
+                    None => e.within(format!("in the sweep combination {name}")),
+                }
+            })?;
+        }
         let plan = plan::Plan::new(&sub.campaign)?;
         super::memory::fits(sub, scene, &plan)
             .map_err(|e| at_swept_key(loaded, keys, combo, name, e))?;
@@ -214,7 +231,7 @@ fn combinations<'a>(
         if let Some((a, b)) = values.iter().enumerate().find_map(|(i, v)| {
             values[..i]
                 .iter()
-                .find(|u| folder_value(u) == folder_value(v))
+                .find(|u| in_folder_name(u) == in_folder_name(v))
                 .map(|u| (u, v))
         }) {
             return Err(loaded.doc.sweep_error(
@@ -224,7 +241,7 @@ fn combinations<'a>(
                      in more than spaces and slashes",
                     inline(a),
                     inline(b),
-                    folder_value(a)
+                    in_folder_name(a)
                 ),
             ));
         }
@@ -315,23 +332,17 @@ fn sub_campaign(
         scene_path: loaded.scene_path.clone(),
         method_note: None,
     };
-    let name = names.join("_").replace(['/', '\\', ' '], "-");
+    let name = names.join("_").replace(FOLDER_UNSAFE, "-");
     Ok((sub, name))
 }
 
-/// A swept value on one line, for messages and `sweep.csv`: a scalar as YAML writes it, a
-/// list or mapping in JSON's flow style (`{"start_ns":0,"bins":20}`).
-fn inline(v: &serde_yaml::Value) -> String {
-    use serde_yaml::Value;
-    match v {
-        Value::Sequence(_) | Value::Mapping(_) | Value::Tagged(_) => {
-            serde_json::to_string(v).unwrap_or_else(|_| folder_value(v))
-        }
-        v => serde_yaml::to_string(v)
-            .unwrap_or_default()
-            .trim()
-            .replace('\n', " "),
-    }
+/// What a sub-folder's name writes as `-`: a path's separators, and spaces.
+const FOLDER_UNSAFE: [char; 3] = ['/', '\\', ' '];
+
+/// A swept value as it ends up in the sub-folder's name ([`folder_value`], its separators and
+/// spaces made `-`): two values equal here would name one folder.
+fn in_folder_name(v: &serde_yaml::Value) -> String {
+    folder_value(v).replace(FOLDER_UNSAFE, "-")
 }
 
 /// A swept value as it stands in a sub-folder's name: a scalar as YAML writes it, a list's

@@ -143,12 +143,11 @@ pub fn load_campaign(doc: Doc, overrides: &[(String, serde_yaml::Value)]) -> Res
     }
     let mut tree: serde_yaml::Value = doc.parse()?;
     let named = |k: &str, v: &serde_yaml::Value, m: &dyn std::fmt::Display| {
-        let value = serde_yaml::to_string(v).unwrap_or_default();
         Error::at(
             &doc.path,
             None,
             k,
-            format!("override {}: {m}", value.trim()),
+            format!("override {}: {m}", crate::campaign::yaml::inline(v)),
         )
     };
     for (k, v) in overrides {

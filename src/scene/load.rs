@@ -284,6 +284,16 @@ pub(crate) fn common_wavelength(path: &Path) -> Result<f64> {
         })
 }
 
+/// Whether a scene file's materials and water resolve at `wavelengths_nm`, without building
+/// the scene: a sweep of bands checks each combination's before any run.
+pub(crate) fn check_bands(path: &Path, wavelengths_nm: &[f64]) -> Result<()> {
+    let doc = Doc::read(path)?;
+    let file: SceneFile = doc.parse()?;
+    resolve_materials(&doc, &file, wavelengths_nm)?;
+    water_body(&doc, &file, wavelengths_nm)?;
+    Ok(())
+}
+
 /// Reads a scene file and builds its scene: the objects checked against the file, every
 /// distinct mesh loaded once, materials given to each slot, instances placed, the top level
 /// built.

@@ -380,6 +380,12 @@ impl Scene {
         load::load(path, wavelengths_nm)
     }
 
+    /// Whether the scene file's materials (and water) give every one of `wavelengths_nm`,
+    /// without building the scene.
+    pub fn check_bands(path: &Path, wavelengths_nm: &[f64]) -> Result<()> {
+        load::check_bands(path, wavelengths_nm)
+    }
+
     /// Clips `origin + t dir`, 0 < t < t_max, to the scene box in f64 and moves it to f32.
     #[inline]
     fn local_ray(&self, origin: DVec3, dir: DVec3, t_max: f64) -> Option<LocalRay> {

@@ -545,6 +545,17 @@ pub fn part_is_whole(
         && (pulses.is_empty() || pulse_span(meta) == Some(want))
 }
 
+/// Whether a part's bytes are those its checksum file (written after it) records: a part
+/// read back for a caller (Python's `Run.waveforms`) is refused when damaged, as `--resume`
+/// refuses it.
+pub fn part_matches_checksum(path: &Path) -> bool {
+    let Ok(record) = std::fs::read_to_string(checksum_path(path)) else {
+        return false;
+    };
+    let sum = record.split_whitespace().next().unwrap_or_default();
+    Some(sum) == crate::fsutil::file_checksum(path).as_deref()
+}
+
 /// The least and greatest `pulse_id` of a Parquet file, from its row groups' statistics;
 /// None when a row group has none.
 fn pulse_span(meta: &parquet::file::metadata::ParquetMetaData) -> Option<(u64, u64)> {

@@ -584,7 +584,7 @@ class Scene:
         sim.update(
             method=method,
             rays_per_pulse=_whole(rays, "rays", least=1, most=2**32 - 1),
-            max_order=_whole(max_order, "max_order", least=1),
+            max_order=_whole(max_order, "max_order", least=1, most=100_000),
         )
         if (
             wavelength_nm is None

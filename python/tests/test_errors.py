@@ -52,7 +52,10 @@ def test_an_unknown_key_and_a_bad_override(tmp_path):
     with pytest.raises(lidarsim.InputError) as e:
         lidarsim.run(camp, out=tmp_path / "a")
     assert "altitude" in str(e.value)
-    assert e.value.line is not None
+    # a mapping has no file: the key says where, not a place in the package's own text
+    assert e.value.key == "platform.altitude", e.value
+    assert (e.value.file, e.value.line, e.value.column) == (None, None, None)
+    assert str(e.value).startswith("platform.altitude: unknown field"), e.value
     with pytest.raises(lidarsim.InputError) as e:
         lidarsim.run(als_campaign(), out=tmp_path / "b", overrides={"platform.altitude_m": -5})
     assert e.value.key == "platform.altitude_m"
@@ -97,6 +100,18 @@ def test_damaged_files_are_data_errors(tmp_path):
     assert e.value.advice
     with pytest.raises(lidarsim.InputError):
         run.photons()  # a discrete-return run writes none: the message says which stage would
+    # a waveform part whose bytes are not those its checksum records is not handed over
+    part = run.folder / "waveforms" / "part-00000.parquet"
+    data = bytearray(part.read_bytes())
+    data[1000:1200] = bytes(b ^ 0xFF for b in data[1000:1200])
+    part.write_bytes(bytes(data))
+    with pytest.raises(lidarsim.DataError) as e:
+        run.waveforms()
+    assert e.value.file.endswith("part-00000.parquet") and "part-00000.fnv" in str(e.value)
+    # a manifest that is JSON but no lidarsim manifest
+    (run.folder / "manifest.json").write_text("{}")
+    with pytest.raises(lidarsim.DataError):
+        lidarsim.open_run(run.folder)
 
 
 def test_the_stubs_name_every_public_name():
@@ -209,6 +224,37 @@ def test_arguments_of_the_wrong_kind_are_input_errors(tmp_path):
     with pytest.raises(lidarsim.InputError) as e:
         plane.simulate_pulse(dict(inst, bin_ns=1e-30), (50, 50, 10), (0, 0, -1), rays=20)
     assert e.value.key == "instrument.bin_ns"
+
+
+def test_numbers_past_64_bits_and_arguments_given_twice(tmp_path):
+    # a whole number no 64-bit integer holds, in an override, a mapping or a section
+    for call in (
+        lambda: lidarsim.run(als_campaign(), out=tmp_path / "x", overrides={"seed": 2**64}),
+        lambda: lidarsim.run(dict(als_campaign(), seed=2**64), out=tmp_path / "y"),
+    ):
+        with pytest.raises(lidarsim.InputError) as e:
+            call()
+        assert e.value.key == "seed" and str(2**64) in str(e.value), e.value
+    plane = lidarsim.Scene.load(PLANE)
+    inst = {"pulse_energy_j": 1e-3, "pulse_fwhm_ns": 3, "footprint_half_angle_mrad": 0.2,
+            "fov_half_angle_mrad": 0.4, "receiver_area_m2": 0.1}
+    with pytest.raises(lidarsim.InputError) as e:
+        plane.simulate_pulse(dict(inst, max_returns=2**64), (0, 0, 10), (0, 0, -1))
+    assert e.value.key == "instrument.max_returns", e.value
+    # method, rays and max_order are simulate_pulse's own arguments, not also simulation keys
+    with pytest.raises(lidarsim.InputError) as e:
+        plane.simulate_pulse(inst, (0, 0, 10), (0, 0, -1), simulation={"method": "forward"})
+    assert e.value.key == "simulation" and "method=" in str(e.value)
+    for bad in ([], -1, True):
+        with pytest.raises(lidarsim.InputError) as e:
+            lidarsim.Scene.load(PLANE, wavelength_nm=bad)
+        assert e.value.key == "wavelength_nm", (bad, e.value)
+    with pytest.raises(lidarsim.InputError) as e:
+        plane.simulate_pulse(inst, (0, 0, 10), (0, 0, -1), wavelength_nm=None)
+    assert e.value.key == "wavelength_nm"
+    with pytest.raises(lidarsim.InputError) as e:
+        lidarsim.run(als_campaign(), out="")
+    assert e.value.key == "out"
 
 
 def test_an_override_of_the_wrong_type_names_its_key(tmp_path):

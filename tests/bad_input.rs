@@ -270,6 +270,12 @@ fn out_of_range_numbers() {
             "receiver_area_m2: 0.1\n  detector_response_fwhm_ns: 1e300",
             "instrument.detector_response_fwhm_ns",
         ),
+        // a waveform's samples past what GEDI's 16-bit rx_sample_count holds
+        (
+            "receiver_area_m2: 0.1",
+            "receiver_area_m2: 0.1\n  range_gate: { start_ns: 0, bins: 70000 }",
+            "instrument.range_gate.bins: a waveform instrument's gate holds at most 65535 bins",
+        ),
     ] {
         let c = if from == "edge_energy_fraction" {
             CAMPAIGN.replace(

@@ -1184,6 +1184,18 @@ impl Campaign {
                     "must be between 1 and 10000000",
                 ));
             }
+            // GEDI's rx_sample_count, which waveforms_l1b.h5 keeps, is 16 bits
+            if i.kind == InstrumentKind::Waveform && g.bins > u32::from(u16::MAX) {
+                return Err(doc.error(
+                    "instrument.range_gate.bins",
+                    format!(
+                        "a waveform instrument's gate holds at most 65535 bins (the 16 bits of \
+                         rx_sample_count in waveforms_l1b.h5, as GEDI's), found {}: use wider \
+                         bins (instrument.bin_ns)",
+                        g.bins
+                    ),
+                ));
+            }
         }
         if let Some(a) = &self.atmosphere {
             for (k, layer) in a.layers.iter().enumerate() {

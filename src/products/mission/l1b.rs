@@ -170,6 +170,16 @@ impl L1b {
         let tx = transmitted_pulse(self.pulse_sigma_s, w.bin_ns as f64 * 1e-9);
         let beam = self.beams.get(&pulse.line).copied().unwrap_or_default();
         let n = record.samples.len();
+        // a gate the scene's ranges sized (none given) may pass what the count holds
+        if n > usize::from(u16::MAX) {
+            return Err(crate::error::Error::msg(format!(
+                "pulse {}: a waveform of {n} samples, more than the 65535 that waveforms_l1b.h5 \
+                 gives a shot (GEDI's rx_sample_count is 16 bits): use wider bins \
+                 (instrument.bin_ns) or a range_gate",
+                pulse.id
+            ))
+            .for_key("instrument.bin_ns"));
+        }
         // centre of sample k: t0 + (k + ½) Δt after emission, at range c t / 2
         let at = |k: usize| {
             let t = (w.t0_ns + (k as f64 + 0.5) * w.bin_ns as f64) * 1e-9;
@@ -185,7 +195,7 @@ impl L1b {
         let up = -pulse.direction;
         let h = &mut self.h5;
         h.push_f32(&format!("{b}/rxwaveform"), &record.samples)?;
-        h.push_u16(&format!("{b}/rx_sample_count"), &[n.min(65_535) as u16])?;
+        h.push_u16(&format!("{b}/rx_sample_count"), &[n as u16])?;
         h.push_u64(&format!("{b}/rx_sample_start_index"), &[beam.rx + 1])?;
         h.push_f32(&format!("{b}/txwaveform"), &tx)?;
         h.push_u16(

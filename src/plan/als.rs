@@ -518,7 +518,10 @@ impl Als {
         let edge = i + 1 == self.per_line;
         match self.pattern {
             ScanPattern::Line | ScanPattern::RotatingPolygon => (true, edge),
-            ScanPattern::Oscillating => (j % 2 == 0, edge),
+            // a line's first pulse is the turn itself, at the swath's edge: the last point
+            // before the mirror changes direction, as LAS defines the flag (not the one a step
+            // before it); the flight's first pulse turns nothing
+            ScanPattern::Oscillating => (j % 2 == 0, i == 0 && j > 0),
             _ => (false, false),
         }
     }

@@ -728,8 +728,9 @@ fn scanner_keys_belong_to_their_pattern() {
 }
 
 /// LAS's scan flags: an oscillating scan's lines alternate their direction (left to right on
-/// even lines, growing angles), a line scan's all grow, and the last pulse of every line is
-/// its edge; a conic scan has neither flag.
+/// even lines, growing angles) and its edge is the pulse at each turn (the first of every
+/// line but the first, at the swath's edge); a line scan's all grow, the last pulse of every
+/// line its edge; a conic scan has neither flag.
 #[test]
 fn scan_flags_follow_the_sweep() {
     let platform = |pattern: &str| {
@@ -753,7 +754,14 @@ fn scan_flags_follow_the_sweep() {
             match pattern {
                 "conic" => assert_eq!((dir, edge), (false, false)),
                 _ => {
-                    assert_eq!(edge, i + 1 == n, "pulse {}", q.id);
+                    if pattern == "line" {
+                        assert_eq!(edge, i + 1 == n, "pulse {}", q.id);
+                    } else {
+                        assert_eq!(edge, i == 0 && j > 0, "pulse {}", q.id);
+                        if edge {
+                            assert_eq!(q.scan_angle_deg.abs(), 10.0, "pulse {}", q.id);
+                        }
+                    }
                     let growing = pattern == "line" || j % 2 == 0;
                     assert_eq!(dir, growing, "pulse {}", q.id);
                     // the flag says which way the angle goes to the line's next pulse

@@ -1128,6 +1128,23 @@ fn staged_run_equals_one_shot_run() {
     let oneshot = dir.join("oneshot");
     run_ok(&camp, &oneshot, &[]);
     assert_same_files(&staged, &oneshot);
+
+    // a later stage alone over an earlier stage's damaged file: the message says so
+    std::fs::write(staged.join("products.json"), "{}").unwrap();
+    let (code, _, err) = lidarsim(&[
+        "run",
+        camp.to_str().unwrap(),
+        "--out",
+        staged.to_str().unwrap(),
+        "--resume",
+        "--stages",
+        "report",
+    ]);
+    assert_eq!(code, 1, "{err}");
+    assert!(
+        err.contains("stage products must run again (products.json is not what it wrote)"),
+        "{err}"
+    );
 }
 
 fn copy_tree(from: &Path, to: &Path) {

@@ -211,6 +211,9 @@ struct RunFolder<'a> {
     opts: &'a RunOptions,
     manifest_path: PathBuf,
     manifest: Manifest,
+    /// The stages whose files were found damaged on opening, each with the file: forgotten,
+    /// with every later stage.
+    damaged: Vec<(Stage, String)>,
     /// Held while the run works in the folder (none for a shard: shards share it).
     _lock: Option<FolderLock>,
 }
@@ -370,8 +373,10 @@ impl<'a> RunFolder<'a> {
         } else {
             Manifest::default()
         };
+        let mut damaged = Vec::new();
         if keep {
-            for (stage, file) in forget_damaged(&mut manifest, out) {
+            damaged = forget_damaged(&mut manifest, out);
+            for (stage, file) in &damaged {
                 log(&format!(
                     "{}: {file} is not what the {} stage wrote: that stage is redone",
                     out.display(),
@@ -416,6 +421,7 @@ impl<'a> RunFolder<'a> {
             opts,
             manifest_path,
             manifest,
+            damaged,
             _lock: lock,
         })
     }
@@ -423,10 +429,19 @@ impl<'a> RunFolder<'a> {
     /// The error of a stage left out of `--stages` whose output a later stage asked for is
     /// missing or stale.
     fn missing(&self, stage: Stage) -> Error {
-        let why = if self.manifest.stages.contains_key(stage.name()) {
-            "is out of date (the campaign, its scene or lidarsim changed since it ran)"
-        } else {
-            "has not run"
+        let damaged = self.damaged.iter().find(|(s, _)| *s <= stage);
+        let why = match damaged {
+            Some((s, file)) if *s == stage => {
+                format!("must run again ({file} is not what it wrote)")
+            }
+            Some((s, file)) => format!(
+                "must run again (the {} stage's {file} is not what it wrote)",
+                s.name()
+            ),
+            None if self.manifest.stages.contains_key(stage.name()) => {
+                "is out of date (the campaign, its scene or lidarsim changed since it ran)".into()
+            }
+            None => "has not run".into(),
         };
         Error::msg(format!(
             "{}: stage {} {why}: include it in --stages",

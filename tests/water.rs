@@ -432,6 +432,38 @@ fn bad_water_is_a_located_error() {
     );
 }
 
+/// `check` warns of what a smooth surface hides: everything, to `backward`; the bottom made
+/// rare, to the others; wind (even 0 m/s) makes the surface rough, and the warning goes.
+#[test]
+fn smooth_water_is_warned_of() {
+    let dir = tmp("water_warned");
+    scene(&dir);
+    let text = "name: w\nscene: water.yaml\nwavelength_nm: 532\ninstrument: { pulse_energy_j: 0.00001, pulse_fwhm_ns: 3, footprint_half_angle_mrad: 0.3, fov_half_angle_mrad: 0.5, receiver_area_m2: 0.01, bin_ns: 1 }\nplatform: { kind: track, altitude_m: 100, track: { start: [0, 0], end: [2, 0] }, along_track_step_m: 1 }\nsimulation: { method: METHOD }\n";
+    for (method, says) in [
+        (
+            "backward",
+            "warning: simulation.method backward over smooth water",
+        ),
+        ("bdpt", "warning: the scene's water surface is smooth"),
+    ] {
+        let path = write(&dir, "c.yaml", &text.replace("METHOD", method));
+        let (code, out, err) = lidarsim(&["check", path.to_str().unwrap()]);
+        assert_eq!(code, 0, "{err}");
+        assert!(
+            out.contains(says) && out.contains("wind_speed_m_s"),
+            "{method}: {out}"
+        );
+    }
+    let calm = std::fs::read_to_string(dir.join("water.yaml"))
+        .unwrap()
+        .replace("refractive_index:", "wind_speed_m_s: 0, refractive_index:");
+    write(&dir, "water.yaml", &calm);
+    let path = write(&dir, "c.yaml", &text.replace("METHOD", "backward"));
+    let (code, out, err) = lidarsim(&["check", path.to_str().unwrap()]);
+    assert_eq!(code, 0, "{err}");
+    assert!(!out.contains("smooth"), "{out}");
+}
+
 /// Two runs agree per order where both have energy: |a − b| < 3 combined SE, with SEs small
 /// enough to tell 10 %.
 fn agree(

@@ -143,9 +143,42 @@ pub fn check(path: &Path) -> Result<CheckReport> {
         warnings: c
             .warnings()
             .into_iter()
-            .chain(aim_warnings(c, &scene, &plan))
+            .chain(scene_warnings(c, &scene, &plan))
             .collect(),
     })
+}
+
+/// What `check` and the run log warn of a campaign over its scene: where its pulses aim
+/// ([`aim_warnings`]) and what a smooth water surface hides ([`water_warnings`]).
+pub fn scene_warnings(c: &crate::campaign::Campaign, scene: &Scene, plan: &Plan) -> Vec<String> {
+    let mut out = aim_warnings(c, scene, plan);
+    out.extend(water_warnings(c, scene));
+    out
+}
+
+/// A smooth water surface is a mirror: no strategy connects through it (docs/physics.md,
+/// "Specular vertices"). `backward` then finds nothing of it or under it; forward and bdpt
+/// find the light under it only along paths that happen to cross the aperture, which a
+/// narrow field of view makes rare. Wind (even 0 m/s: Cox and Munk's calm sea) makes it rough.
+pub fn water_warnings(c: &crate::campaign::Campaign, scene: &Scene) -> Vec<String> {
+    if !scene.water.as_ref().is_some_and(|w| w.mss <= 0.0) {
+        return Vec::new();
+    }
+    let calm = "give the water wind_speed_m_s (0 is Cox and Munk's calm sea, a rough surface \
+                every strategy connects through)";
+    if c.simulation.method == crate::campaign::Method::Backward {
+        vec![format!(
+            "simulation.method backward over smooth water: no receiver path joins the laser's \
+             light through a mirror-flat surface, so its reflection and everything under it are \
+             missing; use forward, bdpt or auto, or {calm}"
+        )]
+    } else {
+        vec![format!(
+            "the scene's water surface is smooth: light from under it reaches the telescope only \
+             along paths that happen to cross the aperture, which a narrow field of view makes \
+             rare, so the bottom's return may be missing or noisy; {calm}"
+        )]
+    }
 }
 
 /// Pulses traced for the ranges at which the scene lies before the sensor.

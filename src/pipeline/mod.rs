@@ -541,7 +541,7 @@ fn run_single(
 
     let scene = cache.get(&loaded.scene_path, loaded.campaign.wavelength_nm.all())?;
     memory::fits(loaded, scene, &plan)?;
-    for w in check::aim_warnings(&loaded.campaign, scene, &plan) {
+    for w in check::scene_warnings(&loaded.campaign, scene, &plan) {
         log(&format!("warning: {w}"));
     }
     let sim = &loaded.campaign.simulation;

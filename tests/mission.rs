@@ -1224,27 +1224,3 @@ fn atl03_off_nadir_photons_stay_in_their_segments() {
         );
     }
 }
-
-/// ATL03's `atlas_beam_type` says what each beam carries: the campaign's first beam at a
-/// quarter of the second's energy is `weak`, the second `strong` (not by the beams' order).
-#[test]
-fn atl03_beam_types_follow_the_beams_energies() {
-    let dir = tmp("mission_beam_types");
-    plane_scene(&dir, 0.3, 200.0);
-    let camp = write(
-        &dir,
-        "c.yaml",
-        "name: types\nscene: plane.yaml\nseed: 3\nwavelength_nm: 532\ninstrument: { kind: photon_counting, pulse_energy_j: 1.0e-12, pulse_fwhm_ns: 1, footprint_half_angle_mrad: 0.05, fov_half_angle_mrad: 0.3, receiver_area_m2: 0.01, bin_ns: 0.5, dead_time_ns: 1 }\nplatform: { kind: spaceborne, altitude_m: 500, ground_speed_m_s: 7000, prf_hz: 700, track: { start: [0, 0], end: [50, 0] }, beams: [ { cross_track_m: -45, relative_energy: 0.25 }, { cross_track_m: 45 } ] }\nsimulation: { method: forward, rays_per_pulse: 10, max_order: 1 }\n",
-    );
-    let out = dir.join("run");
-    run_cli(&camp, &out, None);
-    let f = h5(&out.join("photons_atl03.h5"));
-    for (track, kind) in [("gt1l", "weak"), ("gt1r", "strong")] {
-        let attrs = f
-            .group(track)
-            .and_then(|g| g.attrs())
-            .unwrap_or_else(|e| panic!("{track}: {e}"));
-        let found = format!("{:?}", attrs.get("atlas_beam_type"));
-        assert!(found.contains(&format!("\"{kind}\"")), "{track}: {found}");
-    }
-}

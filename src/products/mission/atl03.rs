@@ -94,9 +94,6 @@ pub struct Atl03 {
     tracks: BTreeMap<u32, Track>,
     geo: Geo,
     sun: SunAngles,
-    /// Each beam's pulse energy, J (by line): a beam of at least half the largest is
-    /// "strong".
-    beam_energy_j: Vec<f64>,
 }
 
 /// Appends one row of `track`'s `geolocation/`.
@@ -176,7 +173,6 @@ impl Atl03 {
         campaign: &str,
         frame: Option<&Frame>,
         sun: SunAngles,
-        beam_energy_j: Vec<f64>,
     ) -> Result<Atl03> {
         let mut attrs = root_attrs(campaign, frame, "ATL03")?;
         attrs.push((
@@ -194,7 +190,6 @@ impl Atl03 {
             tracks: BTreeMap::new(),
             geo: Geo::new(frame)?,
             sun,
-            beam_energy_j,
         })
     }
 
@@ -203,13 +198,8 @@ impl Atl03 {
             return Ok(());
         }
         let name = track_name(pulse.line);
-        // as the campaign's beams carry energy: ATLAS's strong beams carry four times its
-        // weak ones'
-        let most = self.beam_energy_j.iter().copied().fold(0.0, f64::max);
-        let strong = self
-            .beam_energy_j
-            .get(pulse.line as usize)
-            .is_none_or(|&e| e >= 0.5 * most);
+        // under sc_orient 0 the left beams are the strong ones
+        let strong = pulse.line.is_multiple_of(2);
         self.h5.group(
             &name,
             &[

@@ -67,15 +67,7 @@ fn writers<'a>(
             plan.len(),
         )));
         let sun = SunAngles::new(c.sun.as_ref());
-        let beams = c.platform.beams.as_ref().map_or(1, Vec::len);
-        let energies = (0..beams as u32).map(|b| c.pulse_energy_j(b)).collect();
-        let file = Atl03::create(
-            &out.join(ATL03_FILE),
-            &c.name,
-            c.frame.as_ref(),
-            sun,
-            energies,
-        )?;
+        let file = Atl03::create(&out.join(ATL03_FILE), &c.name, c.frame.as_ref(), sun)?;
         list.push(Box::new(mission::Atl03Writer {
             file,
             plan,

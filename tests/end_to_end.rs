@@ -766,6 +766,41 @@ fn the_resolved_campaign_holds_its_defaults_and_runs_the_same() {
             "{file} differs"
         );
     }
+
+    // a track's pulse rate, the sun's share and fixed probability, a digitiser's saturation
+    let camp = write(
+        &dir,
+        "track.yaml",
+        "name: track_defaults\nscene: plane.yaml\nseed: 6\nwavelength_nm: 1064\ninstrument: { pulse_energy_j: 0.00001, pulse_fwhm_ns: 3, footprint_half_angle_mrad: 0.3, fov_half_angle_mrad: 0.5, receiver_area_m2: 0.01, bin_ns: 1, bandwidth_nm: 1, digitiser: { gain: 10, offset: 5, bits: 10 } }\nplatform: { kind: track, altitude_m: 100, track: { start: [0, 0], end: [3, 0] }, along_track_step_m: 1 }\nsun: { zenith_deg: 30, azimuth_deg: 0, irradiance_w_m2_um: 1000, selection: fixed }\nsimulation: { method: bdpt, rays_per_pulse: 8, max_order: 2 }\n",
+    );
+    let out = dir.join("track");
+    run_ok(&camp, &out, &[]);
+    let text = std::fs::read_to_string(out.join("campaign.resolved.yaml")).unwrap();
+    let r: serde_yaml::Value = serde_yaml::from_str(&text).unwrap();
+    assert_eq!(r["platform"]["prf_hz"].as_f64(), Some(1000.0), "{text}");
+    assert_eq!(r["sun"]["share"].as_f64(), Some(1.0), "{text}");
+    assert_eq!(
+        r["sun"]["selection_probability"].as_f64(),
+        Some(0.5),
+        "{text}"
+    );
+    assert_eq!(
+        r["instrument"]["digitiser"]["saturation"].as_f64(),
+        Some(1023.0),
+        "{text}"
+    );
+    let again = dir.join("track_again");
+    run_ok(&write(&dir, "track_resolved.yaml", &text), &again, &[]);
+    for file in [
+        "pulses.parquet",
+        "waveforms/part-00000.parquet",
+        "waveforms_l1b.h5",
+    ] {
+        assert!(
+            std::fs::read(out.join(file)).unwrap() == std::fs::read(again.join(file)).unwrap(),
+            "{file} differs"
+        );
+    }
 }
 
 /// One pulse's DSM has one cell and no swath edge: the log's figures of the edge's no cells

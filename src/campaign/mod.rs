@@ -733,17 +733,36 @@ impl Campaign {
     /// would hide them from a reader of `campaign.resolved.yaml`: the products, the GPS start,
     /// the receiver's offset, the false-alarm rate, and the scanner's duty (rotating polygon)
     /// or prism phases (Risley). The run itself reads the same values either way.
+    ///
+    /// Only defaults that change nothing when written out: a `mount:` or a `beams:` list the
+    /// campaign left out stays out (a mount, even of zeros, turns the beam through the body's
+    /// axes, with other round-off), their keys are filled where they stand.
     pub fn with_defaults(&self) -> Campaign {
         let mut c = self.clone();
         c.products = Some(self.products());
-        if c.platform.trajectory.is_none() {
+        let p = &mut c.platform;
+        if p.trajectory.is_none() {
             // a trajectory's file gives the times, and refuses the key
-            c.platform.gps_start_s.get_or_insert(0.0);
+            p.gps_start_s.get_or_insert(0.0);
         }
-        let i = &mut c.instrument;
-        i.receiver_offset_m.get_or_insert([0.0; 3]);
-        i.false_alarm_rate_per_pulse = Some(self.instrument.false_alarm_rate());
-        if let Some(scan) = &mut c.platform.scanner {
+        match p.kind {
+            PlatformKind::Track | PlatformKind::Tls => {
+                p.prf_hz.get_or_insert(DEFAULT_PRF_HZ);
+            }
+            PlatformKind::Spaceborne => {
+                p.off_nadir_deg.get_or_insert(0.0);
+            }
+            _ => {}
+        }
+        if let Some(m) = &mut p.mount {
+            m.offset_m.get_or_insert([0.0; 3]);
+            m.boresight_deg.get_or_insert([0.0; 3]);
+        }
+        if let Some(e) = &mut p.errors {
+            e.position_correlation_s.get_or_insert(0.0);
+            e.attitude_correlation_s.get_or_insert(0.0);
+        }
+        if let Some(scan) = &mut p.scanner {
             match scan.pattern {
                 ScanPattern::RotatingPolygon => {
                     scan.duty.get_or_insert(1.0);
@@ -751,7 +770,22 @@ impl Campaign {
                 ScanPattern::Risley => {
                     scan.phase_deg.get_or_insert([0.0; 2]);
                 }
+                ScanPattern::Multibeam => {
+                    scan.head_tilt_deg.get_or_insert(0.0);
+                }
                 _ => {}
+            }
+        }
+        let i = &mut c.instrument;
+        i.receiver_offset_m.get_or_insert([0.0; 3]);
+        i.false_alarm_rate_per_pulse = Some(self.instrument.false_alarm_rate());
+        if let Some(d) = &mut i.digitiser {
+            d.saturation = Some(d.saturation());
+        }
+        if let Some(s) = &mut c.sun {
+            s.share.get_or_insert(SunShare::Fraction(1.0));
+            if s.selection() == SunSelection::Fixed {
+                s.selection_probability.get_or_insert(0.5);
             }
         }
         c
@@ -993,6 +1027,9 @@ impl Check<'_> {
         })
     }
 }
+
+/// Pulse rate used for GPS times by `track` and `tls` platforms that give no `prf_hz`.
+pub const DEFAULT_PRF_HZ: f64 = 1000.0;
 
 /// How far a platform's positions may lie from the scene's origin, m: 100,000 km, past the
 /// geostationary orbit, as `frame.origin`.

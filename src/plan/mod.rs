@@ -40,8 +40,7 @@ use glam::{DVec2, DVec3};
 /// Plans larger than this are refused: at 100 bytes a pulse the plan alone would pass 50 GB.
 pub const MAX_PULSES: u64 = 500_000_000;
 
-/// Pulse rate used for GPS times by `track` and `tls` platforms that give no `prf_hz`.
-pub const DEFAULT_PRF_HZ: f64 = 1000.0;
+pub use crate::campaign::DEFAULT_PRF_HZ;
 
 const TOL: f64 = 1e-9;
 

@@ -1077,7 +1077,7 @@ fn sweep_writes_subruns_and_summaries() {
     let (code, stdout, err) = lidarsim(&["compare", out.to_str().unwrap()]);
     assert_eq!(code, 0, "{err}");
     assert!(
-        stdout.contains("| altitude_m=100 | 100 | – | 10 |"),
+        stdout.contains("| altitude_m=100 | 100 | 1000 | 10 |"),
         "{stdout}"
     );
     assert!(

@@ -204,7 +204,8 @@ impl Atl03 {
             &name,
             &[
                 (
-                    "description",
+                    // ATL03 capitalises its groups' attribute
+                    "Description",
                     format!("beam {} of the campaign", pulse.line),
                 ),
                 ("groundtrack_id", name.clone()),

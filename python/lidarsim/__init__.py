@@ -373,8 +373,9 @@ class Run:
 
     @property
     def campaign(self) -> Dict[str, Any]:
-        """``campaign.resolved.yaml``: the campaign with every default filled in."""
-        return json.loads(self._read("campaign"))
+        """``campaign.resolved.yaml``: the campaign with every default filled in, as a YAML
+        reader gives it (a table's wavelength keys stay numbers)."""
+        return self._read("campaign")
 
     @property
     def manifest(self) -> Dict[str, Any]:

@@ -349,6 +349,7 @@ fn read_run<'py>(
     enum Got {
         Table(ArrowStream),
         Text(String),
+        Yaml(serde_yaml::Value),
     }
     let got = detached(py, || {
         let run = RunFolder::open(&folder)?;
@@ -357,7 +358,7 @@ fn read_run<'py>(
             "waveforms" => Got::Table(stream(run.waveforms(pulse_ids.as_deref())?)),
             "points" => Got::Table(batch(run.points()?)),
             "photons" => Got::Table(stream(run.photons()?)),
-            "campaign" => Got::Text(run.campaign_json()?),
+            "campaign" => Got::Yaml(run.campaign()?),
             "manifest" => Got::Text(run.manifest_json()?),
             "report" => Got::Text(run.text("report.md", "report")?),
             other => return Err(lidarsim::Error::msg(format!("no table named {other:?}"))),
@@ -366,6 +367,45 @@ fn read_run<'py>(
     Ok(match got {
         Got::Table(t) => Bound::new(py, t)?.into_any(),
         Got::Text(t) => t.into_pyobject(py)?.into_any(),
+        Got::Yaml(v) => yaml_to_py(py, &v)?,
+    })
+}
+
+/// A YAML value as Python's YAML readers give it: mappings as dicts whose number keys stay
+/// numbers (`{532.0: 0.12}`), sequences as lists, null as None.
+fn yaml_to_py<'py>(py: Python<'py>, v: &serde_yaml::Value) -> PyResult<Bound<'py, PyAny>> {
+    use serde_yaml::Value;
+    Ok(match v {
+        Value::Null => py.None().into_bound(py),
+        Value::Bool(b) => b.into_pyobject(py)?.to_owned().into_any(),
+        Value::Number(n) => match (n.as_i64(), n.as_u64()) {
+            (Some(i), _) => i.into_pyobject(py)?.into_any(),
+            (None, Some(u)) => u.into_pyobject(py)?.into_any(),
+            _ => n.as_f64().unwrap_or(f64::NAN).into_pyobject(py)?.into_any(),
+        },
+        Value::String(s) => s.into_pyobject(py)?.into_any(),
+        Value::Sequence(items) => {
+            let list = PyList::empty(py);
+            for item in items {
+                list.append(yaml_to_py(py, item)?)?;
+            }
+            list.into_any()
+        }
+        Value::Mapping(m) => {
+            let d = PyDict::new(py);
+            for (k, v) in m {
+                // a key Python cannot hash (a list or mapping, which no campaign has) as text
+                let key = match k {
+                    Value::Sequence(_) | Value::Mapping(_) => lidarsim::campaign::yaml::inline(k)
+                        .into_pyobject(py)?
+                        .into_any(),
+                    k => yaml_to_py(py, k)?,
+                };
+                d.set_item(key, yaml_to_py(py, v)?)?;
+            }
+            d.into_any()
+        }
+        Value::Tagged(t) => yaml_to_py(py, &t.value)?,
     })
 }
 

@@ -87,6 +87,16 @@ def test_waveforms_of_given_pulses_are_those_rows_of_the_parts(runs):
     assert run.waveforms(pulse_ids=[]).num_rows == 0
 
 
+def test_the_campaign_keeps_its_number_keys(tmp_path):
+    # a table by wavelength reads back with number keys, as a YAML reader gives it
+    layers = [{"scale_height_m": 8000, "optical_depth": {1064: 0.1}}]
+    run = lidarsim.run(
+        dict(als_campaign(), atmosphere={"layers": layers}), out=tmp_path / "a", stages=["plan"]
+    )
+    depth = run.campaign["atmosphere"]["layers"][0]["optical_depth"]
+    assert depth == {1064: 0.1} and all(isinstance(k, (int, float)) for k in depth), depth
+
+
 def test_pulses_campaign_manifest_report_and_dsm(runs):
     run = runs["file"]
     pulses = run.pulses()

@@ -72,13 +72,18 @@ impl RunFolder {
         }
     }
 
-    /// `campaign.resolved.yaml` as JSON text (YAML keys that are numbers become strings).
-    pub fn campaign_json(&self) -> Result<String> {
+    /// `campaign.resolved.yaml`, parsed (its keys that are numbers stay numbers: a band's
+    /// `532.0` of an optical depth's table).
+    pub fn campaign(&self) -> Result<serde_yaml::Value> {
         let path = self.file("campaign.resolved.yaml", "plan")?;
         let text = crate::error::read_text(&path)?;
-        let value: serde_yaml::Value = serde_yaml::from_str(&text)
-            .map_err(|e| Error::data(&path, format!("not YAML: {e}")))?;
-        serde_json::to_string(&value).map_err(|e| Error::data(&path, e.to_string()))
+        match serde_yaml::from_str::<serde_yaml::Value>(&text) {
+            Ok(v) if v.is_mapping() => Ok(v),
+            Ok(_) => Err(Error::data(&path, "damaged: not a resolved campaign")
+                .advise("run the campaign again with --resume: its plan stage writes it")),
+            Err(e) => Err(Error::data(&path, format!("not YAML: {e}"))
+                .advise("run the campaign again with --resume: its plan stage writes it")),
+        }
     }
 
     /// `pulses.parquet`.

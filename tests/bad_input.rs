@@ -295,6 +295,36 @@ fn bad_yaml_syntax() {
     let c = CAMPAIGN.replace("kind: static", "kind: [static");
     let (code, err, _) = check("syntax", &c, SCENE);
     assert_one_message(code, &err, &["campaign.yaml:"]);
+    // an unclosed list is the text's fault, not a wrong type at its key; a tab in the
+    // indentation says so once, without naming the key before it; an empty enum is a null
+    for (from, to, words) in [
+        (
+            "scene: scene.yaml",
+            "scene: [scene.yaml",
+            &["campaign.yaml:3:", "(YAML syntax)"][..],
+        ),
+        (
+            "  receiver_area_m2: 0.1",
+            "\treceiver_area_m2: 0.1",
+            &[
+                "campaign.yaml:9:",
+                "a tab character where YAML expects indentation",
+            ][..],
+        ),
+        (
+            "kind: static",
+            "kind:",
+            &[
+                "campaign.yaml:11:",
+                "platform.kind: found nothing (null), expected one of",
+            ][..],
+        ),
+    ] {
+        let c = CAMPAIGN.replace(from, to);
+        let (code, err, _) = check("syntax_more", &c, SCENE);
+        assert_one_message(code, &err, words);
+        assert!(!err.contains(" at line "), "{err}");
+    }
 }
 
 /// A campaign name that cannot name a run folder (YAML's null, a line break, a slash) is

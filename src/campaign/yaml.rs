@@ -101,6 +101,12 @@ pub fn parse<T: DeserializeOwned>(path: &Path, text: &str) -> Result<T> {
                 "given twice in the same mapping: keep one",
             ));
         }
+        // text that is no YAML at all (`scene: [x` unclosed): the typed reading would meet a
+        // type before the end of the text, and blame the key
+        let location = e.location().map(|l| (l.line(), l.column()));
+        if let Some(syntax) = syntax_words(&bare_message(&message)) {
+            return Err(Error::at(path, location, "", syntax));
+        }
     }
     let de = serde_yaml::Deserializer::from_str(text);
     match serde_path_to_error::deserialize::<_, T>(de) {
@@ -111,6 +117,14 @@ pub fn parse<T: DeserializeOwned>(path: &Path, text: &str) -> Result<T> {
             let inner = e.into_inner();
             let location = inner.location().map(|l| (l.line(), l.column()));
             let message = plain_words(&bare_message(&inner.to_string()));
+            // the scanner's own errors are of the text, not of the key parsed before them
+            if let Some(syntax) = syntax_words(&message) {
+                return Err(Error::at(path, location, "", syntax));
+            }
+            let message = message.replace(
+                "unknown variant ``, expected",
+                "found nothing (null), expected",
+            );
             // serde reports an unknown key against its parent: name the key itself.
             let key = match unknown_field_name(&message) {
                 Some(field) if key.is_empty() => field,
@@ -186,6 +200,20 @@ fn bare_message(display: &str) -> String {
         }
     }
     s
+}
+
+/// YAML's scanner errors in a reader's words, without the place the error gives already
+/// ("… at line 12 column 1, while scanning a plain scalar"); None for other messages.
+fn syntax_words(message: &str) -> Option<String> {
+    if message.contains("found a tab character") {
+        return Some(
+            "a tab character where YAML expects indentation: indent with spaces".to_string(),
+        );
+    }
+    let (what, _) = message.split_once(" at line ")?;
+    message
+        .contains(", while ")
+        .then(|| format!("{what} (YAML syntax)"))
 }
 
 /// serde's "invalid type: string \"high\", expected f64" in a reader's words, as the contract

@@ -236,6 +236,9 @@ pub(crate) fn load_obj(path: &Path) -> Result<MeshData> {
     let bytes = std::fs::read(path).map_err(|e| Error::io(path, "cannot read file", e))?;
     let text = std::str::from_utf8(&bytes)
         .map_err(|_| Error::file(path, "cannot parse OBJ: the file is not UTF-8 text"))?;
+    // a byte-order mark (Windows editors write one) would hide the first line's keyword
+    let bom = text.len() - text.trim_start_matches('\u{feff}').len();
+    let (text, bytes) = (&text[bom..], &bytes[bom..]);
     let mut names: Vec<String> = Vec::new();
     let mut index: HashMap<String, usize> = HashMap::new();
     for line in text.lines() {
@@ -437,15 +440,25 @@ impl PropertyAccess for PlySkip {
 pub(crate) fn load_ply(path: &Path) -> Result<MeshData> {
     let f = std::fs::File::open(path).map_err(|e| Error::io(path, "cannot read file", e))?;
     let mut reader = Reader::new(BufReader::with_capacity(1 << 20, f));
-    // the ply crate's messages run over several lines (the line, the text, the cause): one
+    // the ply crate's messages run over several lines (the line, the text, the cause, its
+    // parser's debug dump): one, with the file's line as the location where it gives one
     let bad = |e: &dyn std::fmt::Display| {
         let text = e.to_string();
         let one: Vec<&str> = text
             .lines()
             .map(str::trim)
-            .filter(|l| !l.is_empty())
+            .filter(|l| !l.is_empty() && !l.starts_with("Error: ParseError"))
             .collect();
-        Error::file(path, format!("cannot parse PLY: {}", one.join("; ")))
+        let mut message = one.join("; ");
+        let line = message
+            .strip_prefix("Line ")
+            .and_then(|r| r.split_once(": "))
+            .and_then(|(n, rest)| Some((n.parse::<usize>().ok()?, rest.to_string())));
+        if let Some((n, rest)) = line {
+            message = rest;
+            return Error::line(path, n, format!("cannot parse PLY: {message}"));
+        }
+        Error::file(path, format!("cannot parse PLY: {message}"))
     };
     let vparser = Parser::<PlyVertex>::new();
     let fparser = Parser::<PlyFace>::new();

@@ -761,6 +761,28 @@ fn ply_ascii_and_binary() {
         e.contains("cannot parse PLY") && e.lines().count() == 1,
         "{e}"
     );
+    // at the file's line, without the parser's internals
+    let line = broken.lines().position(|l| l.starts_with("zero")).unwrap() + 1;
+    assert!(e.contains(&format!("broken.ply:{line}: ")), "{e}");
+    assert!(!e.contains("ParseError") && !e.contains("Line "), "{e}");
+}
+
+/// An OBJ file that starts with a byte-order mark (as Windows editors write) reads as without.
+#[test]
+fn an_obj_with_a_byte_order_mark_loads() {
+    let d = tmp("obj_bom");
+    write(
+        &d,
+        "bom.obj",
+        "\u{feff}v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n",
+    );
+    let p = write(
+        &d,
+        "scene.yaml",
+        "name: bom\nmaterials:\n  soil: { reflectance: 0.2 }\nobjects:\n  - mesh: { file: bom.obj, material: soil }\n",
+    );
+    let scene = Scene::load(&p, 1064.0).unwrap();
+    assert_eq!(scene.stats().distinct_triangles, 1);
 }
 
 /// Objects placed by equal instance tables (a tree's foliage and trunk) are traced as one mesh,

@@ -193,7 +193,7 @@ fn empty_mesh() {
         &[
             "empty.obj",
             "no triangles",
-            "scene.yaml: objects[1].mesh.file",
+            "scene.yaml:6: objects[1].mesh.file",
         ],
     );
 }
@@ -236,7 +236,7 @@ fn instance_row_with_wrong_column_count() {
             "trees.csv:4:",
             "columns",
             "6",
-            "scene.yaml: objects[1].mesh.instances",
+            "scene.yaml:6: objects[1].mesh.instances",
         ],
     );
 }

@@ -37,11 +37,21 @@ enum Source {
     },
 }
 
+/// Where the scene file names a file, for the messages of errors in that file:
+/// `scene.yaml:12: objects[1].mesh.file`.
+fn named_at(doc: &Doc, key: &str) -> String {
+    match crate::campaign::yaml::locate(&doc.text, key) {
+        Some((line, _)) => format!("{}:{line}: {key}", doc.path.display()),
+        None => format!("{}: {key}", doc.path.display()),
+    }
+}
+
 impl Source {
     fn load(&self, scene: &Path) -> Result<MeshData> {
         Ok(match self {
-            Source::Mesh(p, named_at) => mesh::load_mesh(p)
-                .map_err(|e| e.within(format!("{}: {named_at}", scene.display())))?,
+            Source::Mesh(p, named_at) => {
+                mesh::load_mesh(p).map_err(|e| e.within(named_at.clone()))?
+            }
             Source::Plane { z, a, b } => mesh::plane(scene, *z, *a, *b)?,
             Source::Heightfield {
                 path,
@@ -49,7 +59,7 @@ impl Source {
                 origin,
                 named_at,
             } => {
-                let within = |e: Error| e.within(format!("{}: {named_at}", scene.display()));
+                let within = |e: Error| e.within(named_at.clone());
                 let text = crate::error::read_text(path).map_err(within)?;
                 let grid = parse_grid(path, &text).map_err(within)?;
                 mesh::heightfield(path, &grid, *cell_m, *origin).map_err(within)?
@@ -493,7 +503,7 @@ impl Objects<'_> {
             path: p,
             cell_m: h.cell_m,
             origin,
-            named_at: format!("{key}.file"),
+            named_at: named_at(doc, &format!("{key}.file")),
         });
         Ok(ObjectPlan {
             key,
@@ -537,15 +547,18 @@ impl Objects<'_> {
             .mesh_sources
             .entry(canonical.clone())
             .or_insert_with(|| {
-                sources.push(Source::Mesh(canonical, format!("{key}.file")));
+                sources.push(Source::Mesh(
+                    canonical,
+                    named_at(doc, &format!("{key}.file")),
+                ));
                 sources.len() - 1
             });
         let rows = match &m.instances {
             Some(name) => {
                 let p = existing(doc, &format!("{key}.instances"), name)?;
                 self.files.push(p.clone());
-                let within =
-                    |e: Error| e.within(format!("{}: {key}.instances", doc.path.display()));
+                let place = named_at(doc, &format!("{key}.instances"));
+                let within = |e: Error| e.within(place.clone());
                 let text = crate::error::read_text(&p).map_err(within)?;
                 Some(parse_instances(&p, &text).map_err(within)?)
             }

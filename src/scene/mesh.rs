@@ -259,8 +259,7 @@ pub(crate) fn load_obj(path: &Path) -> Result<MeshData> {
         })
         .collect();
     let header = format!("mtllib {NAMES_MTL}\n");
-    let mut reader =
-        BufReader::new(Cursor::new(header.into_bytes()).chain(Cursor::new(bytes)));
+    let mut reader = BufReader::new(Cursor::new(header.into_bytes()).chain(Cursor::new(bytes)));
     let options = tobj::LoadOptions {
         triangulate: true,
         single_index: true,

@@ -270,7 +270,13 @@ fn out_of_range_numbers() {
             "receiver_area_m2: 0.1\n  detector_response_fwhm_ns: 1e300",
             "instrument.detector_response_fwhm_ns",
         ),
-        // a waveform's samples past what GEDI's 16-bit rx_sample_count holds
+        // a waveform's samples past what GEDI's 16-bit rx_sample_count holds, given or as
+        // the scene's ranges and the pulse's length make them
+        (
+            "  pulse_fwhm_ns: 2",
+            "  pulse_fwhm_ns: 20\n  bin_ns: 0.001",
+            "instrument.bin_ns: the scene's ranges make gates of",
+        ),
         (
             "receiver_area_m2: 0.1",
             "receiver_area_m2: 0.1\n  range_gate: { start_ns: 0, bins: 70000 }",
@@ -312,11 +318,27 @@ fn bad_yaml_syntax() {
             ][..],
         ),
         (
+            "  kind: static",
+            "\tkind: static",
+            &[
+                "campaign.yaml:11:",
+                "a tab character where YAML expects indentation",
+            ][..],
+        ),
+        (
             "kind: static",
             "kind:",
             &[
                 "campaign.yaml:11:",
-                "platform.kind: found nothing (null), expected one of",
+                "platform.kind: found nothing, expected one of",
+            ][..],
+        ),
+        (
+            "kind: static",
+            "kind: ~",
+            &[
+                "campaign.yaml:11:",
+                "platform.kind: found nothing, expected one of",
             ][..],
         ),
     ] {
@@ -331,7 +353,7 @@ fn bad_yaml_syntax() {
 /// refused at `name`.
 #[test]
 fn names_that_cannot_name_a_folder() {
-    for name in ["~", "\"a\\nb\"", "a/b", "\"\\ttab\""] {
+    for name in ["~", "null", "\"a\\nb\"", "a/b", "\"\\ttab\""] {
         let c = CAMPAIGN.replace("name: bad", &format!("name: {name}"));
         let (code, err, _) = check("bad_name", &c, SCENE);
         assert_one_message(
@@ -365,6 +387,17 @@ fn deeply_nested_brackets() {
         &err,
         &["campaign.yaml:11:1009", "kind", "nested more than 1000"],
     );
+    // an apostrophe inside a plain value, or an escaped quote in a quoted one, opens no
+    // quote that would hide the brackets after it
+    for name in ["it's", "\"a\\\"b\""] {
+        let c = c.replace("name: bad", &format!("name: {name}"));
+        let (code, err, _) = check("deep_apostrophe", &c, SCENE);
+        assert_one_message(
+            code,
+            &err,
+            &["campaign.yaml:11:1009", "nested more than 1000"],
+        );
+    }
     let s = SCENE.replace("z: 0,", &format!("z: 0, tag: {deep}"));
     let (code, err, _) = check("deep_scene", CAMPAIGN, &s);
     assert_one_message(code, &err, &["scene.yaml:5:", "nested more than 1000"]);

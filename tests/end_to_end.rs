@@ -1180,6 +1180,24 @@ fn staged_run_equals_one_shot_run() {
         err.contains("stage products must run again (products.json is not what it wrote)"),
         "{err}"
     );
+    // and over a damaged waveform part
+    let part = staged.join("waveforms/part-00000.parquet");
+    let mut bytes = std::fs::read(&part).unwrap();
+    bytes.push(b'x');
+    std::fs::write(&part, bytes).unwrap();
+    let (code, _, err) = lidarsim(&[
+        "run",
+        camp.to_str().unwrap(),
+        "--out",
+        staged.to_str().unwrap(),
+        "--stages",
+        "products",
+    ]);
+    assert_eq!(code, 1, "{err}");
+    assert!(
+        err.contains("stage simulate must run again (waveforms/part-00000.parquet"),
+        "{err}"
+    );
 }
 
 fn copy_tree(from: &Path, to: &Path) {

@@ -187,6 +187,18 @@ fn resume_redoes_what_changed_and_nothing_else() {
         assert!(out.join("points.las").is_file() && out.join("dsm/report.json").is_file());
         last = m;
     }
+    // products no longer asked for go with the edit: LAZ for LAS, no DSM
+    let text = std::fs::read_to_string(camp).unwrap();
+    let text = text.split("products:").next().unwrap().to_string();
+    std::fs::write(
+        camp,
+        format!("{text}products: {{ points: true, points_format: laz }}\n"),
+    )
+    .unwrap();
+    let log = run_ok(&["run", camp, "--out", out_s, "--resume"]);
+    assert!(log.contains("simulate: up to date"), "{log}");
+    assert!(out.join("points.laz").is_file(), "{log}");
+    assert!(!out.join("points.las").exists() && !out.join("dsm").exists());
     assert_eq!(
         std::fs::read(out.join("waveforms/part-00000.parquet")).unwrap(),
         part

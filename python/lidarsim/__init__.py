@@ -86,7 +86,7 @@ def _path(value: Any, key: str) -> str:
 def _folder(value: Any, key: str) -> str:
     """A folder path, not empty (an empty one would be the current folder, unasked)."""
     p = _path(value, key)
-    if not p.strip():
+    if not p:
         raise _bad(key, "expected a folder path, found an empty one")
     return p
 
@@ -141,32 +141,22 @@ def _plain(value: Any) -> Any:
     raise TypeError(f"{type(value).__name__} is not a number, a string, a list or a mapping")
 
 
-def _too_large(value: Any, path: str) -> Optional[Tuple[str, int]]:
-    """The first whole number in ``value`` (mappings and lists walked) that no 64-bit integer
-    holds, with its dotted path below ``path``; None if there is none."""
+def _in_64_bits(value: Any) -> Any:
+    """``value`` with every whole number no 64-bit integer holds made a float, as a YAML
+    reader takes 10**20: a key that wants a number takes it, one that wants a whole number
+    says so at its own name (the core's reader has no integers past 64 bits)."""
     if isinstance(value, int) and not isinstance(value, bool):
-        return None if -(2**63) <= value < 2**64 else (path, value)
+        return value if -(2**63) <= value < 2**64 else float(value)
     if isinstance(value, Mapping):
-        for k, v in value.items():
-            found = _too_large(v, f"{path}.{k}" if path else str(k))
-            if found:
-                return found
-    elif isinstance(value, (list, tuple)):
-        for i, v in enumerate(value):
-            found = _too_large(v, f"{path}[{i}]")
-            if found:
-                return found
-    return None
+        return {k: _in_64_bits(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_in_64_bits(v) for v in value]
+    return value
 
 
 def _json(value: Any, key: str, indent: Optional[int] = None) -> str:
-    """``value`` as the JSON the core reads, or an :class:`InputError` naming ``key`` (or,
-    for a number too large, the key that holds it: ``instrument.max_returns``)."""
-    # a campaign's or an override's keys are campaign keys themselves; the other mappings
-    # are sections (instrument, sun) whose keys are named below them
-    found = _too_large(value, "" if key in ("campaign", "overrides") else key)
-    if found:
-        raise _bad(found[0] or key, f"expected a whole number from -2^63 to 2^64 - 1, found {found[1]}")
+    """``value`` as the JSON the core reads, or an :class:`InputError` naming ``key``."""
+    value = _in_64_bits(value)
     try:
         return json.dumps(value, default=_plain, allow_nan=False, indent=indent)
     except ValueError:
@@ -514,6 +504,9 @@ class Scene:
         bands = None
         if wavelength_nm is not None:
             several = not isinstance(wavelength_nm, (str, bytes)) and isinstance(wavelength_nm, Iterable)
+            # a numpy scalar or 0-d array is a number
+            if getattr(wavelength_nm, "shape", None) == () and callable(getattr(wavelength_nm, "item", None)):
+                wavelength_nm, several = wavelength_nm.item(), False
             values = list(wavelength_nm) if several else [wavelength_nm]
             try:
                 if any(isinstance(w, (bool, str, bytes)) for w in values):
@@ -587,6 +580,8 @@ class Scene:
             rays_per_pulse=_whole(rays, "rays", least=1, most=2**32 - 1),
             max_order=_whole(max_order, "max_order", least=1, most=100_000),
         )
+        if getattr(wavelength_nm, "shape", None) == () and callable(getattr(wavelength_nm, "item", None)):
+            wavelength_nm = wavelength_nm.item()
         if (
             wavelength_nm is None
             or isinstance(wavelength_nm, (str, bytes, bool))

@@ -1041,18 +1041,18 @@ impl Campaign {
     pub fn validate(&self, doc: &Doc) -> Result<()> {
         let c = Check { doc };
         let name = self.name.trim();
-        // `~` is YAML's null, which serde reads as that text
+        // YAML's null (`~`, `null`), which serde reads as that text
         if name.is_empty()
             || name == "."
             || name == ".."
-            || name == "~"
+            || ["~", "null", "Null", "NULL"].contains(&name)
             || self.name.contains(['/', '\\'])
             || self.name.chars().any(char::is_control)
         {
             return Err(doc.error(
                 "name",
                 "must be a non-empty name without slashes or control characters (line breaks, \
-                 tabs), other than . and .. (it names the run folder)",
+                 tabs), other than . and .. and YAML's null (~, null): it names the run folder",
             ));
         }
         // a folder's name: file systems hold 255 bytes in one
@@ -1140,7 +1140,8 @@ impl Campaign {
                     "instrument.false_alarm_rate",
                     format!(
                         "must lie strictly between 0 and 1 (false returns per pulse from noise \
-                         alone; default 0.001), found {a}"
+                         alone; default 0.001), found {}",
+                        shown(a)
                     ),
                 ));
             }
@@ -1267,7 +1268,7 @@ impl Campaign {
                 if !(q > 0.0 && q < 1.0) {
                     return Err(doc.error(
                         "sun.selection_probability",
-                        format!("must lie strictly between 0 and 1, found {q}"),
+                        format!("must lie strictly between 0 and 1, found {}", shown(q)),
                     ));
                 }
             }
@@ -1275,7 +1276,10 @@ impl Campaign {
                 if !(f > 0.0 && f <= 1.0) {
                     return Err(doc.error(
                         "sun.share",
-                        format!("must lie in (0, 1], the share of samples that trace the sun, found {f}"),
+                        format!(
+                            "must lie in (0, 1], the share of samples that trace the sun, found {}",
+                            shown(f)
+                        ),
                     ));
                 }
             }

@@ -104,7 +104,7 @@ pub fn parse<T: DeserializeOwned>(path: &Path, text: &str) -> Result<T> {
         // text that is no YAML at all (`scene: [x` unclosed): the typed reading would meet a
         // type before the end of the text, and blame the key
         let location = e.location().map(|l| (l.line(), l.column()));
-        if let Some(syntax) = syntax_words(&bare_message(&message)) {
+        if let Some(syntax) = syntax_words(&bare_message(&message), text, location) {
             return Err(Error::at(path, location, "", syntax));
         }
     }
@@ -118,13 +118,16 @@ pub fn parse<T: DeserializeOwned>(path: &Path, text: &str) -> Result<T> {
             let location = inner.location().map(|l| (l.line(), l.column()));
             let message = plain_words(&bare_message(&inner.to_string()));
             // the scanner's own errors are of the text, not of the key parsed before them
-            if let Some(syntax) = syntax_words(&message) {
+            if let Some(syntax) = syntax_words(&message, text, location) {
                 return Err(Error::at(path, location, "", syntax));
             }
-            let message = message.replace(
-                "unknown variant ``, expected",
-                "found nothing (null), expected",
-            );
+            let mut message = message;
+            for nothing in ["``", "`~`", "`null`", "`Null`", "`NULL`"] {
+                message = message.replace(
+                    &format!("unknown variant {nothing}, expected"),
+                    "found nothing, expected",
+                );
+            }
             // serde reports an unknown key against its parent: name the key itself.
             let key = match unknown_field_name(&message) {
                 Some(field) if key.is_empty() => field,
@@ -146,16 +149,22 @@ const MAX_FLOW_DEPTH: usize = 1000;
 /// comments are skipped roughly (a bracket counted in a plain scalar only makes the count
 /// higher, and nothing near the limit is a campaign).
 fn too_deep(path: &Path, text: &str) -> Result<()> {
-    let (mut depth, mut quote) = (0usize, None);
+    let (mut depth, mut quote, mut escaped) = (0usize, None, false);
     for (line_k, line) in text.split('\n').enumerate() {
         let (mut comment, mut prev) = (false, ' ');
         for (col, c) in line.chars().enumerate() {
             match (quote, c) {
+                // `\"` inside a double-quoted scalar does not close it
+                (Some('"'), _) if escaped => escaped = false,
+                (Some('"'), '\\') => escaped = true,
                 (Some(q), _) if c == q => quote = None,
                 (Some(_), _) => {}
                 _ if comment => {}
                 (None, '#') if prev.is_whitespace() => comment = true,
-                (None, '"' | '\'') => quote = Some(c),
+                // a quote opens a quoted scalar only where a token starts (`it's` is plain)
+                (None, '"' | '\'') if prev.is_whitespace() || "[{,:".contains(prev) => {
+                    quote = Some(c)
+                }
                 (None, '[' | '{') => {
                     depth += 1;
                     if depth > MAX_FLOW_DEPTH {
@@ -204,8 +213,17 @@ fn bare_message(display: &str) -> String {
 
 /// YAML's scanner errors in a reader's words, without the place the error gives already
 /// ("… at line 12 column 1, while scanning a plain scalar"); None for other messages.
-fn syntax_words(message: &str) -> Option<String> {
-    if message.contains("found a tab character") {
+fn syntax_words(message: &str, text: &str, at: Option<(usize, usize)>) -> Option<String> {
+    // a tab in the indentation of the line the scanner stopped at, whatever it calls it
+    let tab_indented = at
+        .and_then(|(line, _)| text.lines().nth(line.saturating_sub(1)))
+        .is_some_and(|l| {
+            l.chars()
+                .take_while(|c| c.is_whitespace() || *c == '-')
+                .any(|c| c == '\t')
+        });
+    if message.contains("found a tab character") || (tab_indented && message.contains(" at line "))
+    {
         return Some(
             "a tab character where YAML expects indentation: indent with spaces".to_string(),
         );
@@ -234,8 +252,12 @@ pub(crate) fn plain_words(message: &str) -> String {
     } else if let Some((kind, v)) = found.split_once(" `") {
         match kind {
             // "integer `18446744073709551616` as u128": the value alone
-            "integer" | "floating point" | "boolean" | "character" => {
-                v.split('`').next().unwrap_or(v).to_string()
+            "integer" | "boolean" | "character" => v.split('`').next().unwrap_or(v).to_string(),
+            // 1e300 as 1e300, not as its 301 digits
+            "floating point" => {
+                let text = v.split('`').next().unwrap_or(v);
+                text.parse::<f64>()
+                    .map_or_else(|_| text.to_string(), crate::campaign::shown)
             }
             _ => found.to_string(),
         }

@@ -66,6 +66,7 @@ pub fn check(path: &Path) -> Result<CheckReport> {
     let scene_load_s = t.elapsed().as_secs_f64();
     // before the probes below, which trace pulses in gates of the campaign's size
     super::memory::fits(&loaded, &scene, &plan)?;
+    mission_fits(&loaded, &scene, &plan)?;
     let s = scene.stats();
     let (lo, hi) = scene.bounds();
     let water = scene.water.as_ref().map(|w| {
@@ -146,6 +147,40 @@ pub fn check(path: &Path) -> Result<CheckReport> {
             .chain(scene_warnings(c, &scene, &plan))
             .collect(),
     })
+}
+
+/// Most samples GEDI's `rx_sample_count` (16 bits) gives a shot of `waveforms_l1b.h5`.
+const L1B_MAX_SAMPLES: usize = u16::MAX as usize;
+
+/// A waveform instrument's gates against what `waveforms_l1b.h5` holds a shot, before any
+/// pulse is traced: the gates of up to 64 pulses spread over the plan, as the scene's ranges
+/// size them (a `range_gate` is checked with the campaign).
+pub fn mission_fits(loaded: &crate::campaign::Loaded, scene: &Scene, plan: &Plan) -> Result<()> {
+    let inst = &loaded.campaign.instrument;
+    if inst.kind != crate::campaign::InstrumentKind::Waveform || inst.range_gate.is_some() {
+        return Ok(());
+    }
+    let most = plan
+        .spread(64, loaded.campaign.seed)
+        .iter()
+        .map(|p| {
+            let near = scene.bounds_near(p.origin, p.direction);
+            crate::sensor::Gate::for_pulse(inst, p.origin, p.direction, near).bins
+        })
+        .max()
+        .unwrap_or(0);
+    if most <= L1B_MAX_SAMPLES {
+        return Ok(());
+    }
+    Err(loaded.doc.error(
+        "instrument.bin_ns",
+        format!(
+            "the scene's ranges make gates of {most} bins of {} ns, more than the 65535 samples \
+             waveforms_l1b.h5 gives a shot (GEDI's rx_sample_count is 16 bits): use wider bins \
+             or a range_gate",
+            inst.bin_ns
+        ),
+    ))
 }
 
 /// What `check` and the run log warn of a campaign over its scene: where its pulses aim

@@ -541,6 +541,7 @@ fn run_single(
 
     let scene = cache.get(&loaded.scene_path, loaded.campaign.wavelength_nm.all())?;
     memory::fits(loaded, scene, &plan)?;
+    check::mission_fits(loaded, scene, &plan)?;
     for w in check::scene_warnings(&loaded.campaign, scene, &plan) {
         log(&format!("warning: {w}"));
     }
@@ -586,6 +587,7 @@ fn run_single(
             ));
             run.manifest.stages.remove(Stage::Simulate.name());
             invalidate_after(&mut run.manifest, out, Stage::Simulate);
+            run.damaged.push((Stage::Simulate, bad));
         }
     }
     if run.wanted(Stage::Simulate) && !run.done(Stage::Simulate, &fp_sim) {
@@ -622,6 +624,9 @@ fn run_single(
         return Err(run.missing(Stage::Products));
     }
     if run.wanted(Stage::Products) && !run.done(Stage::Products, &fp_products) {
+        // products of other `products:` (a DSM no longer asked for, LAS for LAZ) go with
+        // their record, before this stage writes its own
+        invalidate_after(&mut run.manifest, out, Stage::Simulate);
         products_stage(&mut run, loaded, scene, &plan, parts, &fp_products)?;
     }
     let fp_report = fingerprint(&[fp_products.as_bytes(), b"report"]);

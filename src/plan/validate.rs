@@ -350,7 +350,10 @@ pub fn numbers(doc: &Doc, p: &Platform) -> Result<()> {
                     if !(0.0..=180.0).contains(&z) {
                         return Err(doc.error(
                             key,
-                            format!("zenith angles must lie within [0, 180] degrees, found {z}"),
+                            format!(
+                                "zenith angles must lie within [0, 180] degrees, found {}",
+                                crate::campaign::shown(z)
+                            ),
                         ));
                     }
                 }
@@ -407,7 +410,10 @@ fn als(c: &Check, p: &Platform) -> Result<()> {
                 if t.abs() > 90.0 {
                     return Err(doc.error(
                         key,
-                        format!("must lie between -90 and 90 degrees, found {t}"),
+                        format!(
+                            "must lie between -90 and 90 degrees, found {}",
+                            crate::campaign::shown(t)
+                        ),
                     ));
                 }
             }
@@ -426,7 +432,7 @@ fn als(c: &Check, p: &Platform) -> Result<()> {
                 if !(d > 0.0 && d <= 1.0) {
                     return Err(doc.error(
                         "platform.scanner.duty",
-                        format!("must be in (0, 1], found {d}"),
+                        format!("must be in (0, 1], found {}", crate::campaign::shown(d)),
                     ));
                 }
             }

@@ -173,7 +173,7 @@ fn photons_fit(loaded: &Loaded, rows: &[Waveform]) -> Result<()> {
     Err(loaded.doc.error(
         "products.photons",
         format!(
-            "the pulses would record about {:.1e} photon events a pulse (up to {:.1e}), {:.1e} in a part of {} pulses, more than the {:.0e} a part may hold: photon events are for photon-counting instruments, which record a few a shot; lower instrument.pulse_energy_j or receiver_area_m2, set dead_time_ns, or leave photons out",
+            "the pulses would record about {:.1e} photon events a pulse (up to {:.1e}), {:.1e} in a part of {} pulses, more than the {:.0e} a part may hold: a photon-counting detector records a few a shot (ATLAS, MABEL); lower instrument.pulse_energy_j or receiver_area_m2, set instrument.dead_time_ns, or leave photons out",
             total / rows.len().max(1) as f64,
             most,
             total,

@@ -1164,40 +1164,29 @@ fn staged_run_equals_one_shot_run() {
     run_ok(&camp, &oneshot, &[]);
     assert_same_files(&staged, &oneshot);
 
-    // a later stage alone over an earlier stage's damaged file: the message says so
-    std::fs::write(staged.join("products.json"), "{}").unwrap();
-    let (code, _, err) = lidarsim(&[
-        "run",
-        camp.to_str().unwrap(),
-        "--out",
-        staged.to_str().unwrap(),
-        "--resume",
-        "--stages",
-        "report",
-    ]);
-    assert_eq!(code, 1, "{err}");
-    assert!(
-        err.contains("stage products must run again (products.json is not what it wrote)"),
-        "{err}"
-    );
-    // and over a damaged waveform part
+    // a later stage alone over an earlier stage's damaged file (the products' summary, then
+    // a waveform part): the message names the stage to run again and the file
     let part = staged.join("waveforms/part-00000.parquet");
     let mut bytes = std::fs::read(&part).unwrap();
     bytes.push(b'x');
-    std::fs::write(&part, bytes).unwrap();
-    let (code, _, err) = lidarsim(&[
-        "run",
-        camp.to_str().unwrap(),
-        "--out",
-        staged.to_str().unwrap(),
-        "--stages",
-        "products",
-    ]);
-    assert_eq!(code, 1, "{err}");
-    assert!(
-        err.contains("stage simulate must run again (waveforms/part-00000.parquet"),
-        "{err}"
-    );
+    for (damage, stage, says) in [
+        (
+            (staged.join("products.json"), b"{}".to_vec()),
+            "report",
+            "stage products must run again (products.json is not what it wrote)",
+        ),
+        (
+            (part, bytes),
+            "products",
+            "stage simulate must run again (waveforms/part-00000.parquet",
+        ),
+    ] {
+        std::fs::write(&damage.0, &damage.1).unwrap();
+        let (c, o) = (camp.to_str().unwrap(), staged.to_str().unwrap());
+        let (code, _, err) = lidarsim(&["run", c, "--out", o, "--stages", stage]);
+        assert_eq!(code, 1, "{err}");
+        assert!(err.contains(says), "{err}");
+    }
 }
 
 fn copy_tree(from: &Path, to: &Path) {

@@ -1122,6 +1122,14 @@ fn trajectory_files_stream_and_their_errors_are_located() {
         "time_s,x,y,z,roll_deg,pitch_deg,heading_deg\n0,0,0,100,0,0,90\n1,1e300,0,100,0,0,90\n",
     );
     assert!(e.contains("g.csv:3:3: x:"), "{e}");
+    let e = bad(
+        "h.csv",
+        "time_s,x,y,z,roll_deg,pitch_deg,heading_deg\n0,0,0,100,0,0,90\n1,5,0,100,0,0,1e308\n",
+    );
+    assert!(
+        e.contains("h.csv:3:15: heading_deg: must be an angle in degrees"),
+        "{e}"
+    );
     // a classic Mac OS export ends its lines in CR alone: said so, in one short line
     let rows: String = (0..2000).map(|k| format!("{k},0,0,100,0,0,90\r")).collect();
     let e = bad(

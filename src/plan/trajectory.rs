@@ -373,14 +373,16 @@ fn parse_row(
                 ))
             }
         };
-        // GPS seconds to the year 2296; positions within 10,000 km of the frame's origin
+        // GPS seconds to the year 2296; positions within 10,000 km of the frame's origin;
+        // attitude angles within ±10^5 degrees (a heading unwrapped over many turns is one,
+        // 10^308 is none)
         let (limit, what) = match c {
             0 => (1e10, "a GPS time in seconds within ±10^10"),
             1..=3 => (
                 1e7,
                 "a coordinate in metres within 10,000 km of the frame's origin",
             ),
-            _ => (f64::INFINITY, ""),
+            _ => (1e5, "an angle in degrees within ±10^5"),
         };
         let off = if (1..=3).contains(&c) {
             origin[c - 1]

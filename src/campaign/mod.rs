@@ -751,6 +751,9 @@ impl Campaign {
             }
             PlatformKind::Spaceborne => {
                 p.off_nadir_deg.get_or_insert(0.0);
+                for b in p.beams.iter_mut().flatten() {
+                    b.relative_energy.get_or_insert(1.0);
+                }
             }
             _ => {}
         }
@@ -779,6 +782,12 @@ impl Campaign {
         let i = &mut c.instrument;
         i.receiver_offset_m.get_or_insert([0.0; 3]);
         i.false_alarm_rate_per_pulse = Some(self.instrument.false_alarm_rate());
+        // the detector's: a photon's chance to count, and counts without one
+        i.quantum_efficiency.get_or_insert(1.0);
+        i.dark_count_hz.get_or_insert(0.0);
+        if i.kind == InstrumentKind::PhotonCounting {
+            i.dead_time_ns.get_or_insert(0.0);
+        }
         if let Some(d) = &mut i.digitiser {
             d.saturation = Some(d.saturation());
         }

@@ -501,9 +501,6 @@ fn run_single(
     let start = Instant::now();
     let mut run = RunFolder::open(loaded, out, opts)?;
     let before = run.manifest.clone();
-    for w in loaded.campaign.warnings() {
-        log(&format!("warning: {w}"));
-    }
     let resolved = loaded.resolved_yaml();
     write_text_atomic(&out.join("campaign.resolved.yaml"), &resolved)?;
     // the campaign with its scene as the file names it, not as found from the working folder:
@@ -524,6 +521,11 @@ fn run_single(
         env!("CARGO_PKG_VERSION").as_bytes(),
     ]);
     let plan = plan_stage(&mut run, loaded, &fp_plan)?;
+    // after the plan, which a `--stages` without it refuses first: an error then is the one
+    // message on stderr
+    for w in loaded.campaign.warnings() {
+        log(&format!("warning: {w}"));
+    }
 
     let mut summary = RunSummary {
         out: out.to_path_buf(),

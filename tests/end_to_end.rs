@@ -789,6 +789,9 @@ fn the_resolved_campaign_holds_its_defaults_and_runs_the_same() {
         Some(1023.0),
         "{text}"
     );
+    for (key, value) in [("quantum_efficiency", 1.0), ("dark_count_hz", 0.0)] {
+        assert_eq!(r["instrument"][key].as_f64(), Some(value), "{key}: {text}");
+    }
     let again = dir.join("track_again");
     run_ok(&write(&dir, "track_resolved.yaml", &text), &again, &[]);
     for file in [

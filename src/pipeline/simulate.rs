@@ -7,7 +7,8 @@ use crate::fsutil::{Committer, Pending};
 use crate::plan::{Plan, Pulse};
 use crate::progress::{log, progress};
 use crate::scene::Scene;
-use crate::transport::{simulate_pulse, PulseSetup, Scratch};
+use crate::transport::order_tail::{pulse_se, tail_bounds, Batch};
+use crate::transport::{simulate_pulse, simulate_pulse_batches, PulseSetup, Scratch};
 use crate::waveform::file::{part_name, waveforms_pending, Parts};
 use crate::waveform::pulse::PulseSimulator;
 use crate::waveform::Waveform;
@@ -384,15 +385,16 @@ pub const ORDER_TAIL_FRACTION: f64 = 0.1;
 /// `simulation.max_order: auto`: the lowest order k past which the received energy's whole
 /// tail is below [`ORDER_TAIL_FRACTION`] of a pulse's standard error, and why.
 ///
-/// The pilot pulses are traced with the method chosen to [`MaxOrder::AUTO_CAP`]. A pulse's
-/// tail past k is the sum of its energies of orders k + 1 to the cap (every order, not the
-/// next alone: at albedo 0.9 the tail is about ten times its first term), and bounded from
-/// above by that sum plus three standard errors, where the sum's standard error is taken as
-/// the sum of the orders' (never less than the true one, whatever the orders' correlation).
-/// The bound, averaged over the pilot pulses, is held against the root mean square of their
-/// standard errors scaled to the campaign's rays (the pilot's rays over the campaign's, square
-/// rooted). Energy past the cap is not seen: the cap is the default order, so `auto` never
-/// traces less than the default would have without evidence.
+/// The pilot pulses are traced with the method chosen to [`MaxOrder::AUTO_CAP`], in batches of
+/// rays ([`simulate_pulse_batches`], the run's own draws). A pulse's tail past k is the sum of
+/// its energies of orders k + 1 to the cap (every order, not the next alone: at albedo 0.9 the
+/// tail is about ten times its first term), bounded from above as [`tail_bounds`] does: the
+/// pilot's own tail, and past the orders it measures their decay extrapolated, each plus
+/// standard errors from the spread of the batches. The bound, averaged over the pilot pulses,
+/// is held against the root mean square of their standard errors scaled to the campaign's
+/// rays (the pilot's rays over the campaign's, square rooted). Energy past the cap is not
+/// traced: the cap is the default order, so `auto` never traces less than the default would
+/// have without evidence.
 pub fn choose_max_order(loaded: &Loaded, scene: &Scene, plan: &Plan) -> (u32, String) {
     let cap = MaxOrder::AUTO_CAP;
     let (pulses, rays) = pilot_pulses(loaded, plan);
@@ -404,52 +406,56 @@ pub fn choose_max_order(loaded: &Loaded, scene: &Scene, plan: &Plan) -> (u32, St
     trial.campaign.simulation.max_order = MaxOrder::Order(cap);
     let method = trial.campaign.simulation.method;
     let sim = PulseSimulator::new(&trial.campaign, scene);
-    let tallies: Vec<_> = pulses
+    let batches: Vec<Vec<Batch>> = pulses
         .par_iter()
         .with_max_len(leaf_pulses(n, true))
-        // on the run's own streams, unlike the other pilots: the bound is then of the tail of
-        // the very draws the run makes (traced apart, the pilot of the integrating sphere's
-        // one pulse bounds the tail past order 54 by 4.2e-11 J where 32,768 rays find
-        // 7.0e-11 ± 0.7e-11: three standard errors of 2048 rays are no bound on that tail)
-        .map(|p| simulate_pulse(&sim.setup(p, method), rays))
+        .map(|p| simulate_pulse_batches(&sim.setup(p, method), rays))
         .collect();
     let k_max = cap as usize;
-    // per order k (0 = the whole energy): the pulses' tails past k and their squared SE bounds
-    let (mut tail, mut tail_var) = (vec![0.0f64; k_max + 1], vec![0.0f64; k_max + 1]);
-    let mut noise_sq = 0.0;
     let scale = rays as f64 / loaded.campaign.simulation.rays_per_pulse.max(1) as f64;
-    for t in &tallies {
-        let (e, se) = (t.order_energy(), t.order_se());
-        let (mut sum, mut sum_se) = (0.0, 0.0);
-        for k in (0..=k_max).rev() {
-            tail[k] += sum;
-            tail_var[k] += sum_se * sum_se;
-            if k > 0 {
-                sum += e.get(k - 1).copied().unwrap_or(0.0);
-                sum_se += se.get(k - 1).copied().unwrap_or(0.0);
-            }
-        }
-        noise_sq += t.total_se().powi(2) * scale;
-    }
-    let nf = n as f64;
-    let noise = (noise_sq / nf).sqrt();
-    let bound = |k: usize| (tail[k] + 3.0 * tail_var[k].sqrt()) / nf;
-    let total = tail[0] / nf;
+    let noise_sq: f64 = batches.iter().map(|b| pulse_se(b).powi(2) * scale).sum();
+    let noise = (noise_sq / n as f64).sqrt();
+    let bounds = tail_bounds(&batches, k_max);
     let k = (1..=k_max)
-        .find(|&k| bound(k) <= ORDER_TAIL_FRACTION * noise)
+        .find(|&k| bounds.past[k] <= ORDER_TAIL_FRACTION * noise)
         .unwrap_or(k_max);
+    let (seen, total) = (bounds.seen[k], bounds.seen[0]);
     let held = if total > 0.0 {
-        format!("{:.6}", 1.0 - tail[k] / tail[0])
+        format!("{:.6}", 1.0 - seen / total)
     } else {
         "all (none found)".into()
     };
-    let note = format!(
-        "max_order auto chose {k}: past order {k} the received energy is at most {:.3e} J a pulse (the pilot's tail + 3 SE over {n} pulses of {rays} rays, {} to order {cap}), below {ORDER_TAIL_FRACTION} of a pulse's standard error at {} rays ({:.3e} J); orders 1 to {k} hold {held} of the energy",
-        bound(k),
+    let pilot = format!(
+        "{n} pulse{} of {rays} rays, {} to order {cap}, standard errors from the spread of {} batches of rays",
+        if n == 1 { "" } else { "s" },
         method_name(method),
-        loaded.campaign.simulation.rays_per_pulse,
-        noise
+        bounds.batches
     );
+    let t = bounds.sigmas;
+    let how = match bounds.decay {
+        Some(d) if d.last < k_max => format!(
+            "the pilot's tail, with the orders past {} extrapolated at {:.3} of the one before ({}), + {t:.1} SE; {pilot}",
+            d.last,
+            d.ratio,
+            if d.from < d.last {
+                format!("the decay of orders {}-{}", d.from, d.last)
+            } else {
+                format!("order {} over order {}", d.last + 1, d.last)
+            }
+        ),
+        _ => format!("the pilot's tail + {t:.1} SE; {pilot}"),
+    };
+    let rays_asked = loaded.campaign.simulation.rays_per_pulse;
+    let note = if k < k_max {
+        format!(
+            "max_order auto chose {k}: past order {k} the received energy is at most {:.3e} J a pulse ({how}), below {ORDER_TAIL_FRACTION} of a pulse's standard error at {rays_asked} rays ({noise:.3e} J); orders 1 to {k} hold {held} of the energy",
+            bounds.past[k]
+        )
+    } else {
+        format!(
+            "max_order auto chose {k}, the cap: the pilot ({pilot}) bounds the received energy past no lower order below {ORDER_TAIL_FRACTION} of a pulse's standard error at {rays_asked} rays ({noise:.3e} J); orders 1 to {k} hold {held} of the energy it found"
+        )
+    };
     (k as u32, note)
 }
 

@@ -32,6 +32,7 @@ pub mod bands;
 mod bdpt;
 mod bsdf;
 mod mis;
+pub mod order_tail;
 mod tally;
 #[cfg(test)]
 mod tests;
@@ -263,6 +264,57 @@ where
     a
 }
 
+/// Traces chunk `c` of a pulse of `rays` rays into `acc`: rays c·[`CHUNK_RAYS`] on, on the
+/// chunk's own random stream.
+fn trace_chunk(
+    setup: &PulseSetup,
+    sobol: Option<&Sobol2>,
+    rays: u64,
+    c: u64,
+    acc: &mut Accum,
+    bufs: &mut Buffers,
+) {
+    let chunk = CHUNK_RAYS;
+    let mut rng = Rng::new(setup.seed, setup.pulse_id, c);
+    for k in 0..chunk.min(rays - c * chunk) {
+        let first = FirstDims::of(sobol, c * chunk + k);
+        trace_ray(setup, &first, &mut rng, acc, bufs);
+        acc.end_ray();
+    }
+    if setup.bands.is_some() {
+        acc.add_underflows(&bands::take_underflows());
+    }
+}
+
+/// The rays [`simulate_pulse`] traces (the same draws), each chunk's orders kept apart
+/// (the first band's): batches of independent rays, whose spread says how far a figure made
+/// of several orders may be off ([`order_tail`]).
+pub fn simulate_pulse_batches(setup: &PulseSetup, rays: u64) -> Vec<order_tail::Batch> {
+    let sobol = (setup.sampler == Sampler::Sobol).then(|| Sobol2::new(setup.seed, setup.pulse_id));
+    use rayon::prelude::*;
+    (0..rays.div_ceil(CHUNK_RAYS))
+        .into_par_iter()
+        .map(|c| {
+            let mut acc = Accum::new(setup);
+            acc.reset(setup);
+            trace_chunk(
+                setup,
+                sobol.as_ref(),
+                rays,
+                c,
+                &mut acc,
+                &mut Buffers::default(),
+            );
+            let t = acc.band(0);
+            order_tail::Batch {
+                order_sum: t.order_sum.clone(),
+                total_sq: t.total_sq,
+                rays: t.rays,
+            }
+        })
+        .collect()
+}
+
 /// [`simulate_pulse`] in a worker's scratch: the tally returned (the first band's) lives
 /// there until its next pulse, with the other bands' ([`Scratch::band`]).
 pub fn simulate_pulse_in<'s>(setup: &PulseSetup, rays: u64, scratch: &'s mut Scratch) -> &'s Tally {
@@ -272,15 +324,7 @@ pub fn simulate_pulse_in<'s>(setup: &PulseSetup, rays: u64, scratch: &'s mut Scr
     acc.reset(setup);
     let sobol = (setup.sampler == Sampler::Sobol).then(|| Sobol2::new(setup.seed, setup.pulse_id));
     let trace = |c: u64, acc: &mut Accum, bufs: &mut Buffers| {
-        let mut rng = Rng::new(setup.seed, setup.pulse_id, c);
-        for k in 0..chunk.min(rays - c * chunk) {
-            let first = FirstDims::of(sobol.as_ref(), c * chunk + k);
-            trace_ray(setup, &first, &mut rng, acc, bufs);
-            acc.end_ray();
-        }
-        if setup.bands.is_some() {
-            acc.add_underflows(&bands::take_underflows());
-        }
+        trace_chunk(setup, sobol.as_ref(), rays, c, acc, bufs)
     };
     if chunks == 1 {
         // the common case of a campaign pulse: its one chunk is the total (adding it to

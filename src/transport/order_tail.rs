@@ -9,7 +9,8 @@
 //! (the transport's largest eigenvalue, below 1 where light escapes or is absorbed), a share
 //! that grows with the order towards that limit. So the orders past the last one the pilot
 //! measures are extrapolated from the measured ones' decay, and the tail past k is bounded by
-//! the larger of the pilot's own tail and that model, each three standard errors up.
+//! the larger of the pilot's own tail and that model, each three standard errors up (more
+//! where the batches below are few).
 //!
 //! Standard errors come from the spread of the pilot's batches (each pulse's chunks of rays,
 //! or its pulses): the orders of one path are not independent (a path that survives longer

@@ -44,8 +44,25 @@ pub fn progress(len: u64, what: &str) -> ProgressBar {
 pub fn log(line: &str) {
     match sink() {
         Some(f) => f(line),
-        None => eprintln!("lidarsim: {line}"),
+        None => tell(&format!("lidarsim: {line}")),
     }
+}
+
+/// A line on standard error, or nothing where that is closed (`2>&1 | head -1`): the run goes
+/// on and writes its files, which are what it is for.
+pub fn tell(line: &str) {
+    use std::io::Write;
+    let _ = writeln!(std::io::stderr().lock(), "{line}");
+}
+
+/// `text` on standard output. A closed or full output (`| head -1`, `> /dev/full`) is an
+/// error the command ends on (exit code 1), not a panic.
+pub fn say(text: &str) -> crate::error::Result<()> {
+    use std::io::Write;
+    let mut out = std::io::stdout().lock();
+    out.write_all(text.as_bytes())
+        .and_then(|()| out.flush())
+        .map_err(|e| crate::error::Error::msg(format!("cannot write to standard output: {e}")))
 }
 
 /// Gives the memory the allocator holds free back to the system. glibc keeps the blocks a

@@ -559,6 +559,19 @@ fn bad_frames_and_points_formats() {
             &["frame.origin[1]", "finite"][..],
         ),
         ("frame: { crs: EPSG:32631 }\n", 16, &["frame", "origin"][..]),
+        // axes pointing west and south would mirror the scene
+        (
+            "frame: { crs: EPSG:2046, origin: [0, 0, 0] }\n",
+            16,
+            &["frame.crs", "west and south"][..],
+        ),
+        // Krovak has no inverse to latitude and longitude here, which this waveform
+        // instrument's mission files hold: refused before any pulse
+        (
+            "frame: { crs: EPSG:5514, origin: [-700000, -1100000, 0] }\n",
+            16,
+            &["frame.crs", "no inverse projection", "mission files"][..],
+        ),
         (
             "products: { points: true, points_format: copc }\n",
             16,
@@ -963,4 +976,45 @@ fn byte_order_marks_folders_and_bad_flags() {
         let (code, _out, err) = lidarsim(&args);
         assert_one_message(code, &err, &[word]);
     }
+}
+
+/// A standard output that cannot be written (full, or a pipe closed by `head`) ends a command
+/// whose output is its report with exit code 1 and one message, never a panic; a run, whose
+/// files are its result, still writes them and exits 0 when its standard error is full.
+#[test]
+fn full_standard_output_or_error() {
+    let full = std::path::Path::new("/dev/full");
+    if !full.exists() {
+        eprintln!("SKIPPED: this system has no /dev/full to write to");
+        return;
+    }
+    let dir = tmp("bad_full_output");
+    write(&dir, "scene.yaml", SCENE);
+    let campaign = write(&dir, "campaign.yaml", CAMPAIGN);
+    let to_full = || std::fs::OpenOptions::new().write(true).open(full).unwrap();
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_lidarsim"))
+        .args(["check", campaign.to_str().unwrap()])
+        .stdout(to_full())
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_one_message(
+        out.status.code().unwrap_or(-1),
+        &err,
+        &["cannot write to standard output"],
+    );
+    let run = dir.join("run");
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_lidarsim"))
+        .args([
+            "run",
+            campaign.to_str().unwrap(),
+            "--out",
+            run.to_str().unwrap(),
+        ])
+        .stderr(to_full())
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(0));
+    assert!(run.join("waveforms/part-00000.parquet").exists());
+    assert!(!run.join("run.lock").exists());
 }

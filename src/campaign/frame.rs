@@ -49,7 +49,55 @@ impl Frame {
                 "EPSG:{code} is not in metres: the scene's coordinates are metres"
             ));
         }
+        // a CRS whose axes point west and south (South African Lo grids) would mirror the
+        // scene: x and y are east and north, the origin plus them the CRS's coordinates
+        if let Some(axis) = def
+            .proj4
+            .split_whitespace()
+            .find_map(|t| t.strip_prefix("+axis="))
+            .filter(|a| !a.starts_with("en"))
+        {
+            return Err(format!(
+                "EPSG:{code}'s axes point {} (+axis={axis}): a frame's x and y are the CRS's easting and northing, so its axes must point east and north; choose such a CRS for the same place (a UTM zone, EPSG:326NN north, 327NN south)",
+                axis_names(axis)
+            ));
+        }
         Ok((code, wkt))
+    }
+
+    /// Why latitudes and longitudes cannot be had from this frame's CRS, if they cannot: a
+    /// projection this build cannot invert (Krovak, oblique Mercator, ...) or a datum shift
+    /// by grids it does not have (NAD27). The mission files give degrees; LAS and GeoTIFF do
+    /// not need them.
+    pub fn degrees_unavailable(&self) -> Option<String> {
+        let why = match ToWgs84::new(self) {
+            Err(e) => e,
+            Ok(to) => match to.try_degrees(0.0, 0.0) {
+                Ok(_) => return None,
+                Err(e) => format!("{}: {e}", self.crs.trim()),
+            },
+        };
+        Some(format!(
+            "{why}: this build has no inverse projection from it to latitude and longitude, which the mission files (GEDI, ICESat-2) hold; choose another projected CRS for the place, such as a UTM zone (EPSG:326NN north, 327NN south)"
+        ))
+    }
+}
+
+/// `+axis=wsu` in words: "west and south".
+fn axis_names(axis: &str) -> String {
+    let word = |c: char| match c {
+        'e' => "east",
+        'w' => "west",
+        'n' => "north",
+        's' => "south",
+        'u' => "up",
+        'd' => "down",
+        _ => "?",
+    };
+    let mut chars = axis.chars();
+    match (chars.next(), chars.next()) {
+        (Some(x), Some(y)) => format!("{} and {}", word(x), word(y)),
+        _ => axis.to_string(),
     }
 }
 
@@ -69,7 +117,7 @@ impl ToWgs84 {
         let (code, _) = frame.resolve()?;
         let def = crs_definitions::from_code(code)
             .ok_or_else(|| format!("EPSG:{code} is not a CRS this build knows"))?;
-        let from = proj4rs::proj::Proj::from_proj_string(def.proj4)
+        let from = proj4rs::proj::Proj::from_proj_string(&for_proj4rs(code, def.proj4))
             .map_err(|e| format!("EPSG:{code} ({}): {e}", def.proj4))?;
         let to = proj4rs::proj::Proj::from_proj_string("+proj=longlat +datum=WGS84 +no_defs")
             .map_err(|e| format!("WGS 84: {e}"))?;
@@ -83,12 +131,123 @@ impl ToWgs84 {
     /// (latitude, longitude) in degrees of the local point (x, y) (metres from the frame's
     /// origin); NaN where the projection has no inverse there.
     pub fn degrees(&self, x: f64, y: f64) -> (f64, f64) {
+        self.try_degrees(x, y).unwrap_or((f64::NAN, f64::NAN))
+    }
+
+    /// [`ToWgs84::degrees`], or why there are none.
+    fn try_degrees(&self, x: f64, y: f64) -> std::result::Result<(f64, f64), String> {
         let mut p = (x + self.origin[0], y + self.origin[1], 0.0);
         match proj4rs::transform::transform(&self.from, &self.to, &mut p) {
-            Ok(()) if p.0.is_finite() && p.1.is_finite() => (p.1.to_degrees(), p.0.to_degrees()),
-            _ => (f64::NAN, f64::NAN),
+            Ok(()) if p.0.is_finite() && p.1.is_finite() => {
+                Ok((p.1.to_degrees(), p.0.to_degrees()))
+            }
+            Ok(()) => Err("the inverse projection gave no number".into()),
+            Err(e) => Err(e.to_string()),
         }
     }
+}
+
+/// Prime meridians proj4 strings name, degrees east of Greenwich (PROJ's table).
+const PRIME_MERIDIANS: [(&str, f64); 14] = [
+    ("greenwich", 0.0),
+    ("lisbon", -9.131906111111),
+    ("paris", 2.337229166667),
+    ("bogota", -74.080916666667),
+    ("madrid", -3.687938888889),
+    ("rome", 12.452333333333),
+    ("bern", 7.439583333333),
+    ("jakarta", 106.807719444444),
+    ("ferro", -17.666666666667),
+    ("brussels", 4.367975),
+    ("stockholm", 18.058277777778),
+    ("athens", 23.7163375),
+    ("oslo", 10.722916666667),
+    ("copenhagen", 12.57788),
+];
+
+/// Ellipsoids PROJ defines by their semi-minor axis: name, a, b (m).
+const MINOR_AXIS_ELLIPSOIDS: [(&str, f64, f64); 6] = [
+    ("mod_airy", 6_377_340.189, 6_356_034.446),
+    ("clrk66", 6_378_206.4, 6_356_583.8),
+    ("new_intl", 6_378_157.5, 6_356_772.2),
+    ("plessis", 6_376_523.0, 6_355_863.0),
+    ("SEasia", 6_378_155.0, 6_356_773.320_5),
+    ("walbeck", 6_376_896.0, 6_355_834.846_7),
+];
+
+/// CRSs whose `+towgs84` in the crs-definitions tables (0.6.0) holds EPSG's rotations in the
+/// coordinate-frame convention where proj4 reads the position-vector one: their signs are
+/// turned. Stereo 70, and IGN63 Hiva Oa and Fatu Iva 72 in UTM zone 7S, were 38 m, 7 m and
+/// 4.8 km off PROJ's transformations at their areas' centres, and are under 1 m once turned;
+/// the tables' 873 other CRSs with rotations agree with PROJ.
+const ROTATIONS_AS_COORDINATE_FRAME: [u16; 3] = [3302, 3303, 3844];
+
+/// A proj4 definition rewritten so that proj4rs (0.1.10) reads it as PROJ does, around three of
+/// its slips (each changes a position by tens of metres to hundreds of kilometres):
+/// - it adds a prime meridian (`+pm`), which it holds in degrees, to longitudes in radians:
+///   the meridian is given to it in radians;
+/// - it takes the flattening of an ellipsoid given by its semi-minor axis b as (a - b) / b, not
+///   (a - b) / a: `+b`, and the ellipsoids PROJ defines by b (among them Clarke 1866 and,
+///   through the datum `ire65`, the modified Airy), are given to it as a and 1 / f;
+/// - it reads a scale factor as `+k` or `+k0`, not PROJ's `+k_0`, and takes 1 without a word
+///   (0.9998774 is 28 m over the 228 km from Lambert II's origin to Paris): given as `+k`.
+///
+/// And the tables' rotations of [`ROTATIONS_AS_COORDINATE_FRAME`] are turned.
+fn for_proj4rs(code: u16, proj4: &str) -> String {
+    let tokens: Vec<&str> = proj4.split_whitespace().collect();
+    let a = tokens
+        .iter()
+        .find_map(|t| t.strip_prefix("+a="))
+        .and_then(|v| v.parse::<f64>().ok());
+    let by_minor_axis = |a: f64, b: f64| format!("+a={a} +rf={}", a / (a - b));
+    let mut out: Vec<String> = Vec::with_capacity(tokens.len());
+    for t in tokens {
+        if let Some(pm) = t.strip_prefix("+pm=") {
+            let degrees = PRIME_MERIDIANS
+                .iter()
+                .find(|(name, _)| name.eq_ignore_ascii_case(pm))
+                .map(|&(_, d)| d)
+                .or_else(|| pm.parse::<f64>().ok());
+            out.push(match degrees {
+                Some(d) => format!("+pm={}", d.to_radians()),
+                None => t.to_string(),
+            });
+        } else if let Some(b) = t.strip_prefix("+b=") {
+            out.push(match (a, b.parse::<f64>()) {
+                (Some(a), Ok(b)) if b > 0.0 && b < a => format!("+rf={}", a / (a - b)),
+                _ => t.to_string(),
+            });
+        } else if let Some(k) = t.strip_prefix("+k_0=") {
+            out.push(format!("+k={k}"));
+        } else if let Some(name) = t.strip_prefix("+ellps=") {
+            out.push(
+                match MINOR_AXIS_ELLIPSOIDS.iter().find(|(n, _, _)| *n == name) {
+                    Some(&(_, a, b)) => by_minor_axis(a, b),
+                    None => t.to_string(),
+                },
+            );
+        } else if let Some(v) = t
+            .strip_prefix("+towgs84=")
+            .filter(|_| ROTATIONS_AS_COORDINATE_FRAME.contains(&code))
+        {
+            let mut p: Vec<String> = v.split(',').map(str::to_string).collect();
+            for r in p.iter_mut().skip(3).take(3) {
+                *r = match r.strip_prefix('-') {
+                    Some(pos) => pos.to_string(),
+                    None => format!("-{r}"),
+                };
+            }
+            out.push(format!("+towgs84={}", p.join(",")));
+        } else if t == "+datum=ire65" {
+            // PROJ's datum: the modified Airy ellipsoid and this shift
+            let (_, a, b) = MINOR_AXIS_ELLIPSOIDS[0];
+            out.push(by_minor_axis(a, b));
+            out.push("+towgs84=482.530,-130.596,564.557,-1.042,-0.214,-0.631,8.15".into());
+        } else {
+            out.push(t.to_string());
+        }
+    }
+    out.join(" ")
 }
 
 /// Whether a PROJCS's own linear unit (its last top-level UNIT) is the metre.
@@ -146,5 +305,102 @@ mod tests {
             );
         }
         assert!(frame("EPSG:1").resolve().unwrap_err().contains("not a CRS"));
+    }
+
+    #[test]
+    fn proj4_definitions_are_given_to_proj4rs_as_proj_reads_them() {
+        // Lambert II étendu: Paris meridian, a scale factor as k_0, an ellipsoid by its b
+        let p = for_proj4rs(27572, crs_definitions::from_code(27572).unwrap().proj4);
+        assert!(
+            p.contains(&format!("+pm={}", 2.337229166667f64.to_radians())),
+            "{p}"
+        );
+        assert!(p.contains("+k=0.99987742") && !p.contains("k_0"), "{p}");
+        assert!(p.contains("+rf=293.466021") && !p.contains("+b="), "{p}");
+        // Clarke 1866 by name, and the datum of Ireland 1965 through its modified Airy
+        let p = for_proj4rs(2027, crs_definitions::from_code(2027).unwrap().proj4);
+        assert!(p.contains("+a=6378206.4 +rf=294.978698"), "{p}");
+        let p = for_proj4rs(29902, crs_definitions::from_code(29902).unwrap().proj4);
+        assert!(
+            p.contains("+a=6377340.189 +rf=299.324937") && p.contains("+towgs84=482.53"),
+            "{p}"
+        );
+        // Stereo 70's rotations turned, another CRS's kept
+        let p = for_proj4rs(3844, crs_definitions::from_code(3844).unwrap().proj4);
+        assert!(
+            p.contains("+towgs84=2.329,-147.042,-92.08,-0.309,0.325,0.497,5.69"),
+            "{p}"
+        );
+        let osgb = crs_definitions::from_code(27700).unwrap().proj4;
+        assert_eq!(
+            for_proj4rs(27700, osgb),
+            osgb.split_whitespace().collect::<Vec<_>>().join(" ")
+        );
+    }
+
+    /// Latitudes and longitudes as PROJ gives them for the same CRS coordinates (pyproj 3.7.2, PROJ
+    /// 9.5.1, `Transformer.from_crs(CRS(wkt), 4326)` with the tables' WKT): the frame's origin
+    /// plus (18.2, 19.1) m.
+    #[test]
+    fn degrees_agree_with_proj_where_proj4rs_slipped() {
+        let cases: [(&str, [f64; 2], [f64; 2]); 5] = [
+            // Paris meridian, k_0, minor axis
+            (
+                "EPSG:27572",
+                [600990.892, 2427961.512],
+                [48.85017164, 2.35024790],
+            ),
+            // Madrid meridian
+            (
+                "EPSG:2062",
+                [600000.0, 600000.0],
+                [40.00017222, -3.68772551],
+            ),
+            // Oslo meridian
+            ("EPSG:27391", [0.0, 0.0], [58.00099759, 6.05232308]),
+            // Clarke 1866
+            (
+                "EPSG:2027",
+                [500000.0, 4984944.378],
+                [45.02007684, -92.99976901],
+            ),
+            // Stereo 70's rotations
+            (
+                "EPSG:3844",
+                [500120.3, 444471.627],
+                [45.50017189, 25.00023293],
+            ),
+        ];
+        for (crs, origin, [lat, lon]) in cases {
+            let f = Frame {
+                crs: crs.into(),
+                origin: [origin[0], origin[1], 0.0],
+            };
+            let (la, lo) = ToWgs84::new(&f).unwrap().degrees(18.2, 19.1);
+            // 1e-6 degree: 0.1 m
+            assert!(
+                (la - lat).abs() < 1e-6 && (lo - lon).abs() < 1e-6,
+                "{crs}: {la:.7} {lo:.7}, PROJ {lat} {lon}"
+            );
+        }
+    }
+
+    #[test]
+    fn frames_lidarsim_cannot_place_are_refused_with_a_reason() {
+        let south = frame("EPSG:2046").resolve().unwrap_err();
+        assert!(south.contains("west and south"), "{south}");
+        let krovak = Frame {
+            crs: "EPSG:5514".into(),
+            origin: [-700000.0, -1100000.0, 0.0],
+        };
+        assert!(krovak.resolve().is_ok());
+        let why = krovak.degrees_unavailable().unwrap();
+        assert!(why.contains("no inverse projection"), "{why}");
+        let nad27 = Frame {
+            crs: "EPSG:26717".into(),
+            origin: [500000.0, 4500000.0, 0.0],
+        };
+        assert!(nad27.degrees_unavailable().is_some());
+        assert!(frame("EPSG:32631").degrees_unavailable().is_none());
     }
 }

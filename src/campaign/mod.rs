@@ -1343,6 +1343,13 @@ impl Campaign {
                     "a coordinate in metres within 100,000 km",
                 )?;
             }
+            // the mission files (a waveform instrument's GEDI files, photons' ATL03) give
+            // degrees, which some CRSs cannot give in this build: said before any pulse
+            let missions =
+                self.instrument.kind == InstrumentKind::Waveform || self.products().photons;
+            if let Some(why) = f.degrees_unavailable().filter(|_| missions) {
+                return Err(doc.error("frame.crs", why));
+            }
         }
         Ok(())
     }

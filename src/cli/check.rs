@@ -5,8 +5,12 @@ use crate::error::Result;
 
 pub(super) fn check(path: &std::path::Path) -> Result<()> {
     require_file(path)?;
-    for line in crate::pipeline::check::check(path)?.lines() {
-        println!("{line}");
-    }
-    Ok(())
+    let report = crate::pipeline::check::check(path)?;
+    crate::progress::say(
+        &report
+            .lines()
+            .iter()
+            .map(|l| format!("{l}\n"))
+            .collect::<String>(),
+    )
 }

@@ -186,14 +186,14 @@ where
     T: Into<std::ffi::OsString> + Clone,
 {
     if let Some(why) = unsupported_cpu() {
-        eprintln!("error: {why}");
+        crate::progress::tell(&format!("error: {why}"));
         return 1;
     }
     crate::progress::tune_allocator();
     let cli = match Cli::try_parse_from(args) {
         Ok(c) => c,
         Err(e) if e.use_stderr() => {
-            eprintln!("{}", one_line(&e.render().to_string()));
+            crate::progress::tell(&one_line(&e.render().to_string()));
             return 1;
         }
         Err(e) => {
@@ -214,7 +214,7 @@ where
     match done {
         Ok(()) => 0,
         Err(e) => {
-            eprintln!("error: {e}");
+            crate::progress::tell(&format!("error: {e}"));
             1
         }
     }
@@ -251,14 +251,15 @@ fn run(args: RunArgs) -> Result<()> {
     let peak = crate::progress::peak_rss_bytes()
         .map(|b| format!(", peak memory {:.0} MB", b as f64 / 1e6))
         .unwrap_or_default();
-    println!(
-        "wrote {} ({} pulses, {} rays, {} parts simulated, {:.2} s{peak}, {state})",
+    // the files are the run's result: a summary that cannot be shown fails nothing
+    let _ = crate::progress::say(&format!(
+        "wrote {} ({} pulses, {} rays, {} parts simulated, {:.2} s{peak}, {state})\n",
         s.out.display(),
         s.pulses,
         s.rays,
         s.parts_done,
         s.seconds
-    );
+    ));
     Ok(())
 }
 
@@ -307,20 +308,20 @@ fn compare(args: CompareArgs) -> Result<()> {
         inside_runs("--csv", path)?;
     }
     let rows = compare::rows(&args.runs)?;
-    print!("{}", compare::markdown(&rows));
+    crate::progress::say(&compare::markdown(&rows))?;
     if let Some(path) = args.csv {
         compare::write_csv(&path, &rows)?;
     }
     if let Some(dir) = args.plots {
         let written = compare::plots(&rows, &dir)?;
         for p in &written {
-            eprintln!("wrote {}", p.display());
+            crate::progress::tell(&format!("wrote {}", p.display()));
         }
         if written.is_empty() {
-            eprintln!(
+            crate::progress::tell(&format!(
                 "no plot written to {}: a plot needs two runs or more with a DSM error and their altitudes or pulse rates",
                 dir.display()
-            );
+            ));
         }
     }
     Ok(())
@@ -342,8 +343,8 @@ fn generate(args: GenerateArgs) -> Result<()> {
         ..GenerateOptions::default()
     };
     let s = generate_with_summary(args.kind, args.seed, &args.out, &opts)?;
-    println!(
-        "wrote {} ({} trees, {} templates, {} facets instanced, {} distinct, LAI {:.2}, {:.1} MB)",
+    crate::progress::say(&format!(
+        "wrote {} ({} trees, {} templates, {} facets instanced, {} distinct, LAI {:.2}, {:.1} MB)\n",
         s.scene.display(),
         s.trees,
         s.templates.len(),
@@ -352,8 +353,7 @@ fn generate(args: GenerateArgs) -> Result<()> {
         // a scene without leaves: 0, not -0
         s.lai + 0.0,
         s.bytes as f64 / 1e6
-    );
-    Ok(())
+    ))
 }
 
 fn bench(args: BenchArgs) -> Result<()> {
@@ -412,7 +412,7 @@ fn bench(args: BenchArgs) -> Result<()> {
         .map_err(|_| Error::msg(format!("--trees {}: too many", args.trees)))?;
     let text = pipeline::with_threads(args.threads, || bench::run(&opts))?;
     let path = bench::write_report(&args.report, &text)?;
-    println!("{text}\n(written to {})", path.display());
+    crate::progress::say(&format!("{text}\n(written to {})\n", path.display()))?;
     Ok(())
 }
 

@@ -404,3 +404,58 @@ mod tests {
         assert!(frame("EPSG:32631").degrees_unavailable().is_none());
     }
 }
+/// Every CRS of the tables against PROJ, from `tools/crs_reference.py`'s file (named by
+/// `LIDARSIM_CRS_REFERENCE`): at each area of use's centre, lidarsim's latitude and longitude
+/// against pyproj's. Manual: it needs that file, which needs pyproj.
+#[cfg(test)]
+mod sweep {
+    /// Beyond 1 m of PROJ: CRSs whose definitions lack the shift EPSG holds (docs/outputs.md),
+    /// and two whose WKT holds the rotations lidarsim turns (PROJ read from the WKT keeps them).
+    const KNOWN: [&str; 35] = [
+        "3303", "2000", "5168", "5175", "5178", "2096", "5176", "5167", "5177", "2097", "5174",
+        "2098", "5173", "8433", "5169", "5170", "3374", "5685", "3399", "5669", "3398", "5668",
+        "5684", "3397", "5667", "3396", "5666", "5683", "5682", "2312", "2081", "3354", "2313",
+        "6991", "3302",
+    ];
+
+    #[test]
+    #[ignore]
+    fn every_crs_against_proj() {
+        let Some(path) = std::env::var_os("LIDARSIM_CRS_REFERENCE") else {
+            eprintln!("SKIPPED: set LIDARSIM_CRS_REFERENCE to tools/crs_reference.py's file");
+            return;
+        };
+        let text = std::fs::read_to_string(path).unwrap();
+        let (mut compared, mut refused) = (0, 0);
+        let mut off: Vec<(f64, String)> = Vec::new();
+        for line in text.lines() {
+            let f: Vec<&str> = line.split(',').collect();
+            let v: Vec<f64> = f[1..].iter().map(|x| x.parse().unwrap()).collect();
+            let frame = super::Frame {
+                crs: format!("EPSG:{}", f[0]),
+                origin: [v[0], v[1], 0.0],
+            };
+            if frame.resolve().is_err() || frame.degrees_unavailable().is_some() {
+                refused += 1;
+                continue;
+            }
+            compared += 1;
+            let (la, lo) = super::ToWgs84::new(&frame).unwrap().degrees(0.0, 0.0);
+            let dlo = ((lo - v[3] + 540.0) % 360.0) - 180.0;
+            let m = ((la - v[2]) * 111_320.0).hypot(dlo * 111_320.0 * v[2].to_radians().cos());
+            if m > 1.0 {
+                off.push((m, f[0].to_string()));
+            }
+        }
+        off.sort_by(|a, b| b.0.total_cmp(&a.0));
+        eprintln!(
+            "{compared} CRSs compared, {refused} refused, {} beyond 1 m: {off:?}",
+            off.len()
+        );
+        let unknown: Vec<_> = off
+            .iter()
+            .filter(|(_, c)| !KNOWN.contains(&c.as_str()))
+            .collect();
+        assert!(unknown.is_empty(), "beyond 1 m of PROJ: {unknown:?}");
+    }
+}

@@ -70,6 +70,10 @@ pub struct PulseSetup<'a> {
     /// Sub-bins per bin: contributions are kept at this finer time resolution so the pulse
     /// convolution does not depend on where a path falls inside its bin.
     pub sub_bins: usize,
+    /// Sub-bins kept on each side of the gate for energy that arrives just outside it, whose
+    /// pulse tails the convolution spreads into the gate's first or last bins (0: none kept, a
+    /// waveform with no pulse convolution).
+    pub edge_sub_bins: usize,
     pub method: Method,
     pub heuristic: MisHeuristic,
     pub sampler: Sampler,

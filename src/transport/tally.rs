@@ -47,10 +47,17 @@ pub struct Tally {
     /// per-sub-bin sum is zero outside them, so a pulse of few paths in a long gate (3152
     /// bins of 0.067 ns over a forest) is reset and turned into a waveform over its span only.
     pub lit: (usize, usize),
+    /// Energy that arrived within [`PulseSetup::edge_sub_bins`] sub-bins before the gate (0)
+    /// and after it (1), per sub-bin, with its moments as in `sub_moment`: counted `outside`,
+    /// yet its pulse tails reach into the gate's first or last bins.
+    pub edge_sub: [Vec<f64>; 2],
+    pub edge_moment: [Vec<f64>; 2],
+    /// Whether any energy fell in `edge_sub`: else they are zeros, neither added nor cleared.
+    pub edge_lit: bool,
 }
 
 impl Tally {
-    pub(super) fn new(bins: usize, sub_bins: usize, max_order: u32) -> Tally {
+    pub(super) fn new(bins: usize, sub_bins: usize, max_order: u32, edge: usize) -> Tally {
         Tally {
             sub: vec![0.0; bins * sub_bins],
             sub_moment: vec![0.0; bins * sub_bins],
@@ -68,6 +75,9 @@ impl Tally {
             solar_sum: 0.0,
             solar_sq: 0.0,
             lit: (0, 0),
+            edge_sub: [vec![0.0; edge], vec![0.0; edge]],
+            edge_moment: [vec![0.0; edge], vec![0.0; edge]],
+            edge_lit: false,
         }
     }
 
@@ -110,6 +120,13 @@ impl Tally {
         self.non_finite += o.non_finite;
         self.underflows += o.underflows;
         self.light(o.lit.0, o.lit.1);
+        if o.edge_lit {
+            for k in 0..2 {
+                add(&mut self.edge_sub[k], &o.edge_sub[k]);
+                add(&mut self.edge_moment[k], &o.edge_moment[k]);
+            }
+            self.edge_lit = true;
+        }
     }
 
     /// Mean received solar power over the receiver band, W, and its standard error.
@@ -186,7 +203,12 @@ impl Accum {
 
     fn one_band(setup: &PulseSetup) -> Accum {
         Accum {
-            tally: Tally::new(setup.gate.bins, setup.sub_bins, setup.max_order),
+            tally: Tally::new(
+                setup.gate.bins,
+                setup.sub_bins,
+                setup.max_order,
+                setup.edge_sub_bins,
+            ),
             t0: setup.gate.t0,
             sub_dt: setup.gate.dt / setup.sub_bins as f64,
             sub_bins: setup.sub_bins,
@@ -290,6 +312,12 @@ impl Accum {
         }
         span(&mut self.ray_bin, (lo, hi), bins);
         t.lit = (0, 0);
+        for v in t.edge_sub.iter_mut().chain(t.edge_moment.iter_mut()) {
+            if t.edge_lit || v.len() != setup.edge_sub_bins {
+                zero(v, setup.edge_sub_bins);
+            }
+        }
+        t.edge_lit = false;
         zero(&mut t.order_sum, setup.max_order as usize);
         zero(&mut t.order_sq, setup.max_order as usize);
         (t.outside, t.total_sq, t.rays, t.paths) = (0.0, 0.0, 0, 0);
@@ -339,6 +367,7 @@ impl Accum {
             self.ray_bin[b] += energy;
         } else {
             self.tally.outside += energy;
+            self.add_at_edge(x, energy);
         }
         let k = order - 1;
         if self.ray_order[k] == 0.0 {
@@ -346,6 +375,24 @@ impl Accum {
         }
         self.ray_order[k] += energy;
         self.tally.paths += 1;
+    }
+
+    /// Energy at `x` sub-bins from the gate's start, outside the gate, kept in the edge's
+    /// sub-bins where it lies within them.
+    fn add_at_edge(&mut self, x: f64, energy: f64) {
+        let t = &mut self.tally;
+        let m = t.edge_sub[0].len() as f64;
+        let (side, y) = if x < 0.0 {
+            (0, x + m)
+        } else {
+            (1, x - t.sub.len() as f64)
+        };
+        if y >= 0.0 && y < m {
+            let j = y as usize;
+            t.edge_sub[side][j] += energy;
+            t.edge_moment[side][j] += energy * (y - j as f64);
+            t.edge_lit = true;
+        }
     }
 
     pub(super) fn end_ray(&mut self) {

@@ -33,6 +33,7 @@ fn setup<'a>(scene: &'a Scene, method: Method, heuristic: MisHeuristic) -> Pulse
             bins: 10,
         },
         sub_bins: 1,
+        edge_sub_bins: 0,
         method,
         heuristic,
         sampler: crate::campaign::Sampler::Independent,

@@ -188,7 +188,9 @@ pub fn impulse_bins(sub: &[f64], sub_bins: usize) -> Vec<f64> {
 ///
 /// `sub_moment[i] / sub[i]` is the mean position (0..1) of sub-bin i's energy within it.
 /// Only the sub-bins of the bins `lit` are read: a pulse's energy lies within a few dozen of
-/// its gate's hundreds of bins, and the others are zero.
+/// its gate's hundreds of bins, and the others are zero. `edges` are the sub-bins and moments
+/// kept before the gate and after it ([`Tally::edge_sub`]): energy outside the gate whose
+/// tails reach into it, as a digitiser records them.
 pub fn convolve(
     sub: &[f64],
     sub_moment: &[f64],
@@ -196,6 +198,7 @@ pub fn convolve(
     gate: &Gate,
     sigma: f64,
     lit: (usize, usize),
+    edges: [(&[f64], &[f64]); 2],
 ) -> Vec<f64> {
     if sigma <= 0.0 {
         return impulse_bins(sub, sub_bins);
@@ -213,20 +216,18 @@ pub fn convolve(
     // a sub-bin's masses cover its reach within the gate: no more than the gate's bins, whatever
     // the pulse (one of 10^9 ns would ask 68 GB here)
     let mut masses = Vec::with_capacity((2 * reach as usize + 1).min(gate.bins));
-    for (i, &e) in sub.iter().enumerate().take(last).skip(first) {
-        if e == 0.0 {
-            continue;
-        }
-        let pos = match sub_moment.get(i) {
+    // sub-bin energy `e` with moment `moment`, the sub-bin starting `at` sub-bins from t0
+    let mut spread = |e: f64, moment: Option<&f64>, at: f64| {
+        let pos = match moment {
             Some(m) if (0.0..=e).contains(m) => m / e,
             _ => 0.5,
         };
-        let t = (i as f64 + pos) * sub_dt; // relative to t0
-        let centre = (t / gate.dt) as i64;
+        let t = (at + pos) * sub_dt; // relative to t0
+        let centre = (t / gate.dt).floor() as i64;
         let lo = (centre - reach).max(0);
         let hi = (centre + reach).min(gate.bins as i64 - 1);
         if lo > hi {
-            continue;
+            return;
         }
         masses.clear();
         bin_masses_into(
@@ -239,8 +240,39 @@ pub fn convolve(
         for (o, m) in out[lo as usize..=hi as usize].iter_mut().zip(&masses) {
             *o += e * m;
         }
+    };
+    for (i, &e) in sub.iter().enumerate().take(last).skip(first) {
+        if e != 0.0 {
+            spread(e, sub_moment.get(i), i as f64);
+        }
+    }
+    let [(before, before_moment), (after, after_moment)] = edges;
+    for (j, &e) in before.iter().enumerate() {
+        if e != 0.0 {
+            spread(e, before_moment.get(j), j as f64 - before.len() as f64);
+        }
+    }
+    for (j, &e) in after.iter().enumerate() {
+        if e != 0.0 {
+            spread(e, after_moment.get(j), (sub.len() + j) as f64);
+        }
     }
     out
+}
+
+/// Sub-bins kept on each side of a gate of bins of `dt` (s) for a pulse of `sigma` (s), whose
+/// energy's tails reach into the gate ([`crate::transport::PulseSetup::edge_sub_bins`]): the
+/// convolution's reach, but no more bins than the gate holds sub-bins (memory a tally already
+/// has); none without a convolution.
+pub fn edge_sub_bins(dt: f64, sigma: f64, gate_bins: usize) -> usize {
+    if !(sigma > 0.0 && dt > 0.0) {
+        return 0;
+    }
+    let reach = usize::try_from(convolution_reach(sigma / dt)).unwrap_or(usize::MAX);
+    let sub_bins = sub_bins_per_bin(dt, sigma);
+    reach
+        .saturating_mul(sub_bins)
+        .min(gate_bins.saturating_mul(sub_bins))
 }
 
 /// Bins on either side of a sub-bin's own that [`convolve`] spreads it over, for a pulse of
@@ -324,6 +356,7 @@ pub fn waveform(
         gate,
         pulse_sigma_s,
         (lo, hi),
+        [0, 1].map(|k| (&tally.edge_sub[k][..], &tally.edge_moment[k][..])),
     );
     // the bins the convolution may have reached (a bin more each side than its reach): zero
     // beyond, so the photons are made only here, as the impulse only over the lit span
@@ -334,10 +367,15 @@ pub fn waveform(
     } else {
         0
     };
-    let (c_lo, c_hi) = (
-        lo.saturating_sub(reach),
-        hi.saturating_add(reach).min(gate.bins),
-    );
+    let (c_lo, c_hi) = if tally.edge_lit {
+        // energy just outside the gate reached its first or last bins
+        (0, gate.bins)
+    } else {
+        (
+            lo.saturating_sub(reach),
+            hi.saturating_add(reach).min(gate.bins),
+        )
+    };
     let n = tally.rays.max(1) as f64;
     let (solar_w, solar_se) = tally.solar_power();
     // range of the return's energy centroid, for the footprint's solid angle; the sums over
@@ -399,6 +437,9 @@ fn spanned<T: Copy + Default>(len: usize, lo: usize, hi: usize, f: &dyn Fn(usize
 
 #[cfg(test)]
 mod tests {
+    /// No energy kept outside the gate.
+    const NO_EDGES: [(&[f64], &[f64]); 2] = [(&[], &[]), (&[], &[])];
+
     use super::*;
 
     #[test]
@@ -417,7 +458,7 @@ mod tests {
             let mut moment = vec![0.0; 80 * m];
             sub[x as usize] = 2.0;
             moment[x as usize] = 2.0 * (x - x.floor());
-            let c = convolve(&sub, &moment, m, &gate, sigma, (0, gate.bins));
+            let c = convolve(&sub, &moment, m, &gate, sigma, (0, gate.bins), NO_EDGES);
             let centroid: f64 = c
                 .iter()
                 .enumerate()
@@ -443,8 +484,8 @@ mod tests {
         let mut b = vec![0.0; 100 * m];
         b[50 * m + m - 1] = 1.0; // late in bin 50
         let half = |v: &[f64]| v.iter().map(|e| e * 0.5).collect::<Vec<f64>>();
-        let ca = convolve(&a, &half(&a), m, &gate, sigma, (0, gate.bins));
-        let cb = convolve(&b, &half(&b), m, &gate, sigma, (0, gate.bins));
+        let ca = convolve(&a, &half(&a), m, &gate, sigma, (0, gate.bins), NO_EDGES);
+        let cb = convolve(&b, &half(&b), m, &gate, sigma, (0, gate.bins), NO_EDGES);
         assert!((ca.iter().sum::<f64>() - 1.0).abs() < 1e-6);
         // centroids follow the sub-bin times, not the bin centre
         let centroid = |c: &[f64]| {

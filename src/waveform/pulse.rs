@@ -3,7 +3,7 @@
 //! tally makes. The one constructor of a pulse and its radiometry: the pipeline, the bench,
 //! the Python package and the tests all go through [`PulseSimulator`].
 
-use super::{sub_bins_per_bin, waveform, Radiometry, Waveform};
+use super::{edge_sub_bins, sub_bins_per_bin, waveform, Radiometry, Waveform};
 use crate::campaign::{Campaign, Instrument, Method};
 use crate::plan::Pulse;
 use crate::scene::Scene;
@@ -103,6 +103,7 @@ impl<'a> PulseSimulator<'a> {
             ),
             gate,
             sub_bins: sub_bins_per_bin(gate.dt, self.sigma),
+            edge_sub_bins: edge_sub_bins(gate.dt, self.sigma, gate.bins),
             method,
             heuristic: c.simulation.mis,
             sampler: c.simulation.sampler,

@@ -28,16 +28,22 @@ impl Frame {
             .trim()
             .strip_prefix("EPSG:")
             .or_else(|| self.crs.trim().strip_prefix("epsg:"))
-            .and_then(|c| c.parse::<u16>().ok())
+            .filter(|c| !c.is_empty() && c.bytes().all(|b| b.is_ascii_digit()))
             .ok_or_else(|| {
                 format!(
                     "must be EPSG:NNNN (e.g. EPSG:32631, UTM zone 31N), found {:?}",
                     self.crs
                 )
             })?;
-        let def = crs_definitions::from_code(code)
-            .ok_or_else(|| format!("EPSG:{code} is not a CRS this build knows"))?;
+        let unknown = || format!("EPSG:{code} is not a CRS this build knows");
+        let code = code.parse::<u16>().map_err(|_| unknown())?;
+        let def = crs_definitions::from_code(code).ok_or_else(unknown)?;
         let wkt = def.wkt;
+        if wkt.is_empty() {
+            return Err(format!(
+                "EPSG:{code} has no definition in this build's tables: choose another projected CRS for the place, such as a UTM zone (EPSG:326NN north, 327NN south)"
+            ));
+        }
         if !wkt.starts_with("PROJCS[") {
             return Err(format!(
                 "EPSG:{code} is not a projected CRS (its WKT starts {:?}): the scene's metres need a projected CRS in metres, such as a UTM zone (EPSG:326NN north, 327NN south)",
@@ -305,6 +311,15 @@ mod tests {
             );
         }
         assert!(frame("EPSG:1").resolve().unwrap_err().contains("not a CRS"));
+        // a code of the right form that no table holds, or holds without a definition
+        assert!(frame("EPSG:99999")
+            .resolve()
+            .unwrap_err()
+            .contains("not a CRS this build knows"));
+        assert!(frame("EPSG:8857")
+            .resolve()
+            .unwrap_err()
+            .contains("no definition"));
     }
 
     #[test]

@@ -319,3 +319,107 @@ fn five_centimetre_footprint_over_a_100_m_scene() {
         );
     }
 }
+
+/// A 10 cm cube written in UTM-like coordinates (its centre at 654,321.987 m): seen from its
+/// centre, its wall is 5 cm away, and an OBJ file says so as a PLY file of doubles does. As
+/// f32 the OBJ's vertices were rounded to 6 cm before the scene was re-centred: the wall lay at
+/// 75.6 mm and the energy came out 56 % low.
+#[test]
+fn a_mesh_in_utm_coordinates_keeps_its_millimetres() {
+    let dir = tmp("utm_mesh");
+    let c = [654_321.987, 654_321.987, 1_234.567_8];
+    let corners: Vec<[f64; 3]> = (0..8)
+        .map(|k| {
+            let s = |bit: usize| if k >> bit & 1 == 1 { 0.05 } else { -0.05 };
+            [c[0] + s(0), c[1] + s(1), c[2] + s(2)]
+        })
+        .collect();
+    // the cube's twelve facets, by corner (bit 0: +x, bit 1: +y, bit 2: +z)
+    let faces = [
+        [0, 2, 1],
+        [1, 2, 3],
+        [4, 5, 6],
+        [5, 7, 6],
+        [0, 1, 4],
+        [1, 5, 4],
+        [2, 6, 3],
+        [3, 6, 7],
+        [0, 4, 2],
+        [2, 4, 6],
+        [1, 3, 5],
+        [3, 7, 5],
+    ];
+    let obj: String = corners
+        .iter()
+        .map(|v| format!("v {:.10} {:.10} {:.10}\n", v[0], v[1], v[2]))
+        .chain(
+            faces
+                .iter()
+                .map(|f| format!("f {} {} {}\n", f[0] + 1, f[1] + 1, f[2] + 1)),
+        )
+        .collect();
+    let ply = format!(
+        "ply\nformat ascii 1.0\nelement vertex 8\nproperty double x\nproperty double y\nproperty double z\nelement face 12\nproperty list uchar int vertex_indices\nend_header\n{}{}",
+        corners
+            .iter()
+            .map(|v| format!("{:.10} {:.10} {:.10}\n", v[0], v[1], v[2]))
+            .collect::<String>(),
+        faces
+            .iter()
+            .map(|f| format!("3 {} {} {}\n", f[0], f[1], f[2]))
+            .collect::<String>()
+    );
+    write(&dir, "cube.obj", &obj);
+    write(&dir, "cube.ply", &ply);
+    let (energy, rho, area, d) = (0.001, 0.5, 1e-8, 0.05);
+    let expect = energy * rho * area / (std::f64::consts::PI * d * d);
+    let mut got = Vec::new();
+    for file in ["cube.obj", "cube.ply"] {
+        let scene = write(
+            &dir,
+            &format!("{file}.yaml"),
+            &format!("name: s\nmaterials:\n  w: {{ reflectance: {rho} }}\nobjects:\n  - mesh: {{ file: {file}, material: w }}\n"),
+        );
+        let text = format!(
+            "name: t\nscene: {}\nseed: 3\nwavelength_nm: 1064\ninstrument: {{ pulse_energy_j: {energy}, pulse_fwhm_ns: 0, footprint_half_angle_mrad: 0.0001, fov_half_angle_mrad: 20, receiver_area_m2: {area}, bin_ns: 0.001 }}\nplatform:\n  kind: static\n  pulses:\n    - {{ position: [{}, {}, {}], direction: [1, 0, 0] }}\nsimulation: {{ method: forward, rays_per_pulse: 2000, max_order: 1 }}\n",
+            scene.display(),
+            c[0],
+            c[1],
+            c[2]
+        );
+        let sub = dir.join(file.replace('.', "_"));
+        std::fs::create_dir_all(&sub).unwrap();
+        let w = run(&sub, &text, None).remove(0);
+        finite_non_negative(file, &w);
+        // the wall's range from the start of the bin holding the energy (the impulse spans
+        // the whole gate): bins of 0.15 mm
+        let (b, _) = w
+            .impulse_energy_j
+            .iter()
+            .enumerate()
+            .fold((0, 0.0f32), |m, (i, &e)| if e > m.1 { (i, e) } else { m });
+        let t_ns = w.t0_ns + b as f64 * w.bin_ns as f64;
+        let range = C * t_ns * 1e-9 / 2.0;
+        println!(
+            "{file}: wall at {:.3} mm, {:.6e} J",
+            range * 1e3,
+            w.received_energy_j
+        );
+        assert!(
+            (range - d).abs() < 3e-4,
+            "{file}: wall at {range} m, not {d} m"
+        );
+        unbiased(
+            file,
+            w.received_energy_j,
+            w.received_energy_se_j.max(1e-6 * expect),
+            expect,
+            0.01,
+        );
+        got.push(w.received_energy_j);
+    }
+    assert_eq!(
+        got[0], got[1],
+        "the OBJ and the PLY of the same cube differ"
+    );
+}

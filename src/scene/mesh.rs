@@ -315,7 +315,7 @@ pub(crate) fn load_obj(path: &Path) -> Result<MeshData> {
             m.mesh
                 .positions
                 .chunks_exact(3)
-                .map(|p| DVec3::new(p[0] as f64, p[1] as f64, p[2] as f64)),
+                .map(|p| DVec3::new(p[0], p[1], p[2])),
         );
         for t in m.mesh.indices.chunks_exact(3) {
             if t.iter().any(|&i| i as usize >= nv) {

@@ -1601,6 +1601,30 @@ fn check_bounds_the_peak_memory_of_a_run() {
     );
 }
 
+/// A campaign of one pulse holds one pulse's waveform, not a survey part's thousand: a gate of
+/// 200,000 bins of 1 ps was refused as needing 28 GB (a part of 1,000 such pulses) where the
+/// run peaks at about 35 MB.
+#[test]
+fn check_bounds_a_one_pulse_campaign_by_its_one_pulse() {
+    let dir = tmp("e2e_memory_one_pulse");
+    plane_scene(&dir, 0.3, 10.0);
+    let camp = write(
+        &dir,
+        "campaign.yaml",
+        "name: one\nscene: plane.yaml\nseed: 3\nwavelength_nm: 1064\ninstrument: { kind: discrete_return, pulse_energy_j: 0.001, pulse_fwhm_ns: 0.01, footprint_half_angle_mrad: 0.01, fov_half_angle_mrad: 1, receiver_area_m2: 0.0001, bin_ns: 0.001, range_gate: { start_ns: 600, bins: 200000 } }\nplatform: { kind: static, pulses: [ { position: [0, 0, 100], direction: [0, 0, -1] } ] }\nsimulation: { method: forward, rays_per_pulse: 200, max_order: 1 }\n",
+    );
+    let (code, check, err) = lidarsim(&["check", camp.to_str().unwrap()]);
+    assert_eq!(code, 0, "{err}");
+    let bound = figure_after(&check, "estimated peak memory:");
+    let log = run_ok(&camp, &dir.join("run"), &[]);
+    let peak = figure_after(&log, "peak memory");
+    assert!(
+        peak <= bound,
+        "peak {peak} MB over the bound {bound} MB\n{check}"
+    );
+    assert!(bound < 1000.0, "bound {bound} MB for one pulse\n{check}");
+}
+
 /// Every bundled campaign in pipelines/ (the bench's aside) reads and plans as `lidarsim run`
 /// reads and plans it: keys, values and the platform's pulses. Its scene is not loaded (some
 /// are made by `lidarsim scene generate` first, as their comments say, or need ../shared).

@@ -36,7 +36,12 @@ impl Bound {
 pub fn bound(loaded: &Loaded, scene: &Scene, plan: &Plan) -> Bound {
     use crate::waveform::file::{gate_bins, pulse_bytes, Parts};
     let gate = gate_bins(loaded, scene, plan);
-    let part = Parts::of_run(loaded, scene, plan).size() as f64 * pulse_bytes(loaded, gate);
+    // a part holds no more pulses than the run has: a one-pulse campaign's part is one pulse,
+    // not the thousand a part of a survey may hold
+    let pulses = Parts::of_run(loaded, scene, plan)
+        .size()
+        .min(plan.len().max(1));
+    let part = pulses as f64 * pulse_bytes(loaded, gate);
     let bins = gate as f64;
     let threads = rayon::current_num_threads() as f64;
     // a part in the making, the one queued, and the one being encoded (its table and bytes),

@@ -910,11 +910,11 @@ fn sweeps_that_cannot_run_are_refused() {
         ("\"\": [1]", &["campaign.yaml:", "a key is empty"]),
         // a combination whose run no memory holds is refused before any runs, at its value
         (
-            "instrument.bin_ns: [1, 1e-6]",
+            "instrument.bin_ns: [1, 1e-9]",
             &[
                 "campaign.yaml:",
                 "sweep.instrument.bin_ns",
-                "value 1e-6",
+                "value 1e-9",
                 "in memory",
             ],
         ),

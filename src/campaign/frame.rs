@@ -89,6 +89,57 @@ impl Frame {
     }
 }
 
+/// CRSs whose definitions in the crs-definitions tables give no shift from their datum to
+/// WGS 84 where EPSG holds one, with how far (m) their latitudes and longitudes, taken as on
+/// WGS 84, lie from PROJ's at the centre of each area of use (`every_crs_against_proj`).
+const WITHOUT_EPSG_SHIFT: [(u16, u32); 33] = [
+    (2000, 571),
+    (2081, 123),
+    (2096, 383),
+    (2097, 379),
+    (2098, 373),
+    (2312, 150),
+    (2313, 116),
+    (3354, 120),
+    (3374, 306),
+    (3396, 164),
+    (3397, 170),
+    (3398, 177),
+    (3399, 189),
+    (5167, 382),
+    (5168, 410),
+    (5169, 323),
+    (5170, 320),
+    (5173, 373),
+    (5174, 379),
+    (5175, 410),
+    (5176, 383),
+    (5177, 382),
+    (5178, 386),
+    (5666, 164),
+    (5667, 170),
+    (5668, 177),
+    (5669, 189),
+    (5682, 154),
+    (5683, 160),
+    (5684, 174),
+    (5685, 192),
+    (6991, 78),
+    (8433, 335),
+];
+
+impl Frame {
+    /// Why latitudes and longitudes from this frame's CRS lie far from WGS 84's, if they do:
+    /// a definition without the datum shift EPSG holds ([`WITHOUT_EPSG_SHIFT`]).
+    pub fn degrees_off(&self) -> Option<String> {
+        let (code, _) = self.resolve().ok()?;
+        let &(_, m) = WITHOUT_EPSG_SHIFT.iter().find(|(c, _)| *c == code)?;
+        Some(format!(
+            "frame.crs EPSG:{code}'s definition in this build gives no shift from its datum to WGS 84, which EPSG holds: the mission files' latitudes and longitudes are on its own datum, {m} m from WGS 84's at the centre of its area of use"
+        ))
+    }
+}
+
 /// `+axis=wsu` in words: "west and south".
 fn axis_names(axis: &str) -> String {
     let word = |c: char| match c {
@@ -417,6 +468,10 @@ mod tests {
         };
         assert!(nad27.degrees_unavailable().is_some());
         assert!(frame("EPSG:32631").degrees_unavailable().is_none());
+        // Korean 1985, taken as on WGS 84: said, with how far
+        let korea = frame("EPSG:5178").degrees_off().unwrap();
+        assert!(korea.contains("386 m"), "{korea}");
+        assert!(frame("EPSG:32631").degrees_off().is_none());
     }
 }
 /// Every CRS of the tables against PROJ, from `tools/crs_reference.py`'s file (named by
@@ -424,14 +479,9 @@ mod tests {
 /// against pyproj's. Manual: it needs that file, which needs pyproj.
 #[cfg(test)]
 mod sweep {
-    /// Beyond 1 m of PROJ: CRSs whose definitions lack the shift EPSG holds (docs/outputs.md),
-    /// and two whose WKT holds the rotations lidarsim turns (PROJ read from the WKT keeps them).
-    const KNOWN: [&str; 35] = [
-        "3303", "2000", "5168", "5175", "5178", "2096", "5176", "5167", "5177", "2097", "5174",
-        "2098", "5173", "8433", "5169", "5170", "3374", "5685", "3399", "5669", "3398", "5668",
-        "5684", "3397", "5667", "3396", "5666", "5683", "5682", "2312", "2081", "3354", "2313",
-        "6991", "3302",
-    ];
+    /// Beyond 1 m of PROJ besides [`super::WITHOUT_EPSG_SHIFT`]: two CRSs whose WKT holds the
+    /// rotations lidarsim turns (PROJ read from the WKT keeps them).
+    const WKT_KEEPS_ROTATIONS: [u16; 2] = [3302, 3303];
 
     #[test]
     #[ignore]
@@ -467,10 +517,11 @@ mod sweep {
             "{compared} CRSs compared, {refused} refused, {} beyond 1 m: {off:?}",
             off.len()
         );
-        let unknown: Vec<_> = off
-            .iter()
-            .filter(|(_, c)| !KNOWN.contains(&c.as_str()))
-            .collect();
+        let known = |c: &str| {
+            let c: u16 = c.parse().unwrap();
+            WKT_KEEPS_ROTATIONS.contains(&c) || super::WITHOUT_EPSG_SHIFT.iter().any(|w| w.0 == c)
+        };
+        let unknown: Vec<_> = off.iter().filter(|(_, c)| !known(c)).collect();
         assert!(unknown.is_empty(), "beyond 1 m of PROJ: {unknown:?}");
     }
 }

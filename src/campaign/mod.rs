@@ -835,6 +835,12 @@ impl Campaign {
                     .to_string(),
             );
         }
+        let missions = i.kind == InstrumentKind::Waveform || self.products().photons;
+        if let Some(off) = self.frame.as_ref().and_then(Frame::degrees_off) {
+            if missions {
+                out.push(off);
+            }
+        }
         out
     }
 

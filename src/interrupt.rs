@@ -75,6 +75,28 @@ pub fn requested() -> Option<i32> {
     (s != 0).then_some(s as i32)
 }
 
+/// Work whose result is of no use once a stop is asked for (a single pulse simulated in
+/// memory for a host that raises the interruption) drops what is left of it at its next
+/// chunk of rays: a host asks for that with [`abandon`]. A run's parts never do: a run
+/// finishes the part in hand so that it can be kept.
+static ABANDON: AtomicBool = AtomicBool::new(false);
+
+/// Asks in-memory work to stop at its next chunk of rays (see [`ABANDON`]).
+pub fn abandon() {
+    ABANDON.store(true, Ordering::Relaxed);
+}
+
+/// Whether in-memory work should stop (see [`abandon`]).
+#[inline]
+pub fn abandoning() -> bool {
+    ABANDON.load(Ordering::Relaxed)
+}
+
+/// Forgets an [`abandon`] before new work starts.
+pub fn clear_abandon() {
+    ABANDON.store(false, Ordering::Relaxed);
+}
+
 /// The signal's name, for messages.
 pub fn name(signal: i32) -> String {
     match signal {

@@ -567,6 +567,8 @@ class Scene:
 
         Raises:
             InputError: a key or value is wrong (``err.key`` names it).
+            KeyboardInterrupt: Ctrl-C during the pulse, which drops it at its next chunk
+                of rays (a pulse of many rays need not be waited for).
         """
         sim = {} if simulation is None else _mapping(simulation, "simulation")
         given = [k for k in ("method", "rays_per_pulse", "max_order") if k in sim]

@@ -110,6 +110,54 @@ fn detached<T: Send>(
     settle(py, py.detach(|| catch_unwind(AssertUnwindSafe(f))))
 }
 
+/// [`detached`] for work that may run long on its own (a pulse of many rays): it runs on a
+/// thread of its own while this one polls the interpreter's signals, and on Ctrl-C the work
+/// drops what is left of it (`interrupt::abandon`) and KeyboardInterrupt is raised once it
+/// has.
+fn interruptible<T: Send>(
+    py: Python<'_>,
+    f: impl FnOnce() -> lidarsim::Result<T> + Send,
+) -> PyResult<T> {
+    lidarsim::interrupt::clear_abandon();
+    let (tx, rx) = mpsc::channel();
+    // (a receiver is not shared between threads: the lock only lends it to the wait)
+    let rx = Mutex::new(rx);
+    std::thread::scope(|s| {
+        s.spawn(move || {
+            let _ = tx.send(catch_unwind(AssertUnwindSafe(f)));
+        });
+        let mut stopped: Option<PyErr> = None;
+        loop {
+            let got = py.detach(|| {
+                let rx = rx.lock().unwrap_or_else(|e| e.into_inner());
+                rx.recv_timeout(SIGNAL_POLL)
+            });
+            match got {
+                Ok(r) => {
+                    lidarsim::interrupt::clear_abandon();
+                    return match stopped {
+                        Some(e) => Err(e),
+                        None => settle(py, r),
+                    };
+                }
+                Err(mpsc::RecvTimeoutError::Timeout) => {
+                    if let Err(e) = py.check_signals() {
+                        if stopped.is_none() {
+                            lidarsim::interrupt::abandon();
+                            stopped = Some(e);
+                        }
+                    }
+                }
+                Err(mpsc::RecvTimeoutError::Disconnected) => {
+                    return Err(PyRuntimeError::new_err(
+                        "the pulse's thread ended without a word",
+                    ))
+                }
+            }
+        }
+    })
+}
+
 /// What a guarded call came to, as Python sees it: its value, the package's exception for
 /// its error, or a `LidarsimError` for a panic (a bug, not the user's input).
 fn settle<T>(py: Python<'_>, r: std::thread::Result<lidarsim::Result<T>>) -> PyResult<T> {
@@ -558,7 +606,7 @@ impl PyScene {
         let (loaded, _) = guarded(py, || request.campaign(&self.path, "simulate_pulse"))?;
         let c = &loaded.campaign;
         let scene = self.at(py, c.wavelength_nm.all())?;
-        let rows: Vec<Waveform> = detached(py, || {
+        let rows: Vec<Waveform> = interruptible(py, || {
             let mut own = Scratch::default();
             let mut held = self.scratch.try_lock().ok();
             let scratch = held.as_deref_mut().unwrap_or(&mut own);

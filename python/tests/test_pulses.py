@@ -1,5 +1,11 @@
 """Single pulses in memory: closed form 1, and the one-pulse campaign they are defined as."""
 
+import json
+import signal
+import subprocess
+import sys
+import time
+
 import numpy as np
 import pyarrow.parquet as pq
 import pytest
@@ -116,3 +122,47 @@ def test_scene_bounds_and_bands(plane):
     # the plane's reflectance is 0.10 at 532 nm and 0.30 at 1064 nm: one path, two bands
     ratio = both[0].received_energy_j / both[1].received_energy_j
     assert abs(ratio - 1 / 3) < 1e-9
+
+
+PULSE_SCRIPT = """
+import json, sys
+import lidarsim
+scene = lidarsim.Scene.load(sys.argv[1])
+instrument = json.loads(sys.argv[2])
+print("tracing", flush=True)
+try:
+    # hours of rays: only Ctrl-C ends this call within the test's time
+    scene.simulate_pulse(instrument, (50, 50, 1000), (0, 0, -1), rays=4_000_000_000,
+                         method="bdpt", max_order=5, seed=1)
+    print("returned", flush=True)
+except KeyboardInterrupt:
+    print("stopped", flush=True)
+w = scene.simulate_pulse(instrument, (50, 50, 1000), (0, 0, -1), rays=3000, method="bdpt",
+                         max_order=5, seed=2)
+print(repr(w.received_energy_j), flush=True)
+"""
+
+
+def test_ctrl_c_stops_a_long_pulse_and_the_next_one_is_whole(plane):
+    child = subprocess.Popen(
+        [sys.executable, "-c", PULSE_SCRIPT, str(PLANE), json.dumps(GEDI)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    assert child.stdout.readline().strip() == "tracing", child.stderr.read()
+    time.sleep(0.5)
+    child.send_signal(signal.SIGINT)
+    try:
+        out, err = child.communicate(timeout=120)
+    except subprocess.TimeoutExpired:
+        child.kill()
+        child.communicate()
+        pytest.fail("the pulse went on after Ctrl-C")
+    assert child.returncode == 0, err
+    lines = out.split()
+    assert lines[0] == "stopped", out
+    # the pulse after the stop is traced whole: the same as in a process never interrupted
+    w = plane.simulate_pulse(GEDI, (50, 50, 1000), (0, 0, -1), rays=3000, method="bdpt",
+                             max_order=5, seed=2)
+    assert float(lines[1]) == w.received_energy_j, (lines, w.received_energy_j)

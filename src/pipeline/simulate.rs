@@ -269,6 +269,13 @@ pub fn simulate_in_memory(
     let mut rows = Vec::new();
     for p in plan.pulses(0..plan.len()) {
         let (first, others) = sim.simulate(&p, scratch);
+        if crate::interrupt::abandoning() {
+            // its chunks were left untraced: the waveforms are not the pulse's
+            return Err(crate::error::Error::interrupted(
+                2,
+                "the pulse in memory was dropped",
+            ));
+        }
         rows.push(first);
         rows.extend(others);
     }

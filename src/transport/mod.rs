@@ -247,11 +247,12 @@ where
     F: Fn(u64, &mut Accum, &mut Buffers) + Sync,
 {
     let n = chunks.end - chunks.start;
-    if n <= 1 {
+    // a host that dropped the pulse (see `interrupt::abandon`) gets its chunks left untraced
+    if n <= 1 || crate::interrupt::abandoning() {
         let reused = pool.lock().ok().and_then(|mut p| p.pop());
         let (mut acc, mut bufs) = reused.unwrap_or_else(|| (Accum::new(setup), Buffers::default()));
         acc.reset(setup);
-        if n == 1 {
+        if n == 1 && !crate::interrupt::abandoning() {
             trace(chunks.start, &mut acc, &mut bufs);
         }
         return (acc, bufs);

@@ -217,24 +217,28 @@ impl Atl03 {
             ],
         )?;
         let (lat_units, lon_units) = self.geo.lat_lon_units();
+        // what locates a group's elements, as the real product's `coordinates` say
+        const PHOTON: &str = "delta_time lat_ph lon_ph";
+        const SEGMENT: &str = "delta_time reference_photon_lat reference_photon_lon";
+        const BACKGROUND: &str = "delta_time";
         let group = format!("{name}/heights");
         self.h5.group(&group, &[])?;
         let f = |path: &str, kind, units, description| {
             Field::new(&group, path, kind, units, description)
         };
         self.h5.datasets(&[
-            f("h_ph", Kind::F32, "meters", "height of the photon event").long_name("Photon WGS84 Height"),
-            f("lat_ph", Kind::F64, lat_units, "latitude of the photon event (local y without a frame: see /@coordinates)").long_name("Latitude"),
-            f("lon_ph", Kind::F64, lon_units, "longitude of the photon event (local x without a frame: see /@coordinates)").long_name("Longitude"),
-            f("delta_time", Kind::F64, "seconds since 2018-01-01", "transmit time of the shot the photon belongs to, GPS seconds less atlas_sdp_gps_epoch").long_name("Elapsed GPS seconds"),
-            f("dist_ph_along", Kind::F32, "meters", "along-track distance from the start of the photon's 20 m segment (geolocation/segment_dist_x)").long_name("Distance from equator crossing."),
-            f("dist_ph_across", Kind::F32, "meters", "across-track distance from the pulse's nadir point, positive to the left of the track").long_name("Distance off RGT."),
-            f("ph_id_pulse", Kind::U8, "counts", "the shot within its major frame of 200, counted from 1: shot % 200 + 1 (a shot: one firing, all beams)").long_name("laser pulse counter"),
-            f("pce_mframe_cnt", Kind::U32, "counts", "the major frame of 200 shots: shot // 200 (a shot: one firing, all beams)").long_name("PCE Major frame counter"),
-            f("ph_id_count", Kind::U8, "counts", "photon event number within the pulse, counted from 1").long_name("photon event counter"),
-            f("quality_ph", Kind::I8, "1", "0: nominal (always)").long_name("Photon Quality"),
-            f("signal_conf_ph", Kind::I8, "1", "confidence that the photon is signal, per surface type (land, ocean, sea ice, land ice, inland water): 4 high (laser photons), 0 noise (solar and dark)").rows_of(5).long_name("Photon Signal Confidence"),
-            f("truth_source", Kind::U8, "1", "not in the real product: the simulation's truth, 0 laser, 1 solar, 2 dark").long_name("Simulated photon source (truth)"),
+            f("h_ph", Kind::F32, "meters", "height of the photon event").long_name("Photon WGS84 Height").cf("physicalMeasurement", PHOTON),
+            f("lat_ph", Kind::F64, lat_units, "latitude of the photon event (local y without a frame: see /@coordinates)").long_name("Latitude").cf("modelResult", "delta_time lon_ph"),
+            f("lon_ph", Kind::F64, lon_units, "longitude of the photon event (local x without a frame: see /@coordinates)").long_name("Longitude").cf("modelResult", "delta_time lat_ph"),
+            f("delta_time", Kind::F64, "seconds since 2018-01-01", "transmit time of the shot the photon belongs to, GPS seconds less atlas_sdp_gps_epoch").long_name("Elapsed GPS seconds").cf("referenceInformation", "lat_ph lon_ph"),
+            f("dist_ph_along", Kind::F32, "meters", "along-track distance from the start of the photon's 20 m segment (geolocation/segment_dist_x)").long_name("Distance from equator crossing.").cf("modelResult", PHOTON),
+            f("dist_ph_across", Kind::F32, "meters", "across-track distance from the pulse's nadir point, positive to the left of the track").long_name("Distance off RGT.").cf("modelResult", PHOTON),
+            f("ph_id_pulse", Kind::U8, "counts", "the shot within its major frame of 200, counted from 1: shot % 200 + 1 (a shot: one firing, all beams)").long_name("laser pulse counter").cf("referenceInformation", PHOTON),
+            f("pce_mframe_cnt", Kind::U32, "counts", "the major frame of 200 shots: shot // 200 (a shot: one firing, all beams)").long_name("PCE Major frame counter").cf("referenceInformation", PHOTON),
+            f("ph_id_count", Kind::U8, "counts", "photon event number within the pulse, counted from 1").long_name("photon event counter").cf("referenceInformation", PHOTON),
+            f("quality_ph", Kind::I8, "1", "0: nominal (always)").long_name("Photon Quality").cf("qualityInformation", PHOTON),
+            f("signal_conf_ph", Kind::I8, "1", "confidence that the photon is signal, per surface type (land, ocean, sea ice, land ice, inland water): 4 high (laser photons), 0 noise (solar and dark)").rows_of(5).long_name("Photon Signal Confidence").cf("qualityInformation", PHOTON),
+            f("truth_source", Kind::U8, "1", "not in the real product: the simulation's truth, 0 laser, 1 solar, 2 dark").long_name("Simulated photon source (truth)").cf("referenceInformation", PHOTON),
         ])?;
         let group = format!("{name}/geolocation");
         self.h5.group(&group, &[])?;
@@ -242,17 +246,17 @@ impl Atl03 {
             Field::new(&group, path, kind, units, description)
         };
         self.h5.datasets(&[
-            f("segment_id", Kind::I32, "1", "the segment's number along the track, from 1 at the track's first pulse (the real product counts from the equator)").long_name("along-track segment ID number."),
-            f("segment_dist_x", Kind::F64, "meters", "along-track distance of the segment's start from the track's first pulse").long_name("Segment Distance from EQC"),
-            f("segment_length", Kind::F64, "meters", "the segment's along-track length").long_name("along-track segment length"),
-            f("segment_ph_cnt", Kind::I32, "counts", "photon events in the segment: those of the pulses whose nadir point falls in it").long_name("Number of photons").fill(AttrValue::I32(0)),
-            f("ph_index_beg", Kind::I64, "counts", "index of the segment's first photon in heights/, counted from 1 (0: none)").long_name("Photon Index Begin").fill(AttrValue::I64(0)),
-            f("reference_photon_index", Kind::I32, "counts", "index of the reference photon within the segment, counted from 1: its first (0: none)").long_name("Reference Photon Index").fill(AttrValue::I32(0)),
-            f("reference_photon_lat", Kind::F64, lat_units, "latitude of the segment's first photon (fill value: none)").long_name("Segment Latitude").fill(AttrValue::F64(FILL_F64)),
-            f("reference_photon_lon", Kind::F64, lon_units, "longitude of the segment's first photon (fill value: none)").long_name("Segment Longitude").fill(AttrValue::F64(FILL_F64)),
-            f("delta_time", Kind::F64, "seconds since 2018-01-01", "transmit time of the shot of the segment's first photon (fill value: none)").long_name("Delta Time").fill(AttrValue::F64(FILL_F64)),
-            f("solar_elevation", Kind::F32, "degrees", self.sun.elevation_description()).long_name("solar elevation").fill(AttrValue::F32(FILL_F32)),
-            f("solar_azimuth", Kind::F32, "degrees_east", self.sun.azimuth_description()).long_name("solar azimuth").fill(AttrValue::F32(FILL_F32)),
+            f("segment_id", Kind::I32, "1", "the segment's number along the track, from 1 at the track's first pulse (the real product counts from the equator)").long_name("along-track segment ID number.").cf("referenceInformation", SEGMENT),
+            f("segment_dist_x", Kind::F64, "meters", "along-track distance of the segment's start from the track's first pulse").long_name("Segment Distance from EQC").cf("modelResult", SEGMENT),
+            f("segment_length", Kind::F64, "meters", "the segment's along-track length").long_name("along-track segment length").cf("modelResult", SEGMENT),
+            f("segment_ph_cnt", Kind::I32, "counts", "photon events in the segment: those of the pulses whose nadir point falls in it").long_name("Number of photons").fill(AttrValue::I32(0)).cf("referenceInformation", SEGMENT),
+            f("ph_index_beg", Kind::I64, "counts", "index of the segment's first photon in heights/, counted from 1 (0: none)").long_name("Photon Index Begin").fill(AttrValue::I64(0)).cf("referenceInformation", SEGMENT),
+            f("reference_photon_index", Kind::I32, "counts", "index of the reference photon within the segment, counted from 1: its first (0: none)").long_name("Reference Photon Index").fill(AttrValue::I32(0)).cf("referenceInformation", SEGMENT),
+            f("reference_photon_lat", Kind::F64, lat_units, "latitude of the segment's first photon (fill value: none)").long_name("Segment Latitude").fill(AttrValue::F64(FILL_F64)).cf("modelResult", "delta_time"),
+            f("reference_photon_lon", Kind::F64, lon_units, "longitude of the segment's first photon (fill value: none)").long_name("Segment Longitude").fill(AttrValue::F64(FILL_F64)).cf("modelResult", "delta_time"),
+            f("delta_time", Kind::F64, "seconds since 2018-01-01", "transmit time of the shot of the segment's first photon (fill value: none)").long_name("Delta Time").fill(AttrValue::F64(FILL_F64)).cf("physicalMeasurement", "reference_photon_lat reference_photon_lon"),
+            f("solar_elevation", Kind::F32, "degrees", self.sun.elevation_description()).long_name("solar elevation").fill(AttrValue::F32(FILL_F32)).cf("modelResult", SEGMENT),
+            f("solar_azimuth", Kind::F32, "degrees_east", self.sun.azimuth_description()).long_name("solar azimuth").fill(AttrValue::F32(FILL_F32)).cf("modelResult", SEGMENT),
         ])?;
         let group = format!("{name}/bckgrd_atlas");
         self.h5.group(&group, &[])?;
@@ -260,14 +264,14 @@ impl Atl03 {
             Field::new(&group, path, kind, units, description)
         };
         self.h5.datasets(&[
-            f("delta_time", Kind::F64, "seconds since 2018-01-01", "transmit time of the first of the 50 shots summed").long_name("Time at the start of ATLAS 50-shot sum"),
-            f("pce_mframe_cnt", Kind::I64, "counts", "the major frame of the first of the 50 shots").long_name("PCE Major frame counter"),
-            f("bckgrd_counts", Kind::I32, "counts", "photon events of the 50 shots within their range windows").long_name("ATLAS 50-shot background count"),
-            f("bckgrd_counts_reduced", Kind::I32, "counts", "those of them that are not laser photons (by the simulation's truth, not by a signal finder)").long_name("ATLAS 50-shot background count - reduced"),
-            f("bckgrd_int_height", Kind::F32, "meters", "height of the range window: c times the record's gate over 2").long_name("Altimetric range window width"),
-            f("bckgrd_int_height_reduced", Kind::F32, "meters", "the same (the truth removes the signal's events, not a height span)").long_name("Altimetric range window height - reduced"),
-            f("bckgrd_hist_top", Kind::F32, "meters", "height of the top of the first shot's range window, on its beam axis").long_name("Top of the altimetric range window"),
-            f("bckgrd_rate", Kind::F32, "counts / second", "noise photon events per second of range window: bckgrd_counts_reduced / (50 x the gate)").long_name("Background count rate based on the ATLAS 50-shot sum"),
+            f("delta_time", Kind::F64, "seconds since 2018-01-01", "transmit time of the first of the 50 shots summed").long_name("Time at the start of ATLAS 50-shot sum").cf("referenceInformation", ""),
+            f("pce_mframe_cnt", Kind::I64, "counts", "the major frame of the first of the 50 shots").long_name("PCE Major frame counter").cf("referenceInformation", BACKGROUND),
+            f("bckgrd_counts", Kind::I32, "counts", "photon events of the 50 shots within their range windows").long_name("ATLAS 50-shot background count").cf("modelResult", BACKGROUND),
+            f("bckgrd_counts_reduced", Kind::I32, "counts", "those of them that are not laser photons (by the simulation's truth, not by a signal finder)").long_name("ATLAS 50-shot background count - reduced").cf("modelResult", BACKGROUND),
+            f("bckgrd_int_height", Kind::F32, "meters", "height of the range window: c times the record's gate over 2").long_name("Altimetric range window width").cf("modelResult", BACKGROUND),
+            f("bckgrd_int_height_reduced", Kind::F32, "meters", "the same (the truth removes the signal's events, not a height span)").long_name("Altimetric range window height - reduced").cf("modelResult", BACKGROUND),
+            f("bckgrd_hist_top", Kind::F32, "meters", "height of the top of the first shot's range window, on its beam axis").long_name("Top of the altimetric range window").cf("modelResult", BACKGROUND),
+            f("bckgrd_rate", Kind::F32, "counts / second", "noise photon events per second of range window: bckgrd_counts_reduced / (50 x the gate)").long_name("Background count rate based on the ATLAS 50-shot sum").cf("modelResult", BACKGROUND),
         ])?;
         self.tracks.insert(
             pulse.line,

@@ -81,6 +81,20 @@ impl<'a> Field<'a> {
         self
     }
 
+    /// The real product's `contentType` (its data dictionary's class of the dataset:
+    /// physicalMeasurement, modelResult, referenceInformation, qualityInformation) and its
+    /// `coordinates` (the CF attribute naming the variables that locate each element, which
+    /// xarray makes the dataset's coordinates; none when empty).
+    pub fn cf(mut self, content_type: &str, coordinates: &str) -> Self {
+        self.attrs
+            .push(("contentType", AttrValue::String(content_type.to_string())));
+        if !coordinates.is_empty() {
+            self.attrs
+                .push(("coordinates", AttrValue::String(coordinates.to_string())));
+        }
+        self
+    }
+
     /// The product's fill value for the elements the simulation does not define, in the
     /// `_FillValue` attribute (as netCDF and the missions' readers look for it).
     pub fn fill(mut self, value: AttrValue) -> Self {

@@ -507,7 +507,24 @@ fn terrain(rng: &mut Rand, size: [f64; 2], slope: f64) -> Terrain {
 /// Dart throwing: uniform positions, none closer than `min` to another (a hard-core process,
 /// like stems in a natural stand). Positions are rounded as written.
 fn positions(rng: &mut Rand, size: [f64; 2], n: usize, min: f64) -> Result<Vec<[f64; 2]>> {
-    let cell = min.max(0.5);
+    // Disjoint disks of diameter `min` centred on the stand lie within it grown by min/2 on
+    // every side, so no more than that area over a disk's fit: a count beyond it is refused at
+    // once (the search would fail only after its attempts ran out, minutes for a large count).
+    let most = (size[0] + min) * (size[1] + min) / (std::f64::consts::PI / 4.0 * min * min);
+    if n as f64 > most {
+        return Err(Error::msg(format!(
+            "generate: cannot place {n} trees at least {min} m apart on {} × {} m (no more than {} fit); lower the tree count or the spacing",
+            size[0],
+            size[1],
+            most.floor()
+        )));
+    }
+    // The grid only speeds up the search for neighbours: any cell at least `min` finds them
+    // (the same positions whatever its size), and one of about a tree's share of the stand
+    // keeps it small on a large stand of few trees.
+    let cell = min
+        .max(0.5)
+        .max((size[0] * size[1] / n.max(1) as f64).sqrt());
     let gx = (size[0] / cell).ceil() as usize + 1;
     let gy = (size[1] / cell).ceil() as usize + 1;
     let mut grid: Vec<Vec<u32>> = vec![Vec::new(); gx * gy];

@@ -45,10 +45,52 @@ pub struct Pending {
     committed: bool,
 }
 
+/// Where a file written to `path` goes: through a symbolic link to the file it names (the
+/// link stays, its file is replaced), and into a device, a FIFO or a socket as it is (true:
+/// there is no file to replace, `--csv /dev/stdout` writes to standard output).
+fn destination(path: &Path) -> (PathBuf, bool) {
+    match std::fs::metadata(path) {
+        Ok(m) if !m.is_file() && !m.is_dir() => return (path.to_path_buf(), true),
+        Ok(m) if m.is_file() => {
+            let linked = std::fs::symlink_metadata(path).is_ok_and(|l| l.file_type().is_symlink());
+            if linked {
+                if let Ok(target) = std::fs::canonicalize(path) {
+                    return (target, false);
+                }
+            }
+        }
+        Ok(_) => {}
+        Err(_) => {
+            // a link to a file not yet there names the file to make
+            if let Ok(target) = std::fs::read_link(path) {
+                let dir = path.parent().unwrap_or(Path::new(""));
+                return (dir.join(target), false);
+            }
+        }
+    }
+    (path.to_path_buf(), false)
+}
+
 impl Pending {
     /// Creates the folder of `path` and names the temporary file (the temporary name, then
-    /// `suffix`); the caller creates the file.
+    /// `suffix`); the caller creates the file. A device or FIFO is written in place (see
+    /// [`destination`]), for writers that need no format by extension.
     pub fn new(path: &Path, suffix: &str) -> Result<Pending> {
+        let (path, in_place) = destination(path);
+        let path = path.as_path();
+        if in_place {
+            if !suffix.is_empty() {
+                return Err(Error::file(
+                    path,
+                    "is a device, FIFO or socket, where this file cannot be written: give a file's name",
+                ));
+            }
+            return Ok(Pending {
+                tmp: path.to_path_buf(),
+                path: path.to_path_buf(),
+                committed: true,
+            });
+        }
         if let Some(dir) = path.parent() {
             std::fs::create_dir_all(dir)
                 .map_err(|e| Error::io(dir, "cannot create folder", e).advise(WRITE_ADVICE))?;
@@ -77,6 +119,10 @@ impl Pending {
 
     /// Syncs the written file and renames it to its final name.
     pub fn commit(self) -> Result<()> {
+        if self.committed {
+            // written in place (a device or FIFO): nothing to sync or move
+            return Ok(());
+        }
         if let Ok(f) = File::open(&self.tmp) {
             let _ = f.sync_all();
         }

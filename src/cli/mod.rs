@@ -92,9 +92,10 @@ pub struct BenchArgs {
     /// Seeds per ray count (median rRMSE) [quick 3, full 5].
     #[arg(long, allow_negative_numbers = true, value_parser = clap::value_parser!(u64).range(1..))]
     seeds: Option<u64>,
-    /// Scene file of the RAMI orchard (skipped when its data is absent).
-    #[arg(long, default_value = "scenes/rami_wco.yaml")]
-    rami: PathBuf,
+    /// Scene file of the RAMI orchard [default: scenes/rami_wco.yaml, whose rows are skipped
+    /// when its data is absent; one named here must be there].
+    #[arg(long)]
+    rami: Option<PathBuf>,
     /// Leave out the campaign rows.
     #[arg(long)]
     no_campaigns: bool,
@@ -376,12 +377,20 @@ fn bench(args: BenchArgs) -> Result<()> {
         )));
     }
     // what would fail only at the bench's end, minutes later, fails now
-    if !args.no_campaigns && !args.campaigns.is_dir() {
+    if !args.no_campaigns && !args.campaigns.join("quick.yaml").is_file() {
         return Err(Error::msg(format!(
-            "--campaigns {}: no such folder (the campaign rows' files, pipelines/bench in the \
-             repository: run the bench from its root, or name the folder)",
+            "--campaigns {}: not the bench's campaign folder (it holds quick.yaml and a file per \
+             campaign row: pipelines/bench in the repository; run the bench from its root, or \
+             name the folder)",
             args.campaigns.display()
         )));
+    }
+    // a RAMI scene named on the command line is meant to be there: only the default's
+    // absence (a checkout without ../shared/) skips its rows
+    if let Some(rami) = &args.rami {
+        if let Err(why) = bench::campaigns::find_rami(rami) {
+            return Err(Error::msg(format!("--rami {}: {why}", rami.display())));
+        }
     }
     if args.report.is_dir() {
         return Err(Error::msg(format!(
@@ -401,7 +410,11 @@ fn bench(args: BenchArgs) -> Result<()> {
             parent.display()
         )));
     }
-    opts.rami_scene = args.rami;
+    // a folder the report cannot be written to: its temporary file made and removed now
+    drop(crate::fsutil::Pending::create(&args.report)?);
+    opts.rami_scene = args
+        .rami
+        .unwrap_or_else(|| PathBuf::from("scenes/rami_wco.yaml"));
     opts.campaigns = !args.no_campaigns;
     // each campaign row in a process of its own, as a user runs it (in this one where the
     // executable cannot be found)

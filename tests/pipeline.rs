@@ -223,6 +223,16 @@ fn shards_then_resume_equal_one_run() {
             log.contains(&format!("{expect} parts simulated")),
             "shard {k}: {log}"
         );
+        if k == 0 {
+            // the products asked for before the other shards ran: the simulation is said
+            // unfinished (it was said out of date, as if the campaign had changed)
+            let (code, _, err) = lidarsim(&["run", camp, "--out", s, "--stages", "products"]);
+            assert_eq!(code, 1, "{err}");
+            assert!(
+                err.contains("simulate has not finished") && err.contains("other shards"),
+                "{err}"
+            );
+        }
     }
     assert!(
         !sharded.join("report.md").exists()
@@ -232,6 +242,40 @@ fn shards_then_resume_equal_one_run() {
     assert!(log.contains("0 parts simulated"), "{log}");
     assert!(sharded.join("report.md").is_file());
     assert_eq!(products(&sharded), products(&whole));
+}
+
+/// A sweep stopped before its last run (here: that run's folder cannot be made) is still a
+/// sweep `compare` reads: its index is written before the runs, and a run not begun is a
+/// row of empty cells.
+#[test]
+fn a_sweep_stopped_midway_is_compared() {
+    let dir = tmp("pipe_sweep_stopped");
+    let camp = track_campaign(&dir, 4);
+    let text =
+        std::fs::read_to_string(&camp).unwrap() + "sweep:\n  platform.altitude_m: [300, 600]\n";
+    let camp = write(&dir, "sweep.yaml", &text);
+    let out = dir.join("runs");
+    std::fs::create_dir_all(&out).unwrap();
+    // a file where the second run's folder goes
+    write(&out, "altitude_m=600", "in the way");
+    let (code, _, err) = lidarsim(&[
+        "run",
+        camp.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 1, "{err}");
+    let (code, table, err) = lidarsim(&["compare", out.to_str().unwrap()]);
+    assert_eq!(code, 0, "{err}");
+    let rows: Vec<&str> = table
+        .lines()
+        .filter(|l| l.contains("altitude_m="))
+        .collect();
+    assert_eq!(rows.len(), 2, "{table}");
+    assert!(
+        rows[0].contains("| 300 |") && rows[1].contains('–'),
+        "{table}"
+    );
 }
 
 #[test]

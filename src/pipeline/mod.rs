@@ -438,6 +438,17 @@ impl<'a> RunFolder<'a> {
                 "must run again (the {} stage's {file} is not what it wrote)",
                 s.name()
             ),
+            None if self
+                .manifest
+                .stages
+                .get(stage.name())
+                .is_some_and(|r| r.status == "partial") =>
+            {
+                // a shard's parts, or a run stopped midway: the rest are to be simulated
+                "has not finished (parts of it are still to run: the other shards, or \
+                 --resume)"
+                    .into()
+            }
             None if self.manifest.stages.contains_key(stage.name()) => {
                 "is out of date (the campaign, its scene or lidarsim changed since it ran)".into()
             }

@@ -36,7 +36,17 @@ pub(super) fn run_sweep(
         parts_done: 0,
         complete: true,
     };
-    let mut runs = Vec::new();
+    // the index first: a sweep stopped midway is a sweep `compare` reads (its runs not begun
+    // are empty rows)
+    let index = SweepIndex {
+        campaign: loaded.campaign.name.clone(),
+        sweep: subs.iter().map(|(_, name)| name.clone()).collect(),
+        tool_version: env!("CARGO_PKG_VERSION").into(),
+    };
+    write_text_atomic(
+        &out.join("sweep.json"),
+        &serde_json::to_string_pretty(&index).unwrap_or_default(),
+    )?;
     let mut rows: Vec<(Vec<serde_yaml::Value>, RunTotals)> = Vec::new();
     for (combo, (sub, name)) in combos.iter().zip(subs) {
         log(&format!("sweep: {name}"));
@@ -63,18 +73,8 @@ pub(super) fn run_sweep(
             }
         };
         rows.push((combo.iter().map(|v| (*v).clone()).collect(), totals));
-        runs.push(name);
     }
     write_sweep_summary(out, &keys, &rows)?;
-    let index = SweepIndex {
-        campaign: loaded.campaign.name.clone(),
-        sweep: runs,
-        tool_version: env!("CARGO_PKG_VERSION").into(),
-    };
-    write_text_atomic(
-        &out.join("sweep.json"),
-        &serde_json::to_string_pretty(&index).unwrap_or_default(),
-    )?;
     Ok(total)
 }
 

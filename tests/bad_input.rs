@@ -198,6 +198,23 @@ fn empty_mesh() {
     );
 }
 
+/// A face of two vertices, which tobj drops without a word, is refused at its line.
+#[test]
+fn a_face_of_two_vertices() {
+    let dir = tmp("bad_two_vertex_face_files");
+    let obj = write(
+        &dir,
+        "short.obj",
+        "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nf 1 2 # a line, not a face\n",
+    );
+    let s = format!(
+        "{SCENE}  - mesh: {{ file: {}, material: soil }}\n",
+        obj.display()
+    );
+    let (code, err, _) = check("two_vertex_face", CAMPAIGN, &s);
+    assert_one_message(code, &err, &["short.obj:5", "2 vertices", "at least 3"]);
+}
+
 #[test]
 fn degenerate_mesh() {
     let dir = tmp("bad_degenerate_mesh_files");
@@ -1017,4 +1034,115 @@ fn full_standard_output_or_error() {
     assert_eq!(out.status.code(), Some(0));
     assert!(run.join("waveforms/part-00000.parquet").exists());
     assert!(!run.join("run.lock").exists());
+}
+
+/// Flags that used to fail only after minutes of work, or to fail at all: a bench's campaign
+/// folder without its files and a RAMI scene named but absent (found after the ray
+/// experiments, or skipped without a word), a forest stand of 100 km with two trees (whose
+/// placement grid asked for 107 GB and aborted) and more trees than can stand apart on it
+/// (which searched for minutes).
+#[test]
+fn flags_found_wrong_at_once() {
+    let dir = tmp("bad_flags_early");
+    let empty = dir.join("no_campaigns");
+    std::fs::create_dir_all(&empty).unwrap();
+    let out = dir.join("bench");
+    let report = dir.join("report.md");
+    let bench = |extra: &[&str]| {
+        let mut args = vec![
+            "bench",
+            "--out",
+            out.to_str().unwrap(),
+            "--report",
+            report.to_str().unwrap(),
+            "--reference-rays",
+            "1000",
+        ];
+        args.extend(extra);
+        lidarsim(&args)
+    };
+    let (code, _, err) = bench(&["--campaigns", empty.to_str().unwrap()]);
+    assert_one_message(code, &err, &["--campaigns", "quick.yaml"]);
+    let missing = dir.join("nowhere/rami_wco.yaml");
+    let (code, _, err) = bench(&["--no-campaigns", "--rami", missing.to_str().unwrap()]);
+    assert_one_message(code, &err, &["--rami", "not found"]);
+    assert!(!report.exists(), "the bench ran");
+
+    let stand = dir.join("stand");
+    let (code, _, err) = lidarsim(&[
+        "scene",
+        "generate",
+        "forest",
+        "--size",
+        "100000",
+        "--trees",
+        "2",
+        "--templates",
+        "1",
+        "--leaves",
+        "50",
+        "--out",
+        stand.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    assert!(stand.join("forest.yaml").is_file());
+    let crowded = dir.join("crowded");
+    let (code, _, err) = lidarsim(&[
+        "scene",
+        "generate",
+        "forest",
+        "--size",
+        "5",
+        "--trees",
+        "1000000",
+        "--templates",
+        "1",
+        "--leaves",
+        "1",
+        "--out",
+        crowded.to_str().unwrap(),
+    ]);
+    assert_one_message(code, &err, &["1000000 trees", "no more than"]);
+}
+
+/// A table or report written to a symbolic link replaces the file it names and keeps the
+/// link; to a device it is written as it is (`--csv /dev/stdout`), where it used to replace
+/// the device with a file.
+#[test]
+fn outputs_written_through_links_and_devices() {
+    let dir = tmp("bad_write_through");
+    write(&dir, "scene.yaml", SCENE);
+    let campaign = write(&dir, "campaign.yaml", CAMPAIGN);
+    let run_dir = dir.join("run");
+    let (code, _, err) = lidarsim(&[
+        "run",
+        campaign.to_str().unwrap(),
+        "--out",
+        run_dir.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let target = write(&dir, "target.csv", "old\n");
+    let link = dir.join("link.csv");
+    std::os::unix::fs::symlink(&target, &link).unwrap();
+    let (code, _, err) = lidarsim(&[
+        "compare",
+        run_dir.to_str().unwrap(),
+        "--csv",
+        link.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    assert!(std::fs::symlink_metadata(&link)
+        .unwrap()
+        .file_type()
+        .is_symlink());
+    let table = std::fs::read_to_string(&target).unwrap();
+    assert!(table.starts_with("run,") || table.contains(','), "{table}");
+    assert_ne!(table, "old\n");
+    let (code, _, err) = lidarsim(&["compare", run_dir.to_str().unwrap(), "--csv", "/dev/null"]);
+    assert_eq!(code, 0, "{err}");
+    use std::os::unix::fs::FileTypeExt;
+    assert!(std::fs::metadata("/dev/null")
+        .unwrap()
+        .file_type()
+        .is_char_device());
 }

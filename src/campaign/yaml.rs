@@ -73,6 +73,26 @@ pub fn parse<T: DeserializeOwned>(path: &Path, text: &str) -> Result<T> {
     // without a word where the type is a map; serde_yaml's own Value refuses it.
     if let Err(e) = serde_yaml::from_str::<serde_yaml::Value>(text) {
         let message = e.to_string();
+        if message.contains("more than one document") {
+            // the separator that starts the second document (the first may open with one)
+            let second = text
+                .lines()
+                .enumerate()
+                .filter(|(_, l)| l.starts_with("---"))
+                .map(|(i, _)| i + 1)
+                .find(|&line| {
+                    text.lines().take(line - 1).any(|l| {
+                        !l.trim().is_empty() && !l.starts_with('#') && !l.starts_with("---")
+                    })
+                });
+            return Err(Error::at(
+                path,
+                second.map(|l| (l, 1)),
+                "",
+                "a second YAML document starts here (---): the file holds one; remove the \
+                 line and what follows it, or put that document in a file of its own",
+            ));
+        }
         if let Some(key) = message
             .split_once("duplicate entry with key \"")
             .and_then(|(_, rest)| rest.split_once('"'))
@@ -127,6 +147,24 @@ pub fn parse<T: DeserializeOwned>(path: &Path, text: &str) -> Result<T> {
                     &format!("unknown variant {nothing}, expected"),
                     "found nothing, expected",
                 );
+            }
+            // a required key left out: named as the key, said so in words
+            if let Some(field) = message
+                .strip_prefix("missing field `")
+                .and_then(|r| r.split_once('`'))
+                .map(|(f, _)| f.to_string())
+            {
+                let key = if key.is_empty() {
+                    field
+                } else {
+                    format!("{key}.{field}")
+                };
+                return Err(Error::at(
+                    path,
+                    location,
+                    &key,
+                    "required, and missing: add it",
+                ));
             }
             // serde reports an unknown key against its parent: name the key itself.
             let key = match unknown_field_name(&message) {
@@ -256,8 +294,18 @@ pub(crate) fn plain_words(message: &str) -> String {
             // 1e300 as 1e300, not as its 301 digits
             "floating point" => {
                 let text = v.split('`').next().unwrap_or(v);
-                text.parse::<f64>()
-                    .map_or_else(|_| text.to_string(), crate::campaign::shown)
+                text.parse::<f64>().map_or_else(
+                    |_| text.to_string(),
+                    |x| {
+                        // 7.0 where a whole number is asked for reads "found 7" otherwise
+                        let shown = crate::campaign::shown(x);
+                        if shown.contains(['.', 'e', 'i', 'N']) {
+                            shown
+                        } else {
+                            format!("{shown}.0")
+                        }
+                    },
+                )
             }
             _ => found.to_string(),
         }
@@ -546,6 +594,18 @@ mod tests {
                 "n",
                 "expected a whole number from 0 to 4294967295, found 2.5",
             ),
+            // a required key left out is named as the key
+            (
+                "x: 1\nn: 1\nb: true\n",
+                "l",
+                "required, and missing: add it",
+            ),
+            // a whole number written with a decimal point is shown with it
+            (
+                "x: 1\nn: 7.0\nb: true\nl: []\n",
+                "n",
+                "expected a whole number from 0 to 4294967295, found 7.0",
+            ),
             (
                 "x: 1\nn: 20000000000\nb: true\nl: []\n",
                 "n",
@@ -579,6 +639,17 @@ mod tests {
                 .to_string();
             assert!(e.contains(&format!("{key}: {want}")), "{text:?}: {e}");
         }
+        // a second document is pointed at, not said unsupported
+        let e = parse::<T>(
+            Path::new("f.yaml"),
+            "---\nx: 1\nn: 1\nb: true\nl: []\n---\nx: 2\n",
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.starts_with("f.yaml:6:1:") && e.contains("second YAML document"),
+            "{e}"
+        );
         // a message of our own passes unchanged
         assert_eq!(plain_words("unknown field `q`"), "unknown field `q`");
         // a key given twice in a mapping is refused where it stands, not silently replaced

@@ -131,7 +131,8 @@ pub fn fits(loaded: &Loaded, scene: &Scene, plan: &Plan) -> Result<()> {
             format!(
                 "{needs} (gates of {} bins of {} ns over the scene's ranges and the pulse's ±4σ, \
                  σ = {sigma_ns:.3} ns): use wider bins, a shorter pulse or a range_gate",
-                b.gate_bins, c.instrument.bin_ns
+                crate::campaign::shown(b.gate_bins as f64),
+                crate::campaign::shown(c.instrument.bin_ns)
             ),
         )
     })

@@ -241,8 +241,23 @@ pub(crate) fn load_obj(path: &Path) -> Result<MeshData> {
     let (text, bytes) = (&text[bom..], &bytes[bom..]);
     let mut names: Vec<String> = Vec::new();
     let mut index: HashMap<String, usize> = HashMap::new();
-    for line in text.lines() {
-        if line.split_whitespace().next() == Some("usemtl") {
+    for (n, line) in text.lines().enumerate() {
+        let mut words = line.split_whitespace();
+        let keyword = words.next();
+        if keyword == Some("f") {
+            // tobj drops a face of fewer than three vertices without a word: a facet lost
+            let vertices = words.take_while(|w| !w.starts_with('#')).count();
+            if vertices < 3 {
+                return Err(Error::line(
+                    path,
+                    n + 1,
+                    format!(
+                        "a face of {vertices} vertices: a face needs at least 3 (fix or remove the line)"
+                    ),
+                ));
+            }
+        }
+        if keyword == Some("usemtl") {
             // Same extraction as tobj, so the names match its lookup.
             let name = line.split_once(' ').unwrap_or_default().1.trim().to_owned();
             if !name.is_empty() && !index.contains_key(&name) {

@@ -1103,6 +1103,17 @@ fn flags_found_wrong_at_once() {
         crowded.to_str().unwrap(),
     ]);
     assert_one_message(code, &err, &["1000000 trees", "no more than"]);
+    // a town of 5·10^6 buildings, which searched for minutes before giving up
+    let (code, _, err) = lidarsim(&[
+        "scene",
+        "generate",
+        "town",
+        "--size",
+        "100000",
+        "--out",
+        crowded.to_str().unwrap(),
+    ]);
+    assert_one_message(code, &err, &["--size", "buildings", "2000 ha"]);
 }
 
 /// A table or report written to a symbolic link replaces the file it names and keeps the

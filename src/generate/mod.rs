@@ -175,6 +175,18 @@ impl GenerateOptions {
                 ),
             );
         }
+        // five buildings a hectare, each placed apart from all the others: past 10,000 the
+        // search runs for minutes and gives up (a 100 km town asked for 5·10^6)
+        let buildings = 5.0 * size[0] * size[1] / 1e4;
+        if kind == SceneKind::Town && buildings > MAX_BUILDINGS as f64 {
+            return bad(
+                "size_m",
+                format!(
+                    "a town of {} × {} m holds {:.0} buildings (5 per hectare), more than the {MAX_BUILDINGS} one town can have: make it at most 2000 ha (e.g. 4400 m × 4400 m)",
+                    size[0], size[1], buildings
+                ),
+            );
+        }
         let r = stand::StandOptions {
             size,
             trees: self.trees.or(d.trees).unwrap_or(0),
@@ -220,6 +232,9 @@ impl GenerateOptions {
         Ok(r)
     }
 }
+
+/// Most buildings a generated town holds (five a hectare: 2000 ha).
+const MAX_BUILDINGS: usize = 10_000;
 
 /// One tree template of a generated scene.
 #[derive(Clone, Debug, PartialEq)]

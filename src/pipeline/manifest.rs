@@ -31,6 +31,11 @@ pub struct StageRecord {
     pub peak_memory_mib: Option<f64>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub note: Option<String>,
+    /// The simulate stage: the pulses simulated by the invocation that wrote the record,
+    /// fewer than the plan's when shards or an earlier invocation simulated the rest (its
+    /// wall time is of those alone).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pulses_simulated: Option<u64>,
     /// The checksum (`file_checksum`) of each output file as the stage wrote it (waveform parts excepted: each has
     /// its own beside it, written with it, see `waveform::file`), so that `--resume` never
     /// trusts a file damaged or replaced since.
@@ -86,6 +91,7 @@ pub(super) fn record(
             peak_memory_mib: crate::progress::peak_rss_bytes()
                 .map(|b| (b as f64 / (1024.0 * 102.4)).round() / 10.0),
             note,
+            pulses_simulated: None,
             checksums,
         },
     );

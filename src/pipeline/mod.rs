@@ -695,13 +695,10 @@ fn report_stage(
     fp: &str,
 ) -> Result<()> {
     let clock = StageClock::start();
-    let simulate_s = run
-        .manifest
-        .stages
-        .get("simulate")
-        .map(|r| r.wall_time_s)
-        .unwrap_or(0.0);
-    let text = products::report::report(loaded, scene, parts, run.out, simulate_s)?;
+    let simulated = run.manifest.stages.get("simulate");
+    let simulate_s = simulated.map(|r| r.wall_time_s).unwrap_or(0.0);
+    let pulses_now = simulated.and_then(|r| r.pulses_simulated);
+    let text = products::report::report(loaded, scene, parts, run.out, (simulate_s, pulses_now))?;
     write_text_atomic(&run.out.join("report.md"), &text)?;
     run.finish(
         Stage::Report,
@@ -851,6 +848,7 @@ fn simulate_stage(
     let mut written_now = vec![false; parts];
     todo[..done].iter().for_each(|&k| written_now[k] = true);
     let missing = (0..parts).filter(|&k| !written_now[k] && !whole(k)).count();
+    let pulses_now: usize = todo[..done].iter().map(|&k| cut.range(k).len()).sum();
     if missing == 0 {
         run.finish(Stage::Simulate, fp, part_files, clock, None, "done")?;
     } else {
@@ -864,6 +862,11 @@ fn simulate_stage(
             Some(note),
             "partial",
         )?;
+    }
+    // its wall time is of these pulses alone: the report's rate is over them
+    if let Some(r) = run.manifest.stages.get_mut(Stage::Simulate.name()) {
+        r.pulses_simulated = Some(pulses_now as u64);
+        save(&run.manifest_path, &run.manifest)?;
     }
     if let Some(signal) = stopped {
         return Err(Error::interrupted(

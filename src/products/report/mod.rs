@@ -11,6 +11,24 @@ use crate::waveform::file::{part_name, read_waveforms, Parts};
 use std::path::Path;
 use summary::{ProductsSummary, WaveformTotals};
 
+/// The simulate stage's wall time and rate: of the pulses its last invocation simulated,
+/// when shards or an invocation before a resume simulated the others.
+fn simulation_time(sim: f64, pulses: usize, simulated: Option<u64>) -> String {
+    let now = simulated.map_or(pulses, |n| (n as usize).min(pulses));
+    let rate = if sim > 0.0 { now as f64 / sim } else { 0.0 };
+    if now == 0 && pulses > 0 {
+        "none in the last invocation (its pulses were simulated by shards or before a resume: \
+         per-pulse times in waveforms/part-NNNNN.stats.csv)"
+            .to_string()
+    } else if now < pulses {
+        format!(
+            "{sim:.2} s for the last invocation's {now} of {pulses} pulses ({rate:.1} pulses/s; the others were simulated by other shards or before a resume)"
+        )
+    } else {
+        format!("{sim:.2} s ({rate:.1} pulses/s)")
+    }
+}
+
 /// `report.md`: what ran, on what, how fast, and what came back.
 ///
 /// Long because `report.md` is written top to bottom in the order a reader reads it, a few
@@ -20,7 +38,7 @@ pub fn report(
     scene: &Scene,
     parts: Parts,
     out: &Path,
-    simulate_s: f64,
+    (simulate_s, pulses_simulated): (f64, Option<u64>),
 ) -> Result<String> {
     let c = &loaded.campaign;
     let pulses = parts.pulses();
@@ -56,7 +74,7 @@ pub fn report(
     let s = scene.stats();
     let mut text = format!("# Run report: {}\n\n", c.name);
     text += &format!(
-        "| | |\n| --- | --- |\n| scene | {} ({} instances, {} triangles) |\n| instrument | {}, {} nm, {} J, footprint {} mrad, field of view {} mrad |\n| method | {}, {} rays per pulse, max order {} |\n| pulses | {} |\n| rays | {} |\n| simulation wall time | {:.2} s ({:.1} pulses/s) |\n| effective paths per ray | {:.2} |\n| mean received energy per pulse | {:.4e} J |\n| multiple scattering share | {:.1}% |\n",
+        "| | |\n| --- | --- |\n| scene | {} ({} instances, {} triangles) |\n| instrument | {}, {} nm, {} J, footprint {} mrad, field of view {} mrad |\n| method | {}, {} rays per pulse, max order {} |\n| pulses | {} |\n| rays | {} |\n| simulation wall time | {} |\n| effective paths per ray | {:.2} |\n| mean received energy per pulse | {:.4e} J |\n| multiple scattering share | {:.1}% |\n",
         scene.name,
         s.instances,
         s.instanced_triangles,
@@ -70,8 +88,7 @@ pub fn report(
         c.simulation.max_order,
         pulses,
         rays,
-        sim,
-        if sim > 0.0 { pulses as f64 / sim } else { 0.0 },
+        simulation_time(sim, pulses, pulses_simulated),
         paths / rays.max(1) as f64,
         total / received.max(1) as f64,
         if total > 0.0 { 100.0 * multiple / total } else { 0.0 },

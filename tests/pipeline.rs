@@ -281,6 +281,9 @@ fn a_sweep_stopped_midway_is_compared() {
         rows[0].contains("| 300 |") && rows[1].contains('–'),
         "{table}"
     );
+    // and the empty row is said to be a run not begun, not a run that found nothing
+    assert!(err.contains("altitude_m=600: not begun"), "{err}");
+    assert!(!err.contains("altitude_m=300:"), "{err}");
 }
 
 #[test]

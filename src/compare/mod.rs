@@ -71,6 +71,12 @@ pub fn rows(runs: &[PathBuf]) -> Result<Vec<RunRow>> {
     for r in runs {
         for dir in expand(r)? {
             rows.push(read_row(&dir)?);
+            if let Some(why) = unfinished(&dir) {
+                crate::progress::log(&format!(
+                    "compare: {}: {why}: its empty cells are figures not made yet (`lidarsim run` with --resume finishes it)",
+                    dir.display()
+                ));
+            }
             dirs.push(dir);
         }
     }
@@ -81,6 +87,18 @@ pub fn rows(runs: &[PathBuf]) -> Result<Vec<RunRow>> {
         }
     }
     Ok(rows)
+}
+
+/// Why a run's row is not whole, if it is not: no manifest (not begun), or the last stage
+/// that has not run to its end.
+fn unfinished(dir: &Path) -> Option<String> {
+    let Some(m) = Manifest::read(&dir.join("manifest.json")) else {
+        return Some("not begun".into());
+    };
+    crate::pipeline::Stage::ALL
+        .iter()
+        .find(|s| m.stages.get(s.name()).is_none_or(|r| r.status != "done"))
+        .map(|s| format!("stage {} not done", s.name()))
 }
 
 /// One run's row. A sweep's sub-run not yet begun (no folder, or no manifest in it) is a row

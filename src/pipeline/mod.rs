@@ -373,6 +373,15 @@ impl<'a> RunFolder<'a> {
         } else {
             Manifest::default()
         };
+        // a resume into another campaign's folder keeps none of it (the fingerprints differ):
+        // said, so that its files going is no surprise
+        if keep && !manifest.campaign.is_empty() && manifest.campaign != loaded.campaign.name {
+            log(&format!(
+                "warning: {} holds the run of campaign `{}`: this campaign's stages replace it",
+                out.display(),
+                manifest.campaign
+            ));
+        }
         let mut damaged = Vec::new();
         if keep {
             damaged = forget_damaged(&mut manifest, out);

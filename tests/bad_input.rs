@@ -843,6 +843,15 @@ fn values_beyond_any_instrument_are_refused() {
             ),
             "instrument.dark_count_hz",
         ),
+        // a noise past f32's range filled the record with infinities
+        (
+            "electronic",
+            CAMPAIGN.replace(
+                "  receiver_area_m2: 0.1\n",
+                "  receiver_area_m2: 0.1\n  noise: { electronic_sd_photons: 1e39 }\n",
+            ),
+            "instrument.noise.electronic_sd_photons",
+        ),
         (
             "energy",
             CAMPAIGN.replace("pulse_energy_j: 0.001", "pulse_energy_j: 1e308"),

@@ -1182,9 +1182,13 @@ impl Campaign {
             )?;
         }
         if let Some(n) = &i.noise {
-            c.non_negative(
+            // the record is kept in f32: a noise of 1e39 photons filled it with infinities
+            c.within(
                 "instrument.noise.electronic_sd_photons",
                 n.electronic_sd_photons,
+                0.0,
+                1e12,
+                "photons from 0 to 10^12 (a detector's noise is a few photons)",
             )?;
         }
         if let Some(v) = i.detector_response_fwhm_ns {

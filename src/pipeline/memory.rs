@@ -119,7 +119,7 @@ pub fn fits(loaded: &Loaded, scene: &Scene, plan: &Plan) -> Result<()> {
     } else {
         // the gate spans the scene's ranges and the pulse's ±4σ on either side, in bins: a
         // bin far finer than the pulse, or a pulse far longer than any scene, sizes it
-        let sigma_ns = crate::sensor::pulse_sigma_s(&c.instrument) * 1e9;
+        let sigma_ns = crate::sensor::gate_sigma_s(&c.instrument) * 1e9;
         // a pulse longer than any LiDAR's (100 µs) is what sizes it: name the pulse's key
         let key = if c.instrument.pulse_fwhm_ns > 1e5 {
             "instrument.pulse_fwhm_ns"

@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Compares two folders of runs (from tools/run_bundled.sh, or two run folders) file by file.
 # Every file must be byte-identical, except that in manifest.json (`wall_time_s`,
-# `cpu_time_s`, `peak_memory_mib`, and the checksum of report.md, which holds a wall time)
+# `cpu_time_s`, `peak_memory_mib`, `pulses_simulated` (the last invocation's share, which a
+# resume or a shard changes), and the checksum of report.md, which holds a wall time)
 # and report.md (`simulation wall time`) the lines that hold times and memory are masked
 # before comparing, and
 # waveforms/*.stats.csv (seconds per pulse) and *.log are not compared at all.
@@ -21,7 +22,7 @@ timed() {
 # the file with its time and memory lines masked
 masked() {
   case "$1" in
-    *manifest.json) sed -E 's/"(wall_time_s|cpu_time_s|peak_memory_mib)": [0-9.e+-]+/"\1": _/; s/"report.md": "[0-9a-f]+"/"report.md": _/' "$1" ;;
+    *manifest.json) sed -E 's/"(wall_time_s|cpu_time_s|peak_memory_mib|pulses_simulated)": [0-9.e+-]+/"\1": _/; s/"report.md": "[0-9a-f]+"/"report.md": _/' "$1" ;;
     *report.md) sed -E 's/^\| simulation wall time \|.*$/| simulation wall time | _ |/' "$1" ;;
     *) cat "$1" ;;
   esac

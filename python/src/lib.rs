@@ -110,15 +110,16 @@ fn detached<T: Send>(
     settle(py, py.detach(|| catch_unwind(AssertUnwindSafe(f))))
 }
 
-/// [`detached`] for work that may run long on its own (a pulse of many rays): it runs on a
-/// thread of its own while this one polls the interpreter's signals, and on Ctrl-C the work
-/// drops what is left of it (`interrupt::abandon`) and KeyboardInterrupt is raised once it
-/// has.
-fn interruptible<T: Send>(
+/// Runs `f` on a thread of its own while this one polls the interpreter's signals every
+/// [`SIGNAL_POLL`]; on the first, `on_signal` asks the work to stop (at its boundary), and once
+/// it has, the signal's exception (KeyboardInterrupt) is what comes back. Otherwise, what `f`
+/// came to, panics caught.
+fn polled<T: Send>(
     py: Python<'_>,
+    what: &str,
+    on_signal: fn(),
     f: impl FnOnce() -> lidarsim::Result<T> + Send,
-) -> PyResult<T> {
-    lidarsim::interrupt::clear_abandon();
+) -> PyResult<std::thread::Result<lidarsim::Result<T>>> {
     let (tx, rx) = mpsc::channel();
     // (a receiver is not shared between threads: the lock only lends it to the wait)
     let rx = Mutex::new(rx);
@@ -133,29 +134,36 @@ fn interruptible<T: Send>(
                 rx.recv_timeout(SIGNAL_POLL)
             });
             match got {
-                Ok(r) => {
-                    lidarsim::interrupt::clear_abandon();
-                    return match stopped {
-                        Some(e) => Err(e),
-                        None => settle(py, r),
-                    };
-                }
+                Ok(r) => return stopped.map_or(Ok(r), Err),
                 Err(mpsc::RecvTimeoutError::Timeout) => {
                     if let Err(e) = py.check_signals() {
                         if stopped.is_none() {
-                            lidarsim::interrupt::abandon();
+                            on_signal();
                             stopped = Some(e);
                         }
                     }
                 }
                 Err(mpsc::RecvTimeoutError::Disconnected) => {
-                    return Err(PyRuntimeError::new_err(
-                        "the pulse's thread ended without a word",
-                    ))
+                    return Err(PyRuntimeError::new_err(format!(
+                        "the {what}'s thread ended without a word"
+                    )))
                 }
             }
         }
     })
+}
+
+/// [`detached`] for work that may run long on its own (a pulse of many rays): on Ctrl-C the
+/// work drops what is left of it (`interrupt::abandon`) and KeyboardInterrupt is raised once
+/// it has.
+fn interruptible<T: Send>(
+    py: Python<'_>,
+    f: impl FnOnce() -> lidarsim::Result<T> + Send,
+) -> PyResult<T> {
+    lidarsim::interrupt::clear_abandon();
+    let r = polled(py, "pulse", lidarsim::interrupt::abandon, f);
+    lidarsim::interrupt::clear_abandon();
+    settle(py, r?)
 }
 
 /// What a guarded call came to, as Python sees it: its value, the package's exception for
@@ -316,40 +324,13 @@ fn run<'py>(
         })
     })?;
     lidarsim::interrupt::clear();
-    let (tx, rx) = mpsc::channel();
-    std::thread::spawn(move || {
-        let r = catch_unwind(AssertUnwindSafe(|| pipeline::run_loaded(&loaded, &opts)));
-        let _ = tx.send(r);
-    });
-    // (a receiver is not shared between threads: the lock only lends it to the wait)
-    let rx = Mutex::new(rx);
-    let mut stopped: Option<PyErr> = None;
-    let result = loop {
-        let got = py.detach(|| {
-            let rx = rx.lock().unwrap_or_else(|e| e.into_inner());
-            rx.recv_timeout(SIGNAL_POLL)
-        });
-        match got {
-            Ok(r) => break r,
-            Err(mpsc::RecvTimeoutError::Timeout) => {
-                if let Err(e) = py.check_signals() {
-                    // the run finishes the part in hand, writes it and ends
-                    if stopped.is_none() {
-                        lidarsim::interrupt::request(2);
-                        stopped = Some(e);
-                    }
-                }
-            }
-            Err(mpsc::RecvTimeoutError::Disconnected) => {
-                return Err(PyRuntimeError::new_err(
-                    "the run's thread ended without a word",
-                ))
-            }
-        }
-    };
-    if let Some(e) = stopped {
-        return Err(e);
-    }
+    // on Ctrl-C the run finishes the part in hand, writes it and ends
+    let result = polled(
+        py,
+        "run",
+        || lidarsim::interrupt::request(2),
+        || pipeline::run_loaded(&loaded, &opts),
+    )?;
     let s = settle(py, result).map_err(|e| unplaced(py, e, text_label.as_deref()))?;
     let d = PyDict::new(py);
     // as a path, not as text: a folder whose name is not UTF-8 comes back as itself

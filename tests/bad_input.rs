@@ -621,6 +621,12 @@ fn bad_noise_and_digitisers() {
             &["between 1 and 24"][..],
         ),
         (
+            "bits-1",
+            "  digitiser: { gain: 2, bits: -1 }\n",
+            "instrument.digitiser.bits",
+            &["between 1 and 24, found -1"][..],
+        ),
+        (
             "gain",
             "  digitiser: { gain: -2, bits: 8 }\n",
             "instrument.digitiser.gain",

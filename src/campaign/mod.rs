@@ -159,7 +159,8 @@ pub struct Digitiser {
     /// Counts of zero signal.
     #[serde(default)]
     pub offset: f64,
-    pub bits: u32,
+    /// Signed so that a negative value reads as out of range (1 to 24), not as a type error.
+    pub bits: i64,
     /// Highest count recorded; default 2^bits - 1.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub saturation: Option<f64>,
@@ -168,7 +169,7 @@ pub struct Digitiser {
 impl Digitiser {
     pub fn saturation(&self) -> f64 {
         self.saturation
-            .unwrap_or(((1u64 << self.bits.min(32)) - 1) as f64)
+            .unwrap_or(((1u64 << self.bits.clamp(0, 32)) - 1) as f64)
     }
 }
 
@@ -181,7 +182,7 @@ fn default_bin_ns() -> f64 {
 fn default_max_returns() -> u32 {
     4
 }
-/// False returns per pulse from a gate of noise alone, unless the campaign says otherwise.
+/// The chance that a gate of noise alone gives a false return, unless the campaign says otherwise.
 pub const DEFAULT_FALSE_ALARM_RATE: f64 = 1e-3;
 
 fn default_threshold() -> f64 {
@@ -1154,8 +1155,8 @@ impl Campaign {
                 return Err(doc.error(
                     "instrument.false_alarm_rate",
                     format!(
-                        "must lie strictly between 0 and 1 (false returns per pulse from noise \
-                         alone; default 0.001), found {}",
+                        "must lie strictly between 0 and 1 (the chance of a false return in a \
+                         gate of noise alone; default 0.001), found {}",
                         shown(a)
                     ),
                 ));

@@ -215,6 +215,40 @@ fn a_face_of_two_vertices() {
     assert_one_message(code, &err, &["short.obj:5", "2 vertices", "at least 3"]);
 }
 
+/// A vertex that is not a finite number of metres, or lies beyond 1000 km, is refused at its
+/// line: in an OBJ, and in an ASCII PLY whose vertices come first (whose parser refuses a
+/// "nan" itself; a binary PLY names the vertex by its index, having no lines).
+#[test]
+fn a_bad_vertex_is_named_by_its_line() {
+    let dir = tmp("bad_vertex_line_files");
+    let cases = [
+        ("nan.obj", "v 0 0 0\nv 1 nan 0\nv 0 1 0\nf 1 2 3\n", "nan.obj:2", "non-finite"),
+        ("inf.obj", "# far\nv 0 0 0\nv 1 0 0\nv 0 1 inf\nf 1 2 3\n", "inf.obj:4", "non-finite"),
+        ("far.obj", "v 0 0 0\nv 2e6 0 0\nv 0 1 0\nf 1 2 3\n", "far.obj:2", "1000 km"),
+        (
+            "far.ply",
+            "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 -3e6\n3 0 1 2\n",
+            "far.ply:12",
+            "1000 km",
+        ),
+        (
+            "nan.ply",
+            "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 nan\n3 0 1 2\n",
+            "nan.ply:12",
+            "cannot parse PLY",
+        ),
+    ];
+    for (name, text, at, what) in cases {
+        let mesh = write(&dir, name, text);
+        let s = format!(
+            "{SCENE}  - mesh: {{ file: {}, material: soil }}\n",
+            mesh.display()
+        );
+        let (code, err, _) = check(&format!("bad_vertex_{name}"), CAMPAIGN, &s);
+        assert_one_message(code, &err, &[at, what, "vertex"]);
+    }
+}
+
 #[test]
 fn degenerate_mesh() {
     let dir = tmp("bad_degenerate_mesh_files");

@@ -37,6 +37,20 @@ pub(crate) struct Builder {
     pub slot_names: Vec<SlotName>,
 }
 
+/// What is wrong with a vertex's coordinates, if anything: a mesh's vertices are finite
+/// metres within ±[`super::MAX_COORDINATE_M`] of its origin.
+fn bad_vertex(v: DVec3) -> Option<String> {
+    if !v.is_finite() {
+        return Some(format!("has a non-finite coordinate {v}"));
+    }
+    (v.abs().max_element() > super::MAX_COORDINATE_M).then(|| {
+        format!(
+            "at {v} lies beyond ±{} km of the mesh's origin: coordinates are metres",
+            super::MAX_COORDINATE_M / 1e3
+        )
+    })
+}
+
 impl Builder {
     /// Checks the mesh and converts it to f32 relative to the centre of its box. Zero-area
     /// triangles are dropped (they can never be hit); an empty or all-degenerate mesh is an error.
@@ -61,20 +75,8 @@ impl Builder {
         for t in &self.tris {
             for &i in t {
                 let v = self.verts[i as usize];
-                if !v.is_finite() {
-                    return Err(Error::file(
-                        path,
-                        format!("vertex {i} has a non-finite coordinate {v}"),
-                    ));
-                }
-                if v.abs().max_element() > super::MAX_COORDINATE_M {
-                    return Err(Error::file(
-                        path,
-                        format!(
-                            "vertex {i} at {v} lies beyond ±{} km of the mesh's origin: coordinates are metres",
-                            super::MAX_COORDINATE_M / 1e3
-                        ),
-                    ));
+                if let Some(what) = bad_vertex(v) {
+                    return Err(Error::file(path, format!("vertex {i} {what}")));
                 }
                 lo = lo.min(v);
                 hi = hi.max(v);
@@ -244,6 +246,19 @@ pub(crate) fn load_obj(path: &Path) -> Result<MeshData> {
     for (n, line) in text.lines().enumerate() {
         let mut words = line.split_whitespace();
         let keyword = words.next();
+        if keyword == Some("v") {
+            // found here, a vertex is named by its line; tobj's index is its own, not the file's
+            let xyz: Vec<f64> = words
+                .clone()
+                .take(3)
+                .filter_map(|w| w.parse().ok())
+                .collect();
+            if let [x, y, z] = xyz[..] {
+                if let Some(what) = bad_vertex(DVec3::new(x, y, z)) {
+                    return Err(Error::line(path, n + 1, format!("the vertex {what}")));
+                }
+            }
+        }
         if keyword == Some("f") {
             // tobj drops a face of fewer than three vertices without a word: a facet lost
             let vertices = words.take_while(|w| !w.starts_with('#')).count();
@@ -527,6 +542,22 @@ pub(crate) fn load_ply(path: &Path) -> Result<MeshData> {
             "mesh has no triangles (the PLY file has no face element)",
         ));
     }
+    // an ASCII file's vertex is named by its line when the vertices come first, as they
+    // mostly do (the builder names it by its index otherwise)
+    let vertices_first = header.elements.keys().next().map(String::as_str) == Some("vertex");
+    if header.encoding == ply_rs_bw::ply::Encoding::Ascii && vertices_first {
+        let bad = verts
+            .iter()
+            .enumerate()
+            .find_map(|(i, v)| bad_vertex(DVec3::from_array(v.p)).map(|what| (i, what)));
+        if let (Some((i, what)), Some(lines)) = (bad, ply_header_lines(path)) {
+            return Err(Error::line(
+                path,
+                lines + i + 1,
+                format!("the vertex {what}"),
+            ));
+        }
+    }
     let n = verts.len() as i64;
     let mut b = Builder {
         verts: verts.iter().map(|v| DVec3::from_array(v.p)).collect(),
@@ -552,6 +583,20 @@ pub(crate) fn load_ply(path: &Path) -> Result<MeshData> {
         }
     }
     b.finish(path)
+}
+
+/// The lines of a PLY file's header, `end_header` included; None if it cannot be read again.
+fn ply_header_lines(path: &Path) -> Option<usize> {
+    use std::io::BufRead;
+    let f = std::fs::File::open(path).ok()?;
+    let mut lines = 0;
+    for line in BufReader::new(f).split(b'\n') {
+        lines += 1;
+        if line.ok()?.trim_ascii() == b"end_header" {
+            return Some(lines);
+        }
+    }
+    None
 }
 
 /// A horizontal rectangle at height z, front side up.

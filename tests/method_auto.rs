@@ -235,6 +235,43 @@ fn auto_excludes_the_methods_that_cannot_see_a_contribution() {
     );
 }
 
+/// A pulse from the centre of a sphere (`sphere`, a scene file) at `rays` rays to `order`:
+/// a 20 mrad beam seen through a 500 mrad field of view.
+fn in_sphere(sphere: &std::path::Path, method: &str, rays: u64, order: &str) -> String {
+    let inst = Inst {
+        fp_mrad: 20.0,
+        fov_mrad: 500.0,
+        area: 0.01,
+        energy: 0.001,
+        ..Inst::default()
+    };
+    campaign(
+        sphere,
+        &inst,
+        [0.0, 0.0, 0.0],
+        [0.0, 0.0, -1.0],
+        method,
+        rays,
+        3,
+    )
+    .replace("max_order: 3", &format!("max_order: {order}"))
+}
+
+/// The order `max_order: auto` chose, and its line of the log `err`.
+fn chosen_order(err: &str) -> (usize, &str) {
+    let note = err
+        .lines()
+        .find(|l| l.contains("max_order auto chose"))
+        .unwrap_or_else(|| panic!("{err}"));
+    let k = note
+        .split("max_order auto chose ")
+        .nth(1)
+        .and_then(|s| s.split([':', ',', ' ']).next())
+        .and_then(|s| s.parse().ok())
+        .unwrap_or_else(|| panic!("{note}"));
+    (k, note)
+}
+
 /// `simulation.max_order: auto` models only the orders a scene needs: over a plane (one
 /// order: nothing scatters light back to it) it picks 1; inside a sphere of albedo 0.9 it
 /// picks the order past which the energy left, in a run to order 100 with 16 times the rays,
@@ -276,38 +313,11 @@ fn max_order_auto_keeps_the_orders_that_matter() {
     ] {
         let name = format!("{method}_{albedo}_{rays}");
         let sphere = sphere_scene(&dir, albedo);
-        let inst = Inst {
-            fp_mrad: 20.0,
-            fov_mrad: 500.0,
-            area: 0.01,
-            energy: 0.001,
-            ..Inst::default()
-        };
-        let text = |rays: u64, order: &str| {
-            campaign(
-                &sphere,
-                &inst,
-                [0.0, 0.0, 0.0],
-                [0.0, 0.0, -1.0],
-                method,
-                rays,
-                3,
-            )
-            .replace("max_order: 3", &format!("max_order: {order}"))
-        };
+        let text = |rays: u64, order: &str| in_sphere(&sphere, method, rays, order);
         let camp = write(&dir, &format!("{name}.yaml"), &text(rays, "auto"));
         let err = run_cli(&camp, &dir.join(&name), None);
-        let note = err
-            .lines()
-            .find(|l| l.contains("max_order auto chose"))
-            .unwrap_or_else(|| panic!("{err}"));
+        let (k, note) = chosen_order(&err);
         eprintln!("{name}: {note}");
-        let k: usize = note
-            .split("max_order auto chose ")
-            .nth(1)
-            .and_then(|s| s.split([':', ',']).next())
-            .and_then(|s| s.parse().ok())
-            .unwrap_or_else(|| panic!("{note}"));
         assert!((10..100).contains(&k), "{note}");
         let auto = all_waveforms(&dir.join(&name));
         if name == "forward_0.9_2048" {
@@ -339,5 +349,32 @@ fn max_order_auto_keeps_the_orders_that_matter() {
             "{name}: tail {tail:.3e} J past order {k}"
         );
     }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// With several bands each band's tail is bounded: inside a sphere of albedo 0.2 at 532 nm
+/// and 0.9 at 1064 nm, traced once for both with 532 nm first, `auto` keeps the orders the
+/// 1064 nm band needs (10 or more, as the sphere of albedo 0.9 alone) and says it was that
+/// band, where the first band alone would stop within a few orders.
+#[test]
+fn max_order_auto_bounds_every_band() {
+    let dir = tmp("auto_order_bands");
+    let mesh = repo().join("scenes/meshes/sphere_r10.obj");
+    let sphere = write(
+        &dir,
+        "sphere.yaml",
+        &format!(
+            "name: s\nmaterials:\n  wall: {{ reflectance: {{ 532: 0.2, 1064: 0.9 }} }}\nobjects:\n  - mesh: {{ file: {}, material: wall }}\n",
+            mesh.display()
+        ),
+    );
+    let text = in_sphere(&sphere, "forward", 2048, "auto")
+        .replace("wavelength_nm: 1064", "wavelength_nm: [532, 1064]");
+    assert!(text.contains("[532, 1064]"), "{text}");
+    let camp = write(&dir, "bands.yaml", &text);
+    let err = run_cli(&camp, &dir.join("bands"), None);
+    let (k, note) = chosen_order(&err);
+    eprintln!("{note}");
+    assert!(k >= 10 && note.contains("the 1064 nm band"), "{note}");
     let _ = std::fs::remove_dir_all(&dir);
 }

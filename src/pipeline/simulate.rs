@@ -413,19 +413,40 @@ pub fn choose_max_order(loaded: &Loaded, scene: &Scene, plan: &Plan) -> (u32, St
     trial.campaign.simulation.max_order = MaxOrder::Order(cap);
     let method = trial.campaign.simulation.method;
     let sim = PulseSimulator::new(&trial.campaign, scene);
-    let batches: Vec<Vec<Batch>> = pulses
+    // [pulse][band][batch]
+    let runs: Vec<Vec<Vec<Batch>>> = pulses
         .par_iter()
         .with_max_len(leaf_pulses(n, true))
         .map(|p| simulate_pulse_batches(&sim.setup(p, method), rays))
         .collect();
     let k_max = cap as usize;
     let scale = rays as f64 / loaded.campaign.simulation.rays_per_pulse.max(1) as f64;
-    let noise_sq: f64 = batches.iter().map(|b| pulse_se(b).powi(2) * scale).sum();
-    let noise = (noise_sq / n as f64).sqrt();
-    let bounds = tail_bounds(&batches, k_max);
-    let k = (1..=k_max)
-        .find(|&k| bounds.past[k] <= ORDER_TAIL_FRACTION * noise)
-        .unwrap_or(k_max);
+    // each band bounded on its own, the order the campaign keeps the highest of theirs
+    let bands = runs.first().map_or(1, Vec::len);
+    let (band, k, bounds, noise) = (0..bands)
+        .map(|b| {
+            let batches: Vec<Vec<Batch>> = runs.iter().map(|r| r[b].clone()).collect();
+            let noise_sq: f64 = batches.iter().map(|x| pulse_se(x).powi(2) * scale).sum();
+            let noise = (noise_sq / n as f64).sqrt();
+            let bounds = tail_bounds(&batches, k_max);
+            let k = (1..=k_max)
+                .find(|&k| bounds.past[k] <= ORDER_TAIL_FRACTION * noise)
+                .unwrap_or(k_max);
+            (b, k, bounds, noise)
+        })
+        .fold(None, |best: Option<(usize, usize, _, f64)>, x| match best {
+            Some(b) if b.1 >= x.1 => Some(b),
+            _ => Some(x),
+        })
+        .expect("a campaign has a band");
+    let of_band = if bands > 1 {
+        format!(
+            " (the {} nm band, which needs the most of the {bands})",
+            loaded.campaign.wavelength_nm.all()[band]
+        )
+    } else {
+        String::new()
+    };
     let (seen, total) = (bounds.seen[k], bounds.seen[0]);
     let held = if total > 0.0 {
         format!("{:.6}", 1.0 - seen / total)
@@ -455,12 +476,19 @@ pub fn choose_max_order(loaded: &Loaded, scene: &Scene, plan: &Plan) -> (u32, St
     let rays_asked = loaded.campaign.simulation.rays_per_pulse;
     let note = if k < k_max {
         format!(
-            "max_order auto chose {k}: past order {k} the received energy is at most {:.3e} J a pulse ({how}), below {ORDER_TAIL_FRACTION} of a pulse's standard error at {rays_asked} rays ({noise:.3e} J); orders 1 to {k} hold {held} of the energy",
+            "max_order auto chose {k}{of_band}: past order {k} the received energy is at most {:.3e} J a pulse ({how}), below {ORDER_TAIL_FRACTION} of a pulse's standard error at {rays_asked} rays ({noise:.3e} J); orders 1 to {k} hold {held} of the energy",
             bounds.past[k]
         )
     } else {
+        // past the cap no run traces: say what the pilot knows of that energy
+        let beyond = bounds.past[k_max];
+        let past_cap = if beyond.is_finite() {
+            format!("past it, which no run traces, the decay puts at most {beyond:.3e} J a pulse")
+        } else {
+            "what lies past it, which no run traces, the pilot cannot bound".into()
+        };
         format!(
-            "max_order auto chose {k}, the cap: the pilot ({pilot}) bounds the received energy past no lower order below {ORDER_TAIL_FRACTION} of a pulse's standard error at {rays_asked} rays ({noise:.3e} J); orders 1 to {k} hold {held} of the energy it found"
+            "max_order auto chose {k}, the cap{of_band}: the pilot ({pilot}) bounds the received energy past no lower order below {ORDER_TAIL_FRACTION} of a pulse's standard error at {rays_asked} rays ({noise:.3e} J); orders 1 to {k} hold {held} of the energy it found; {past_cap}"
         )
     };
     (k as u32, note)

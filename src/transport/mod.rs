@@ -291,13 +291,14 @@ fn trace_chunk(
     }
 }
 
-/// The rays [`simulate_pulse`] traces (the same draws), each chunk's orders kept apart
-/// (the first band's): batches of independent rays, whose spread says how far a figure made
-/// of several orders may be off ([`order_tail`]).
-pub fn simulate_pulse_batches(setup: &PulseSetup, rays: u64) -> Vec<order_tail::Batch> {
+/// The rays [`simulate_pulse`] traces (the same draws), each chunk's orders kept apart, for
+/// each band (the first band's first): batches of independent rays, whose spread says how far
+/// a figure made of several orders may be off ([`order_tail`]).
+pub fn simulate_pulse_batches(setup: &PulseSetup, rays: u64) -> Vec<Vec<order_tail::Batch>> {
     let sobol = (setup.sampler == Sampler::Sobol).then(|| Sobol2::new(setup.seed, setup.pulse_id));
+    let bands = setup.bands.map_or(1, |b| b.count);
     use rayon::prelude::*;
-    (0..rays.div_ceil(CHUNK_RAYS))
+    let chunks: Vec<Vec<order_tail::Batch>> = (0..rays.div_ceil(CHUNK_RAYS))
         .into_par_iter()
         .map(|c| {
             let mut acc = Accum::new(setup);
@@ -310,13 +311,20 @@ pub fn simulate_pulse_batches(setup: &PulseSetup, rays: u64) -> Vec<order_tail::
                 &mut acc,
                 &mut Buffers::default(),
             );
-            let t = acc.band(0);
-            order_tail::Batch {
-                order_sum: t.order_sum.clone(),
-                total_sq: t.total_sq,
-                rays: t.rays,
-            }
+            (0..bands)
+                .map(|b| {
+                    let t = acc.band(b);
+                    order_tail::Batch {
+                        order_sum: t.order_sum.clone(),
+                        total_sq: t.total_sq,
+                        rays: t.rays,
+                    }
+                })
+                .collect()
         })
+        .collect();
+    (0..bands)
+        .map(|b| chunks.iter().map(|c| c[b].clone()).collect())
         .collect()
 }
 

@@ -249,28 +249,6 @@ fn a_bad_vertex_is_named_by_its_line() {
     }
 }
 
-/// A key that takes a number or a word (`max_order`), given neither, is refused at its own
-/// line, in block and in flow style, not at its mapping's first key.
-#[test]
-fn a_bad_max_order_is_named_at_its_line() {
-    for (name, simulation, at) in [
-        (
-            "block",
-            "simulation:\n  rays_per_pulse: 100\n  method: forward\n  max_order: Auto\n",
-            "campaign.yaml:18:14",
-        ),
-        (
-            "flow",
-            "simulation: { rays_per_pulse: 100, max_order: -1 }\n",
-            "campaign.yaml:15:",
-        ),
-    ] {
-        let c = CAMPAIGN.replace("simulation: { rays_per_pulse: 100 }\n", simulation);
-        let (code, err, _) = check(&format!("max_order_{name}"), &c, SCENE);
-        assert_one_message(code, &err, &[at, "simulation.max_order", "or auto"]);
-    }
-}
-
 #[test]
 fn degenerate_mesh() {
     let dir = tmp("bad_degenerate_mesh_files");

@@ -172,13 +172,6 @@ pub fn parse<T: DeserializeOwned>(path: &Path, text: &str) -> Result<T> {
                 Some(field) if !key.ends_with(&field) => format!("{key}.{field}"),
                 _ => key,
             };
-            // a value read through a buffer (a key that takes a number or a word) is reported
-            // at its mapping's start: no error of a key's value lies before the key itself
-            let location = match (location, locate(text, &key).filter(|_| !key.is_empty())) {
-                (Some(at), Some(k)) if at < k => Some(k),
-                (None, k) => k,
-                (at, _) => at,
-            };
             Err(Error::at(path, location, &key, message))
         }
     }

@@ -107,8 +107,13 @@ pub fn tail_bounds(pulses: &[Vec<Batch>], cap: usize) -> TailBounds {
     let shape = last.map(|m| Shape::new(&energy, &order_se, m));
     let ratio = shape.as_ref().map(|s| s.decay(&energy).0);
     // the energy past each order as the model has it, and its standard error; past the cap
-    // (traced by no run) as the decay extrapolates it
-    let decaying = ratio.is_some_and(|r| r < 1.0);
+    // (traced by no run) as the decay extrapolates it. The decay must fall below 1 by its own
+    // standard errors: orders that keep their energy within the pilot's errors (an enclosure
+    // of albedo 1) have no tail a fit could bound, however close to 1 the fitted share
+    let decaying = shape.as_ref().is_some_and(|s| {
+        let (r, r_se) = with_se(&|e: &[f64]| vec![s.decay(e).0]);
+        r[0] + t * r_se[0] < 1.0
+    });
     let model = match &shape {
         Some(shape) if decaying => Some(with_se(&|e: &[f64]| shape.tail(e, cap))),
         _ => None,

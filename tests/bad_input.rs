@@ -225,6 +225,9 @@ fn a_bad_vertex_is_named_by_its_line() {
         ("nan.obj", "v 0 0 0\nv 1 nan 0\nv 0 1 0\nf 1 2 3\n", "nan.obj:2", "non-finite"),
         ("inf.obj", "# far\nv 0 0 0\nv 1 0 0\nv 0 1 inf\nf 1 2 3\n", "inf.obj:4", "non-finite"),
         ("far.obj", "v 0 0 0\nv 2e6 0 0\nv 0 1 0\nf 1 2 3\n", "far.obj:2", "1000 km"),
+        ("w.obj", "v 0 0 0\nv 1 0 0\nv 0 1 1 0\nf 1 2 3\n", "w.obj:3", "non-finite"),
+        ("winf.obj", "v 0 0 0\nv 1 0 0 1\nv 0 1 1 inf\nf 1 2 3\n", "winf.obj:3", "non-finite"),
+        ("wfar.obj", "v 0 0 0\nv 0 1 10 1e-6\nv 0 1 0\nf 1 2 3\n", "wfar.obj:2", "1000 km"),
         (
             "far.ply",
             "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 -3e6\n3 0 1 2\n",

@@ -248,15 +248,20 @@ pub(crate) fn load_obj(path: &Path) -> Result<MeshData> {
         let keyword = words.next();
         if keyword == Some("v") {
             // found here, a vertex is named by its line; tobj's index is its own, not the file's
-            let xyz: Vec<f64> = words
+            let numbers: Vec<f64> = words
                 .clone()
-                .take(3)
+                .take_while(|w| !w.starts_with('#'))
                 .filter_map(|w| w.parse().ok())
                 .collect();
-            if let [x, y, z] = xyz[..] {
-                if let Some(what) = bad_vertex(DVec3::new(x, y, z)) {
-                    return Err(Error::line(path, n + 1, format!("the vertex {what}")));
-                }
+            // four numbers are x y z w, the point (x, y, z) / w; six or seven carry a colour
+            let vertex = match numbers[..] {
+                [x, y, z, w] if w.is_finite() => Some(DVec3::new(x, y, z) / w),
+                [x, y, z, w] => Some(DVec3::new(x, y, z) * w),
+                [x, y, z, ..] => Some(DVec3::new(x, y, z)),
+                _ => None,
+            };
+            if let Some(what) = vertex.and_then(bad_vertex) {
+                return Err(Error::line(path, n + 1, format!("the vertex {what}")));
             }
         }
         if keyword == Some("f") {
